@@ -1,0 +1,105 @@
+"""The paper's back-propagation network: fully connected layers of sigmoid units.
+
+A topology is written as in the paper, ``6-13-2``: input width, hidden widths, output width.
+Every layer (hidden *and* output) uses the logistic sigmoid, as in Rumelhart et al.'s BPN, so
+targets must be scaled into (0, 1) (see :mod:`selpres.data`).
+
+Weights of R independent replicas are carried as a flat list ``[W1, b1, W2, b2, ...]`` of tensors with
+a leading replica dimension (``W_l``: ``[R, out, in]``, ``b_l``: ``[R, out]``). That list is the common
+currency between engines, evaluation, checkpoints and tests.
+"""
+
+from __future__ import annotations
+
+import re
+
+import torch
+from torch import nn
+
+_TOPOLOGY_RE = re.compile(r"^\d+(-\d+)+$")
+
+
+class TopologyError(ValueError):
+    """A topology string that cannot describe the network."""
+
+
+def parse_topology(topology: str, n_inputs: int | None = None, n_outputs: int | None = None) -> tuple[int, ...]:
+    """``"6-13-2"`` -> ``(6, 13, 2)``; checks widths against the data when they are given."""
+    text = str(topology).strip()
+    if not _TOPOLOGY_RE.match(text):
+        raise TopologyError(
+            f"topology={topology!r} is malformed: expected layer widths joined by '-', e.g. '6-13-2' or '6-8-8-2'"
+        )
+    sizes = tuple(int(s) for s in text.split("-"))
+    if len(sizes) < 2:
+        raise TopologyError(f"topology={topology!r} needs at least an input and an output layer")
+    if any(s <= 0 for s in sizes):
+        raise TopologyError(f"topology={topology!r} has a layer of width 0: every width must be a positive integer")
+    if n_inputs is not None and sizes[0] != n_inputs:
+        raise TopologyError(f"topology={topology!r} has {sizes[0]} inputs but the data has {n_inputs} (θ1, θ̇1, θ̈1, θ2, θ̇2, θ̈2)")
+    if n_outputs is not None and sizes[-1] != n_outputs:
+        raise TopologyError(f"topology={topology!r} has {sizes[-1]} outputs but the data has {n_outputs} (τ1, τ2)")
+    return sizes
+
+
+class BPN(nn.Module):
+    """Sigmoid multilayer perceptron: the idiomatic ``nn.Module`` that defines correct results."""
+
+    def __init__(self, sizes: tuple[int, ...] | str, dtype: torch.dtype = torch.float64):
+        super().__init__()
+        self.sizes = parse_topology(sizes) if isinstance(sizes, str) else tuple(sizes)
+        self.layers = nn.ModuleList(
+            nn.Linear(i, o, dtype=dtype) for i, o in zip(self.sizes[:-1], self.sizes[1:])
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        for layer in self.layers:
+            x = torch.sigmoid(layer(x))
+        return x
+
+    def flat_params(self) -> list[torch.Tensor]:
+        """``[W1, b1, W2, b2, ...]`` in the replica list's order (without the replica dim)."""
+        out = []
+        for layer in self.layers:
+            out += [layer.weight, layer.bias]
+        return out
+
+
+def init_replica_params(sizes: tuple[int, ...], seeds: list[int], dtype: torch.dtype = torch.float64) -> list[torch.Tensor]:
+    """Initial weights for one replica per seed, drawn from ``nn.Linear``'s default distribution.
+
+    ``nn.Linear`` draws weight and bias from U(-1/sqrt(fan_in), 1/sqrt(fan_in)); here each replica
+    draws from its own ``torch.Generator`` so that replica r of a many-seed job is bit-identical to a
+    single run with seed ``seeds[r]``, whatever R is.
+    """
+    per_replica = []
+    for seed in seeds:
+        gen = torch.Generator().manual_seed(int(seed))
+        tensors = []
+        for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
+            bound = 1.0 / fan_in**0.5  # nn.Linear: kaiming_uniform_(a=sqrt(5)) and bias both give U(-1/sqrt(fan_in), +)
+            w = (torch.rand(fan_out, fan_in, generator=gen, dtype=dtype) * 2 - 1) * bound
+            b = (torch.rand(fan_out, generator=gen, dtype=dtype) * 2 - 1) * bound
+            tensors += [w, b]
+        per_replica.append(tensors)
+    return [torch.stack(group) for group in zip(*per_replica)]
+
+
+def load_into(model: BPN, params: list[torch.Tensor], replica: int) -> BPN:
+    """Copy replica ``replica`` of a replica list into ``model`` (in place)."""
+    with torch.no_grad():
+        for p, src in zip(model.flat_params(), params):
+            p.copy_(src[replica])
+    return model
+
+
+def forward_replicas(params: list[torch.Tensor], x: torch.Tensor) -> torch.Tensor:
+    """Outputs of all R replicas on the same inputs: ``x`` [N, in] -> [R, N, out], one batched matmul a layer."""
+    h = x.unsqueeze(0).expand(params[0].shape[0], -1, -1)
+    for w, b in zip(params[0::2], params[1::2]):
+        h = torch.sigmoid(torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2)))
+    return h
+
+
+def n_params(sizes: tuple[int, ...]) -> int:
+    return sum(o * i + o for i, o in zip(sizes[:-1], sizes[1:]))

@@ -1,0 +1,156 @@
+"""Stages of selective presentation and their cost (paper, section 3).
+
+A schedule is the list of training sets A1 ⊂ A2 ⊂ … ⊂ A_{p+1} = U by their sizes n_i, and the epochs
+N_i spent on each. Its cost is T = t·Σ n_i·N_i presentations; conventional training is the one-stage
+schedule (n, N) with T_con = t·n·N. A *budget* turns a one-stage schedule into the compute-matched
+baseline: as many full epochs as fit, then one partial epoch presenting the first few patterns of
+that epoch's shuffled order, so the total equals the budget exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+from selpres.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Stage:
+    size: int  # n_i, patterns in the training set A_i
+    epochs: int  # N_i full epochs on A_i
+    extra: int = 0  # presentations of one trailing partial epoch (budget-matched schedules only)
+
+    @property
+    def presentations(self) -> int:
+        return self.size * self.epochs + self.extra
+
+
+@dataclass(frozen=True)
+class EpochPlan:
+    """One epoch as the training loop sees it: which stage, how large its set, how many presentations."""
+
+    index: int
+    stage: int
+    size: int
+    presentations: int
+
+
+@dataclass(frozen=True)
+class Schedule:
+    stages: tuple[Stage, ...]
+
+    @property
+    def n(self) -> int:
+        return self.stages[-1].size
+
+    @property
+    def p(self) -> int:
+        """Number of enlargements (the paper's p)."""
+        return len(self.stages) - 1
+
+    @property
+    def sizes(self) -> list[int]:
+        return [s.size for s in self.stages]
+
+    @property
+    def epochs(self) -> list[int]:
+        return [s.epochs for s in self.stages]
+
+    @property
+    def total_epochs(self) -> int:
+        """Σ N_i, counting a partial epoch as one (it is one pass of the loop)."""
+        return sum(s.epochs + (1 if s.extra else 0) for s in self.stages)
+
+    @property
+    def presentations(self) -> int:
+        """T / t = Σ n_i·N_i (+ a partial epoch's presentations)."""
+        return sum(s.presentations for s in self.stages)
+
+    @property
+    def conventional_presentations(self) -> int:
+        """T_con / t = n·N for conventional training with the same number of epochs N = Σ N_i."""
+        return self.n * sum(s.epochs for s in self.stages)
+
+    def plan(self) -> list[EpochPlan]:
+        out: list[EpochPlan] = []
+        for k, st in enumerate(self.stages):
+            counts = [st.size] * st.epochs + ([st.extra] if st.extra else [])
+            out += [EpochPlan(len(out) + j, k, st.size, c) for j, c in enumerate(counts)]
+        return out
+
+    def stage_boundaries(self) -> list[int]:
+        """Global epoch index at which each stage starts."""
+        starts, e = [], 0
+        for st in self.stages:
+            starts.append(e)
+            e += st.epochs + (1 if st.extra else 0)
+        return starts
+
+    def describe(self) -> dict:
+        return {
+            "p": self.p,
+            "sizes": self.sizes,
+            "epochs": self.epochs,
+            "extra_presentations": [s.extra for s in self.stages],
+            "presentations_per_stage": [s.presentations for s in self.stages],
+            "presentations": self.presentations,
+            "conventional_presentations": self.conventional_presentations,
+            "cost_ratio": self.presentations / self.conventional_presentations
+            if self.conventional_presentations
+            else None,
+        }
+
+
+def _is_fraction(v) -> bool:
+    return isinstance(v, float)
+
+
+def resolve_sizes(sizes: Sequence, n: int, key: str = "schedule.sizes") -> list[int]:
+    """Counts stay counts; floats are fractions of n in (0, 1] (rounded, at least 1)."""
+    if not isinstance(sizes, (list, tuple)) or len(sizes) == 0:
+        raise ConfigError(key, sizes, "a non-empty list of counts (e.g. [50, 100, 1002]) or fractions of n (e.g. [0.05, 1.0])")
+    out = []
+    for v in sizes:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ConfigError(key, sizes, f"numbers only; {v!r} is not a count or a fraction")
+        if not math.isfinite(v):
+            raise ConfigError(key, sizes, "finite numbers (no NaN or inf)")
+        if _is_fraction(v):
+            if not 0.0 < v <= 1.0:
+                raise ConfigError(key, sizes, f"fractions of n must lie in (0, 1]; got {v}")
+            out.append(max(1, round(v * n)))
+        else:
+            if v <= 0:
+                raise ConfigError(key, sizes, f"counts must be positive; got {v}")
+            out.append(int(v))
+    if any(b <= a for a, b in zip(out, out[1:])):
+        raise ConfigError(key, sizes, f"sizes strictly increasing (A1 ⊂ A2 ⊂ …); resolved to {out}")
+    if out[-1] > n:
+        raise ConfigError(key, sizes, f"sizes at most n = {n}, the exemplar set's size; resolved to {out}")
+    if out[-1] != n:
+        raise ConfigError(key, sizes, f"the last stage to be the whole exemplar set (n = {n}, or 1.0); resolved to {out}")
+    return out
+
+
+def build_schedule(sizes: Sequence, epochs: Sequence | None, n: int, budget: int | None = None) -> Schedule:
+    """Validate a schedule config against the exemplar set's size n, before any work is done."""
+    counts = resolve_sizes(sizes, n)
+    if budget is not None:
+        if isinstance(budget, bool) or not isinstance(budget, int) or budget <= 0:
+            raise ConfigError("schedule.budget", budget, "a positive whole number of presentations, or null")
+        if len(counts) != 1:
+            raise ConfigError("schedule.budget", budget, "a budget only with a one-stage (conventional) schedule: sizes = [n]")
+        if epochs is not None:
+            raise ConfigError("schedule.epochs", list(epochs), "null when schedule.budget is set (epochs follow from the budget)")
+        full, extra = divmod(budget, n)
+        return Schedule((Stage(n, full, extra),))
+    if epochs is None or not isinstance(epochs, (list, tuple)):
+        raise ConfigError("schedule.epochs", epochs, "a list of positive epoch counts, one per stage (or set schedule.budget)")
+    if len(epochs) != len(counts):
+        raise ConfigError("schedule.epochs", list(epochs), f"one entry per stage: {len(counts)} sizes {list(sizes)} but {len(epochs)} epochs")
+    for e in epochs:
+        if isinstance(e, bool) or not isinstance(e, int) or e <= 0:
+            raise ConfigError("schedule.epochs", list(epochs), "positive whole numbers of epochs")
+    return Schedule(tuple(Stage(s, int(e)) for s, e in zip(counts, epochs)))

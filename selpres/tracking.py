@@ -1,0 +1,76 @@
+"""TensorBoard logging of a job's history: every curve twice, against epochs and against presentations.
+
+Curves against cumulative presentations are the fair axis: a selective and a conventional run are
+compared at equal cost there. The log is a pure function of the history records, so a resumed run
+rebuilds it from the checkpoint's history instead of appending duplicates.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import torch
+
+METRICS = ("train_mse", "test10_rms_nm", "heldout_rms_nm")
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}/"))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+class Tracker:
+    def __init__(self, logdir: Path, enabled: bool = True, per_replica: bool = True):
+        self.enabled = enabled
+        self.per_replica = per_replica
+        self.logdir = Path(logdir)
+        self.writer = None
+        if enabled:
+            from torch.utils.tensorboard import SummaryWriter
+
+            if self.logdir.exists():  # rebuilt from history on resume
+                shutil.rmtree(self.logdir)
+            self.writer = SummaryWriter(str(self.logdir))
+
+    def log_epoch(self, rec: dict) -> None:
+        if self.writer is None:
+            return
+        w = self.writer
+        for metric in METRICS:
+            vals = rec.get(metric)
+            if vals is None:
+                continue
+            t = torch.tensor([v if v is not None else math.nan for v in vals], dtype=torch.float64)
+            finite = t[torch.isfinite(t)]
+            if finite.numel() == 0:
+                continue
+            stats = {"mean": finite.mean().item(), "min": finite.min().item(), "max": finite.max().item()}
+            for axis, step in (("epoch", rec["epoch"] + 1), ("presentations", rec["presentations"])):
+                for name, v in stats.items():
+                    w.add_scalar(f"{metric}/{name}/by_{axis}", v, step)
+                if self.per_replica and len(vals) > 1:
+                    for r, v in enumerate(vals):
+                        if v is not None and math.isfinite(v):
+                            w.add_scalar(f"replicas/{metric}/r{r:03d}/by_{axis}", v, step)
+        w.add_scalar("schedule/stage/by_epoch", rec["stage"] + 1, rec["epoch"] + 1)
+        w.add_scalar("schedule/stage/by_presentations", rec["stage"] + 1, rec["presentations"])
+        w.add_scalar("schedule/training_set_size/by_epoch", rec["size"], rec["epoch"] + 1)
+
+    def replay(self, history: list[dict]) -> None:
+        for rec in history:
+            self.log_epoch(rec)
+
+    def close(self, hparams: dict, metrics: dict) -> None:
+        if self.writer is None:
+            return
+        hp = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in _flat(hparams).items()}
+        mt = {k: v for k, v in _flat(metrics).items() if isinstance(v, (int, float)) and math.isfinite(v)}
+        self.writer.add_hparams(hp, mt, run_name=".")
+        self.writer.close()

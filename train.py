@@ -1,0 +1,16 @@
+"""Train the paper's network: ``python train.py schedule=selective topology=6-13-2`` (see README)."""
+
+import hydra
+from omegaconf import DictConfig
+
+import selpres.config  # noqa: F401  (registers the typed schema and resolvers before Hydra composes)
+from selpres.cli import run_job
+
+
+@hydra.main(version_base="1.3", config_path="configs", config_name="train")
+def main(cfg: DictConfig) -> float:
+    return run_job(cfg)
+
+
+if __name__ == "__main__":
+    main()
