@@ -68,9 +68,8 @@ def prepare(cfg: DictConfig) -> Problem:
             "data.accel_limit", cfg.data.accel_limit,
             "ranges and a filter that keep at least one pattern (this data config keeps none)",
         )
-    schedule = build_schedule(
-        OmegaConf.to_container(cfg.schedule.sizes), cfg.schedule.epochs and list(cfg.schedule.epochs), n, cfg.schedule.budget
-    )
+    sch = to_container(cfg.schedule)
+    schedule = build_schedule(sch["sizes"], sch["epochs"], n, sch["budget"])
     tests = D.make_test_sets(arm, data_cfg, exemplar, seed=cfg.data.test_seed)
     scaler = D.Scaler.fit(exemplar, data_cfg)
     seeds = [cfg.seed + r for r in range(cfg.replicas)]
