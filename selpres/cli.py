@@ -44,6 +44,16 @@ def _objective(res: dict) -> float:
     return float("inf") if m is None else m
 
 
+def _failed(out: Path, cfg: DictConfig, error: str, kind: str) -> None:
+    """A failed job's results.json: enough for the report to list it in its place."""
+    record = {
+        "status": "failed", "error": error, "kind": kind, "schedule": {"name": cfg.schedule.name},
+        "topology": cfg.topology.layers, "replicas": cfg.replicas,
+        "seeds": [cfg.seed + r for r in range(cfg.replicas)] if isinstance(cfg.replicas, int) else None,
+    }
+    (out / RESULTS).write_text(json.dumps(record, indent=1, default=str))
+
+
 def run_job(cfg: DictConfig) -> float:
     """Hydra task function body; returns the mean held-out RMS (Nm) for sweepers such as Optuna."""
     hc = HydraConfig.get()
@@ -59,7 +69,7 @@ def run_job(cfg: DictConfig) -> float:
     except ConfigError as e:
         if multirun:
             log.error("config error: %s", e)
-            (out / RESULTS).write_text(json.dumps({"status": "failed", "error": str(e), "kind": "config"}, indent=1))
+            _failed(out, cfg, str(e), "config")
             raise
         print(f"error: {e}", file=sys.stderr)
         if fresh:
@@ -67,7 +77,7 @@ def run_job(cfg: DictConfig) -> float:
         sys.exit(2)
     except Exception as e:  # a crash: keep the traceback in the job's log, mark the job failed
         log.error("job failed:\n%s", traceback.format_exc())
-        (out / RESULTS).write_text(json.dumps({"status": "failed", "error": repr(e), "kind": "exception"}, indent=1))
+        _failed(out, cfg, repr(e), "exception")
         raise
     print(summary_table(res))
     print(f"results: {out / RESULTS}")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import subprocess
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -148,6 +149,15 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
         }
         _atomic_write(ckpt_path, lambda p: torch.save(state, p))
 
+    if start_epoch == 0 and not history:  # the untrained network: every curve starts at 0 presentations
+        params = engine.params()
+        history.append({
+            "epoch": -1, "stage": 0, "size": plan[0].size, "presentations": 0, "train_mse": [None] * R,
+            "test10_rms_nm": _as_list(evaluate(params, *prob.tests["test10"], prob.scaler)["nm"]["overall"]),
+            "heldout_rms_nm": _as_list(evaluate(params, curve_X, curve_Y, prob.scaler)["nm"]["overall"]),
+        })
+        tracker.log_epoch(history[0])
+
     t_loop = time.perf_counter()
     for ep in plan[start_epoch:]:
         t0 = time.perf_counter()
@@ -229,6 +239,11 @@ def _results(cfg, chash, prob, params, final, history, diverged_at, presentation
         "replicas": R,
         "seeds": prob.seeds,
         "presentations_done": presentations,
+        "tests": {"test10": {"n": int(prob.tests["test10"][0].shape[0])},
+                  "heldout": {"n": int(prob.tests["heldout"][0].shape[0]), "curve_n": min(cfg.eval.heldout_curve, int(prob.tests["heldout"][0].shape[0]))},
+                  "heldout_curve_every": cfg.eval.every},
+        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "git_commit": _git_commit(),
         "wall_seconds": {"total": total_s, "train": train_s, "loop": loop_s},
         "seconds_per_presentation": train_s / max(1, presentations * R),
         "summary": summary,
@@ -236,6 +251,15 @@ def _results(cfg, chash, prob, params, final, history, diverged_at, presentation
         "curves": history,
         "config": to_container(cfg),
     }
+
+
+def _git_commit() -> str | None:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).parent,
+                             capture_output=True, text=True, timeout=5)
+        return out.stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        return None
 
 
 def _print_stage(rec: dict, schedule: Schedule, R: int) -> None:

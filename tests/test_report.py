@@ -1,0 +1,192 @@
+"""selpres.report on synthetic sweeps with known numbers: paired verdicts, time-to-target, runs, files, CLI."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from selpres import report as R
+from selpres.stats import t_quantile
+
+SCHED = {
+    "conventional": ([1002], [150]),
+    "selective": ([50, 100, 400, 800, 1002], [30] * 5),
+    "random_growth": ([50, 100, 400, 800, 1002], [30] * 5),
+    "matched": ([1002], [70]),
+}
+
+
+def results(schedule, topology, heldout, test10=None, curves=None, diverged=(), seed0=0):
+    """A minimal but format-correct results.json dict: heldout/test10 are final Nm values per replica
+    (scaled = Nm / 2); curves is [(presentations, [heldout curve per replica] or None)]."""
+    sizes, epochs = SCHED[schedule]
+    extra = [420] if schedule == "matched" else [0]
+    pres = sum(n * e for n, e in zip(sizes, epochs)) + (420 if schedule == "matched" else 0)
+    test10 = test10 or heldout
+    seeds = [seed0 + r for r in range(len(heldout))]
+    reps = []
+    for r, s in enumerate(seeds):
+        ok = s not in diverged
+        final = {name: {u: {j: (vals[r] * k if ok else None) for j in ("overall", "tau1", "tau2")}
+                        for u, k in (("nm", 1.0), ("scaled", 0.5))}
+                 for name, vals in (("test10", test10), ("heldout", heldout))}
+        reps.append({"seed": s, "status": "complete" if ok else "diverged",
+                     "diverged": None if ok else {"epoch": 3, "presentations": 150},
+                     "final": final, "train_mse": 0.01 if ok else None})
+    curves = curves or [(pres, list(heldout))]
+    recs = [{"epoch": i, "stage": 0, "size": sizes[0], "presentations": p, "train_mse": [0.1] * len(seeds),
+             "test10_rms_nm": [0.1] * len(seeds), "heldout_rms_nm": h} for i, (p, h) in enumerate(curves)]
+    n_div = sum(r["status"] == "diverged" for r in reps)
+    return {
+        "status": "diverged" if n_div == len(seeds) else "complete", "diverged_replicas": n_div,
+        "config_hash": "x", "schedule": {
+            "name": schedule, "order": "stratified", "p": len(sizes) - 1, "sizes": sizes, "epochs": epochs,
+            "extra_presentations": extra * len(sizes), "presentations_per_stage": [n * e for n, e in zip(sizes, epochs)],
+            "presentations": pres, "conventional_presentations": 1002 * sum(epochs),
+            "cost_ratio": pres / (1002 * sum(epochs))},
+        "topology": topology, "engine": "fast", "replicas": len(seeds), "seeds": seeds, "presentations_done": pres,
+        "wall_seconds": {"total": 3.0, "train": 2.0, "loop": 2.5}, "seconds_per_presentation": 1e-6,
+        "summary": {}, "replica_results": reps, "curves": recs, "config": {},
+    }
+
+
+def write_job(sweep: Path, schedule: str, topology: str, res: dict | None) -> Path:
+    d = sweep / f"schedule={schedule},topology={topology}"
+    (d / ".hydra").mkdir(parents=True)
+    (d / ".hydra" / "config.yaml").write_text(f"schedule:\n  name: {schedule}\ntopology:\n  layers: {topology}\n")
+    if res is not None:
+        (d / "results.json").write_text(json.dumps(res))
+    return d
+
+
+SEL = [0.10, 0.12, 0.11, 0.13, 0.09]
+CON = [0.15, 0.14, 0.16, 0.15, 0.17]  # selective − conventional = -0.05 -0.02 -0.05 -0.02 -0.08
+RG = [0.11, 0.11, 0.12, 0.12, 0.10]  # selective − random_growth = -0.01 +0.01 -0.01 +0.01 -0.01
+
+
+@pytest.fixture
+def sweep(tmp_path):
+    s = tmp_path / "sweep"
+    write_job(s, "selective", "6-4-2", results("selective", "6-4-2", SEL))
+    write_job(s, "conventional", "6-4-2", results("conventional", "6-4-2", CON))
+    write_job(s, "random_growth", "6-4-2", results("random_growth", "6-4-2", RG))
+    write_job(s, "matched", "6-4-2", {"status": "failed", "error": "ValueError('boom')", "kind": "exception"})
+    write_job(s, "selective", "6-8-2", results("selective", "6-8-2", SEL, diverged=(1,)))
+    write_job(s, "conventional", "6-8-2", None)  # killed: no results.json
+    return s
+
+
+def test_paired_difference_and_interval_by_hand(sweep):
+    groups, tops, methods = R.aggregate(R.load_jobs(sweep))
+    assert tops == ["6-4-2", "6-8-2"] and methods == ["conventional", "selective", "matched", "random_growth"]
+    rows = {(r["topology"], r["comparison"]): r for r in R.verdict_rows(groups, tops, methods)}
+    v = rows[("6-4-2", "selective vs conventional")]
+    d = [a - b for a, b in zip(SEL, CON)]
+    mean = sum(d) / 5
+    sd = math.sqrt(sum((x - mean) ** 2 for x in d) / 4)
+    half = 2.7764451 * sd / math.sqrt(5)  # t_{0.975, 4}
+    assert abs(t_quantile(0.975, 4) - 2.7764451) < 1e-5
+    assert v["heldout_pairs"] == 5
+    assert v["heldout_diff_mean"] == pytest.approx(-0.044)
+    assert v["heldout_ci_lo"] == pytest.approx(mean - half, abs=1e-9)
+    assert v["heldout_ci_hi"] == pytest.approx(mean + half, abs=1e-9)
+    assert v["heldout_ci_hi"] < 0
+    pct = 0.044 / (sum(CON) / 5) * 100
+    assert v["reading_heldout"] == f"selective better by 0.0440 Nm ({pct:.1f} %)"
+    assert v["cost_ratio"] == pytest.approx(70560 / 150300)
+    # CI containing 0
+    assert rows[("6-4-2", "selective vs random_growth")]["reading_heldout"] == "no detectable difference"
+    # failed other side
+    assert rows[("6-4-2", "selective vs matched")]["reading_heldout"] == "no results for matched"
+
+
+def test_reading_wording():
+    assert R.reading({"n": 5, "mean": 0.01, "ci95": [-0.001, 0.02]}, 0.1) == "no detectable difference"
+    assert R.reading({"n": 5, "mean": 0.02, "ci95": [0.01, 0.03]}, 0.1) == "selective worse by 0.0200 Nm (20.0 %)"
+    assert R.reading({"n": 1, "mean": 0.02, "ci95": [None, None]}, 0.1).startswith("too few pairs (1)")
+
+
+def test_pairs_only_seeds_complete_in_both(tmp_path):
+    s = tmp_path / "sw"
+    write_job(s, "selective", "6-4-2", results("selective", "6-4-2", SEL, diverged=(0, 3)))
+    write_job(s, "conventional", "6-4-2", results("conventional", "6-4-2", CON[:4] + [0.2], diverged=(4,)))
+    groups, tops, methods = R.aggregate(R.load_jobs(s))
+    (v,) = R.verdict_rows(groups, tops, methods)
+    d = [SEL[i] - CON[i] for i in (1, 2)]
+    assert v["heldout_pairs"] == 2
+    assert v["heldout_diff_mean"] == pytest.approx(sum(d) / 2)
+    t1 = {r["method"]: r for r in R.table1_rows(groups, tops, methods)}
+    assert t1["selective"]["replicas"] == "3/5 (2 diverged)"
+    assert t1["selective"]["heldout_nm_n"] == 3
+    assert t1["selective"]["heldout_nm_mean"] == pytest.approx((SEL[1] + SEL[2] + SEL[4]) / 3)
+    assert t1["selective"]["heldout_scaled_mean"] == pytest.approx((SEL[1] + SEL[2] + SEL[4]) / 6)
+
+
+def test_time_to_target_on_known_curve(tmp_path):
+    s = tmp_path / "sw"
+    con_curve = [(30060, [0.30, 0.32]), (90180, [0.20, 0.22]), (150300, [0.10, 0.12])]  # target 0.11
+    sel_curve = [(1500, [0.5, 0.5]), (16500, [0.2, None]), (40560, [0.12, 0.11]), (70560, [0.10, 0.11])]
+    rg_curve = [(40560, [0.3, 0.3]), (70560, [0.2, 0.2])]
+    write_job(s, "conventional", "6-4-2", results("conventional", "6-4-2", [0.1, 0.12], curves=con_curve))
+    write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.1, 0.11], curves=sel_curve))
+    write_job(s, "random_growth", "6-4-2", results("random_growth", "6-4-2", [0.2, 0.2], curves=rg_curve))
+    groups, tops, methods = R.aggregate(R.load_jobs(s))
+    rows = {r["method"]: r for r in R.time_to_target_rows(groups, tops, methods)}
+    assert rows["conventional"]["target_heldout_curve_rms_nm"] == pytest.approx(0.11)
+    assert rows["conventional"]["presentations_to_target"] == 150300
+    sel = rows["selective"]
+    assert (sel["reached"], sel["presentations_to_target"], sel["previous_curve_point"]) == ("yes", 70560, 40560)
+    assert sel["fraction_of_conventional_cost"] == pytest.approx(70560 / 150300)
+    assert rows["random_growth"]["reached"] == "not reached"
+
+
+def test_runs_lists_failed_missing_diverged_and_files_written(sweep, tmp_path, capsys):
+    out = tmp_path / "rep"
+    assert R.main([str(sweep), "--out", str(out)]) == 0
+    md = capsys.readouterr().out
+    for f in ("report.md", "table1.csv", "verdict.csv", "time_to_target.csv", "runs.csv", "curves.png", "cost.png"):
+        assert (out / f).stat().st_size > 0, f
+    assert (out / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert md == (out / "report.md").read_text()
+    runs = {(r["schedule"], r["topology"], r["job"]): r for r in csv.DictReader((out / "runs.csv").open())}
+    assert runs[("matched", "6-4-2", "schedule=matched,topology=6-4-2")]["status"] == "failed"
+    assert "boom" in runs[("matched", "6-4-2", "schedule=matched,topology=6-4-2")]["error"]
+    assert runs[("conventional", "6-8-2", "schedule=conventional,topology=6-8-2")]["status"] == "missing"
+    sel = runs[("selective", "6-8-2", "schedule=selective,topology=6-8-2")]
+    assert sel["replicas"] == "4/5 (1 diverged)" and "seed 1 diverged" in sel["error"]
+    # grid cells with no folder at all are listed too
+    assert runs[("random_growth", "6-8-2", "(no folder)")]["status"] == "missing"
+    assert "| failed |" in md and "| missing |" in md and "4/5 (1 diverged)" in md
+    assert "0.0554" in md and "150,300t (printed 1,50,000t)" in md and "70,560t" in md
+    t1 = list(csv.DictReader((out / "table1.csv").open()))
+    assert {(r["method"], r["topology"]) for r in t1} >= {("selective", "6-4-2"), ("matched", "6-8-2")}
+    assert "curves.png" in md
+
+
+def test_default_out_dir(sweep, capsys):
+    assert R.main([str(sweep)]) == 0
+    assert (sweep / "report" / "report.md").exists()
+    assert sweep / "report" not in R._job_folders(sweep)  # a second report does not take it for a job
+
+
+def test_cli_missing_or_empty_dir_exits_2(tmp_path, capsys):
+    assert R.main([str(tmp_path / "nope")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and err.count("\n") == 1 and "Traceback" not in err
+    (tmp_path / "empty").mkdir()
+    assert R.main([str(tmp_path / "empty")]) == 2
+    assert "no job folders" in capsys.readouterr().err
+
+
+def test_cli_as_module_exit_code(tmp_path):
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    p = subprocess.run([sys.executable, "-m", "selpres.report", str(tmp_path / "nope")], cwd=root,
+                       capture_output=True, text=True)
+    assert p.returncode == 2 and "Traceback" not in p.stderr and p.stderr.startswith("error:")
