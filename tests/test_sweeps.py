@@ -1,0 +1,79 @@
+"""Multirun sweeps: a failing job leaves the others complete; re-running fills in only what is missing."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ["schedule.epochs=[1,1,1,1,1]", "data.heldout=200", "eval.heldout_curve=200", "logging.progress=false"]
+
+
+def multirun(sweep_dir: Path, *args: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
+    return subprocess.run(
+        [sys.executable, "train.py", "-m", f"hydra.sweep.dir={sweep_dir}", *TINY, *args],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=600,
+    )
+
+
+def results(sweep_dir: Path, key: str) -> dict[str, dict]:
+    """Job results keyed by the swept override ``key=value`` (folders are named by all overrides)."""
+    out = {}
+    for p in sweep_dir.glob("*/results.json"):
+        (value,) = re.findall(rf"(?:^|,){re.escape(key)}=([^,]+)", p.parent.name)
+        out[f"{key}={value}"] = json.loads(p.read_text())
+    return out
+
+
+def job_dir(sweep_dir: Path, swept: str) -> Path:
+    (match,) = [d for d in sweep_dir.iterdir() if re.search(rf"(?:^|,){re.escape(swept)}(?:,|$)", d.name)]
+    return match
+
+
+def test_one_failing_job_does_not_take_the_sweep_down_and_rerun_fills_in(tmp_path):
+    sweep = tmp_path / "sweep"
+    first = multirun(sweep, "optim.lr=0.15,-1,0.3")
+    assert first.returncode != 0  # the sweep reports its failure...
+    res = results(sweep, "optim.lr")
+    assert res["optim.lr=0.15"]["status"] == "complete"  # ...but the jobs around it finished
+    assert res["optim.lr=0.3"]["status"] == "complete"
+    bad = res["optim.lr=-1"]
+    assert bad["status"] == "failed" and "optim.lr" in bad["error"]
+    assert "optim.lr" in (job_dir(sweep, "optim.lr=-1") / "train.log").read_text()
+    done = job_dir(sweep, "optim.lr=0.15") / "results.json"
+    stamp = done.stat().st_mtime_ns
+
+    again = multirun(sweep, "optim.lr=0.15,-1,0.3")
+    assert again.stdout.count("already done") == 2
+    assert done.stat().st_mtime_ns == stamp  # the finished job was not redone
+    assert results(sweep, "optim.lr")["optim.lr=-1"]["status"] == "failed"
+
+
+def test_a_crash_leaves_its_traceback_in_the_job_log(tmp_path):
+    sweep = tmp_path / "sweep"
+    assert multirun(sweep, "seed=0,1").returncode == 0
+    (job_dir(sweep, "seed=1") / "checkpoint.pt").write_bytes(b"not a checkpoint")  # a job that will crash
+    out = multirun(sweep, "seed=0,1", "overwrite=true")
+    assert out.returncode != 0
+    res = results(sweep, "seed")
+    assert res["seed=0"]["status"] == "complete"
+    assert res["seed=1"]["status"] == "failed" and res["seed=1"]["kind"] == "exception"
+    assert "Traceback" in (job_dir(sweep, "seed=1") / "train.log").read_text()
+
+
+@pytest.mark.parametrize("launcher", ["local2", "submitit_local"])
+def test_parallel_launchers_run_the_sweep(tmp_path, launcher):
+    sweep = tmp_path / "sweep"
+    extra = ["threads=1"] + (["hydra.launcher.timeout_min=10"] if launcher == "submitit_local" else [])
+    out = multirun(sweep, f"hydra/launcher={launcher}", "topology=6-4-2,6-8-2", *extra)
+    assert out.returncode == 0, out.stderr[-2000:]
+    res = results(sweep, "topology")
+    assert sorted(res) == ["topology=6-4-2", "topology=6-8-2"]
+    assert all(r["status"] == "complete" for r in res.values())
