@@ -150,19 +150,20 @@ register()
 
 
 def _walk(node, prefix=""):
-    if isinstance(node, DictConfig):
-        for k in node.keys():
-            yield from _walk(node._get_node(k), f"{prefix}{k}.")
-    elif isinstance(node, ListConfig):
+    """(dotted key, value) for every leaf of a plain container."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _walk(v, f"{prefix}.{k}" if prefix else str(k))
+    elif isinstance(node, list):
         for i, v in enumerate(node):
-            yield from _walk(node._get_node(i), f"{prefix[:-1]}[{i}].")
+            yield from _walk(v, f"{prefix}[{i}]")
     else:
-        yield prefix[:-1], node._value() if hasattr(node, "_value") else node
+        yield prefix, node
 
 
 def validate(cfg: DictConfig) -> tuple[int, ...]:
     """Checks that need more than a type; returns the parsed topology. Raises ConfigError."""
-    for key, value in _walk(cfg):
+    for key, value in _walk(to_container(cfg)):
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
     o = cfg.optim

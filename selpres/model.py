@@ -94,9 +94,15 @@ def load_into(model: BPN, params: list[torch.Tensor], replica: int) -> BPN:
 
 
 def forward_replicas(params: list[torch.Tensor], x: torch.Tensor) -> torch.Tensor:
-    """Outputs of all R replicas on the same inputs: ``x`` [N, in] -> [R, N, out], one batched matmul a layer."""
-    h = x.unsqueeze(0).expand(params[0].shape[0], -1, -1)
-    for w, b in zip(params[0::2], params[1::2]):
+    """Outputs of all R replicas on the same inputs: ``x`` [N, in] -> [R, N, out].
+
+    The first layer of all replicas is one matrix product (``x`` is shared); later layers are batched.
+    """
+    w, b = params[0], params[1]
+    R, H, _ = w.shape
+    h = torch.sigmoid(torch.addmm(b.reshape(1, R * H), x, w.reshape(R * H, -1).T))  # [N, R*H]
+    h = h.reshape(-1, R, H).transpose(0, 1)  # [R, N, H]
+    for w, b in zip(params[2::2], params[3::2]):
         h = torch.sigmoid(torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2)))
     return h
 

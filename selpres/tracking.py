@@ -37,7 +37,7 @@ class Tracker:
 
             if self.logdir.exists():  # rebuilt from history on resume
                 shutil.rmtree(self.logdir)
-            self.writer = SummaryWriter(str(self.logdir))
+            self.writer = SummaryWriter(str(self.logdir), max_queue=10_000, flush_secs=30)
 
     def log_epoch(self, rec: dict) -> None:
         if self.writer is None:

@@ -8,6 +8,7 @@ logs, checkpoints, and returns the results that ``results.json`` holds.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -58,11 +59,24 @@ def config_hash(cfg: DictConfig) -> str:
     return stable_hash(c)
 
 
+@functools.lru_cache(maxsize=4)
+def _data(robot_json: str, data_json: str) -> tuple[D.ExemplarSet, D.TestSets, D.Scaler]:
+    """Exemplar set, test sets and scaler of one robot/data config; cached so that the jobs of an
+    in-process sweep (Hydra's basic launcher) build them once. Tensors are never modified in place."""
+    arm = TwoLinkArm.from_config(json.loads(robot_json))
+    data_cfg = OmegaConf.create(json.loads(data_json))
+    exemplar = D.build_exemplar_set(arm, data_cfg)
+    if exemplar.X.shape[0] == 0:
+        return exemplar, None, None
+    tests = D.make_test_sets(arm, data_cfg, exemplar, seed=data_cfg.test_seed)
+    return exemplar, tests, D.Scaler.fit(exemplar, data_cfg)
+
+
 def prepare(cfg: DictConfig) -> Problem:
     sizes = validate(cfg)
-    arm = TwoLinkArm.from_config(cfg.robot)
-    data_cfg = OmegaConf.create(to_container(cfg.data))  # plain values (enums as strings) for the data module
-    exemplar = D.build_exemplar_set(arm, data_cfg)
+    # plain values (enums as strings) for the data module
+    exemplar, tests, scaler = _data(json.dumps(to_container(cfg.robot), sort_keys=True),
+                                    json.dumps(to_container(cfg.data), sort_keys=True))
     n = exemplar.X.shape[0]
     if n == 0:
         raise ConfigError(
@@ -71,8 +85,6 @@ def prepare(cfg: DictConfig) -> Problem:
         )
     sch = to_container(cfg.schedule)
     schedule = build_schedule(sch["sizes"], sch["epochs"], n, sch["budget"])
-    tests = D.make_test_sets(arm, data_cfg, exemplar, seed=cfg.data.test_seed)
-    scaler = D.Scaler.fit(exemplar, data_cfg)
     seeds = [cfg.seed + r for r in range(cfg.replicas)]
     kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
     samplers = [

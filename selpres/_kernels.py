@@ -1,0 +1,368 @@
+"""The native SGD kernel behind ``make_engine("native"/"fast")``: C source, build-at-first-use, ctypes binding.
+
+Layout: replicas are packed in groups of 4 (one AVX2 vector of float64 per parameter), a group's
+parameters contiguous as ``[P, 4]`` in the replica list's order (W1 row-major, b1, W2, b2, ...). A
+group is trained through the whole epoch before the next one, so its weights, momentum buffers and
+activations (~11 KB at 6-13-2) stay in L1. The topology is compiled in (one small shared library per
+topology, loops fully unrolled for small nets). The sigmoid's ``exp`` is an inline AVX2 polynomial
+(Cody-Waite reduction + degree-13 Taylor, relative error ~1e-16; argument clamped to +-708, NaN kept),
+so there is no -ffast-math and no vector-math library: only a C compiler is needed.
+
+Build: ``$CC`` (default ``cc``/``gcc``) ``-O3 -march=native -fPIC -shared``, once per (source,
+topology, flags, compiler, CPU) into ``$SELPRES_CACHE_DIR`` (default ``~/.cache/selpres``), written to
+a temporary file and renamed, so parallel processes may race safely. Any failure (no compiler, no
+AVX2/FMA) raises :class:`KernelUnavailable` and ``make_engine("fast")`` falls back to pure torch.
+``SELPRES_NO_NATIVE=1`` forces that fallback.
+
+Threads: :meth:`Kernel.train` splits the groups into ``threads`` contiguous chunks and runs them on a
+thread pool; ctypes releases the GIL during the call, so the chunks run in parallel.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import platform
+import shutil
+import subprocess
+import tempfile
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import torch
+
+LANES = 4
+
+C_TEMPLATE = r"""#include <immintrin.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef __AVX2__
+#error "selpres kernel needs AVX2"
+#endif
+#ifndef __FMA__
+#error "selpres kernel needs FMA"
+#endif
+
+#define NL @NL@
+static const int64_t S[NL + 1] = {@SIZES@};
+#define P_TOTAL @P@
+#define TOT_UNITS @TOT@
+#define MAXW @MAXW@
+
+#define LD(p) _mm256_loadu_pd(p)
+#define ST(p, v) _mm256_storeu_pd((p), (v))
+
+/* exp(x) for 4 doubles, |rel err| ~1e-16 (Cody-Waite reduction + degree-13 Taylor); x clamped to
+   [-708, 708] (NaN passes through). Only used inside the sigmoid, where the clamp is invisible. */
+static inline __m256d exp4(__m256d x) {
+    x = _mm256_min_pd(_mm256_set1_pd(708.0), x);   /* operand order keeps NaN */
+    x = _mm256_max_pd(_mm256_set1_pd(-708.0), x);
+    __m256d n = _mm256_round_pd(_mm256_mul_pd(x, _mm256_set1_pd(1.4426950408889634)),
+                                _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+    __m256d r = _mm256_fnmadd_pd(n, _mm256_set1_pd(6.93147180369123816490e-01), x);
+    r = _mm256_fnmadd_pd(n, _mm256_set1_pd(1.90821492927058770002e-10), r);
+    __m256d p = _mm256_set1_pd(1.0 / 6227020800.0);
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 479001600.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 39916800.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 3628800.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 362880.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 40320.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 5040.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 720.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 120.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 24.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 6.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(0.5));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0));
+    __m256d t = _mm256_add_pd(n, _mm256_set1_pd(6755399441055744.0));   /* 1.5 * 2^52: n in the low bits */
+    __m256i e = _mm256_slli_epi64(_mm256_add_epi64(_mm256_castpd_si256(t), _mm256_set1_epi64x(1023)), 52);
+    return _mm256_mul_pd(p, _mm256_castsi256_pd(e));
+}
+
+static inline __m256d sigmoid4(__m256d z) {
+    const __m256d one = _mm256_set1_pd(1.0);
+    return _mm256_div_pd(one, _mm256_add_pd(one, exp4(_mm256_xor_pd(z, _mm256_set1_pd(-0.0)))));
+}
+
+int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t P,
+                  double *W, double *M, const double *X, const double *Y,
+                  const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss)
+{
+    if (nl != NL || P != P_TOTAL) return -3;
+    for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
+    const int64_t nin = S[0], nout = S[NL];
+    int64_t woff[NL], boff[NL], aoff[NL + 1];
+    {
+        int64_t off = 0, tot = 0;
+        for (int l = 0; l < NL; l++) { woff[l] = off; off += S[l + 1] * S[l]; boff[l] = off; off += S[l + 1]; }
+        for (int l = 0; l <= NL; l++) { aoff[l] = tot; tot += S[l]; }
+    }
+    double act[TOT_UNITS * 4] __attribute__((aligned(32)));
+    double da[MAXW * 4] __attribute__((aligned(32))), db[MAXW * 4] __attribute__((aligned(32)));
+    double *G = B > 1 ? (double *)aligned_alloc(32, (size_t)P_TOTAL * 32) : NULL;
+    if (B > 1 && !G) return -1;
+
+    const __m256d one = _mm256_set1_pd(1.0);
+    const __m256d vmom = _mm256_set1_pd(mom), vlr = _mm256_set1_pd(lr);
+
+    for (int64_t g = g0; g < g1; g++) {
+        double *__restrict w = W + g * P_TOTAL * 4, *__restrict mb = M + g * P_TOTAL * 4;
+        const int64_t *o0 = order + (g * 4 + 0) * m, *o1 = order + (g * 4 + 1) * m;
+        const int64_t *o2 = order + (g * 4 + 2) * m, *o3 = order + (g * 4 + 3) * m;
+        __m256d lsum = _mm256_setzero_pd();
+        for (int64_t s = 0; s < m; s += B) {
+            const int64_t bs = (m - s < B) ? (m - s) : B;
+            const __m256d scale = _mm256_set1_pd(2.0 / (double)(bs * nout));
+            if (B > 1) memset(G, 0, (size_t)P_TOTAL * 32);
+            for (int64_t k = 0; k < bs; k++) {
+                const int64_t j = s + k;
+                const double *x0 = X + o0[j] * nin, *x1 = X + o1[j] * nin, *x2 = X + o2[j] * nin, *x3 = X + o3[j] * nin;
+#pragma GCC unroll 64
+                for (int64_t i = 0; i < nin; i++) ST(act + i * 4, _mm256_set_pd(x3[i], x2[i], x1[i], x0[i]));
+#pragma GCC unroll 8
+                for (int l = 0; l < NL; l++) {
+                    const int64_t ni = S[l], no = S[l + 1];
+                    const double *wl = w + woff[l] * 4, *bl = w + boff[l] * 4;
+                    const double *ain = act + aoff[l] * 4;
+                    double *aout = act + aoff[l + 1] * 4;
+#pragma GCC unroll 64
+                    for (int64_t o = 0; o < no; o++) {
+                        __m256d z = LD(bl + o * 4);
+                        const double *wr = wl + o * ni * 4;
+#pragma GCC unroll 64
+                        for (int64_t i = 0; i < ni; i++) z = _mm256_fmadd_pd(LD(wr + i * 4), LD(ain + i * 4), z);
+                        ST(aout + o * 4, sigmoid4(z));
+                    }
+                }
+                const double *y = act + aoff[NL] * 4;
+                const double *t0 = Y + o0[j] * nout, *t1 = Y + o1[j] * nout, *t2 = Y + o2[j] * nout, *t3 = Y + o3[j] * nout;
+                double *d = da, *dn = db;
+#pragma GCC unroll 64
+                for (int64_t o = 0; o < nout; o++) {
+                    __m256d yv = LD(y + o * 4);
+                    __m256d diff = _mm256_sub_pd(yv, _mm256_set_pd(t3[o], t2[o], t1[o], t0[o]));
+                    lsum = _mm256_fmadd_pd(diff, diff, lsum);
+                    ST(d + o * 4, _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(diff, scale), yv), _mm256_sub_pd(one, yv)));
+                }
+#pragma GCC unroll 8
+                for (int l = NL - 1; l >= 0; l--) {
+                    const int64_t ni = S[l], no = S[l + 1];
+                    double *wl = w + woff[l] * 4, *bl = w + boff[l] * 4;
+                    const double *ain = act + aoff[l] * 4;
+                    if (l > 0) {
+#pragma GCC unroll 64
+                        for (int64_t i = 0; i < ni; i++) {
+                            __m256d acc = _mm256_setzero_pd();
+#pragma GCC unroll 64
+                            for (int64_t o = 0; o < no; o++) acc = _mm256_fmadd_pd(LD(wl + (o * ni + i) * 4), LD(d + o * 4), acc);
+                            __m256d a = LD(ain + i * 4);
+                            ST(dn + i * 4, _mm256_mul_pd(_mm256_mul_pd(acc, a), _mm256_sub_pd(one, a)));
+                        }
+                    }
+                    if (B == 1) {
+                        double *ml = mb + woff[l] * 4, *mbl = mb + boff[l] * 4;
+#pragma GCC unroll 64
+                        for (int64_t o = 0; o < no; o++) {
+                            __m256d dv = LD(d + o * 4);
+#pragma GCC unroll 64
+                            for (int64_t i = 0; i < ni; i++) {
+                                double *pw = wl + (o * ni + i) * 4, *pm = ml + (o * ni + i) * 4;
+                                __m256d bv = _mm256_fmadd_pd(vmom, LD(pm), _mm256_mul_pd(dv, LD(ain + i * 4)));
+                                ST(pm, bv);
+                                ST(pw, _mm256_fnmadd_pd(vlr, bv, LD(pw)));
+                            }
+                            __m256d bv = _mm256_fmadd_pd(vmom, LD(mbl + o * 4), dv);
+                            ST(mbl + o * 4, bv);
+                            ST(bl + o * 4, _mm256_fnmadd_pd(vlr, bv, LD(bl + o * 4)));
+                        }
+                    } else {
+                        double *gl = G + woff[l] * 4, *gbl = G + boff[l] * 4;
+#pragma GCC unroll 64
+                        for (int64_t o = 0; o < no; o++) {
+                            __m256d dv = LD(d + o * 4);
+#pragma GCC unroll 64
+                            for (int64_t i = 0; i < ni; i++) {
+                                double *pg = gl + (o * ni + i) * 4;
+                                ST(pg, _mm256_fmadd_pd(dv, LD(ain + i * 4), LD(pg)));
+                            }
+                            ST(gbl + o * 4, _mm256_add_pd(LD(gbl + o * 4), dv));
+                        }
+                    }
+                    double *tmp = d; d = dn; dn = tmp;
+                }
+            }
+            if (B > 1) {
+                for (int64_t p = 0; p < P_TOTAL; p++) {
+                    __m256d bv = _mm256_fmadd_pd(vmom, LD(mb + p * 4), LD(G + p * 4));
+                    ST(mb + p * 4, bv);
+                    ST(w + p * 4, _mm256_fnmadd_pd(vlr, bv, LD(w + p * 4)));
+                }
+            }
+        }
+        double ls[4];
+        _mm256_storeu_pd(ls, lsum);
+        for (int k = 0; k < 4; k++) loss[g * 4 + k] = ls[k] / (double)nout;
+    }
+    free(G);
+    return 0;
+}
+"""
+
+CFLAGS = ["-O3", "-march=native", "-fPIC", "-shared", "-std=c11"]
+LIBS = ["-lm"]
+
+
+class KernelUnavailable(RuntimeError):
+    """The native kernel cannot be built or loaded here (the torch engine is used instead)."""
+
+
+def cache_dir() -> Path:
+    env = os.environ.get("SELPRES_CACHE_DIR")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "selpres"
+
+
+def _compiler() -> str:
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if not cc:
+        raise KernelUnavailable("no C compiler (set CC or install gcc)")
+    return cc
+
+
+def _cpu_id() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            lines = [ln for ln in f if ln.startswith(("flags", "model name"))]
+        return "".join(sorted(set(lines)))
+    except OSError:
+        return platform.processor()
+
+
+class Kernel:
+    def __init__(self, path: Path):
+        self.path = path
+        self.lib = ctypes.CDLL(str(path))
+        f = self.lib.selpres_train
+        i64, dp, lp = ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p
+        f.argtypes = [ctypes.c_int, lp, i64, i64, i64, dp, dp, dp, dp, lp, i64, i64,
+                      ctypes.c_double, ctypes.c_double, dp]
+        f.restype = ctypes.c_int
+        self._f = f
+        self._pool: ThreadPoolExecutor | None = None
+        self._pool_size = 0
+
+    def _executor(self, n: int) -> ThreadPoolExecutor:
+        if self._pool is None or self._pool_size < n:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True)
+            self._pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix="selpres")
+            self._pool_size = n
+        return self._pool
+
+    def train(self, sizes, w: torch.Tensor, buf: torch.Tensor, X: torch.Tensor, Y: torch.Tensor,
+              order: torch.Tensor, batch_size: int, lr: float, mom: float, loss: torch.Tensor,
+              threads: int) -> None:
+        """One epoch for all groups of ``w``/``buf`` ([G, P, 4], updated in place); ``loss`` [G*4] gets sums."""
+        G, P, lanes = w.shape
+        assert lanes == LANES and buf.shape == w.shape and w.is_contiguous() and buf.is_contiguous()
+        assert w.dtype == buf.dtype == X.dtype == Y.dtype == loss.dtype == torch.float64
+        order = order.contiguous()
+        assert order.dtype == torch.int64 and order.shape[0] == G * LANES
+        sz = torch.tensor(list(sizes), dtype=torch.int64)
+        m = order.shape[1]
+        common = (sz.data_ptr(), P, w.data_ptr(), buf.data_ptr(), X.data_ptr(), Y.data_ptr(),
+                  order.data_ptr(), m, int(batch_size), float(lr), float(mom), loss.data_ptr())
+        nl = len(sizes) - 1
+
+        def run(g0: int, g1: int) -> None:
+            rc = self._f(nl, common[0], g0, g1, *common[1:])
+            if rc != 0:
+                raise RuntimeError(f"selpres native kernel failed with code {rc}")
+
+        T = max(1, min(int(threads), G))
+        if T == 1:
+            run(0, G)
+            return
+        bounds = [G * k // T for k in range(T + 1)]
+        futures = [self._executor(T).submit(run, bounds[k], bounds[k + 1]) for k in range(T)]
+        for fut in futures:
+            fut.result()
+
+
+def source(sizes) -> str:
+    """C source of the kernel specialised for topology ``sizes``."""
+    sizes = tuple(int(s) for s in sizes)
+    nl = len(sizes) - 1
+    P = sum(o * i + o for i, o in zip(sizes[:-1], sizes[1:]))
+    src = (C_TEMPLATE.replace("@NL@", str(nl)).replace("@SIZES@", ", ".join(map(str, sizes)))
+           .replace("@P@", str(P)).replace("@TOT@", str(sum(sizes))).replace("@MAXW@", str(max(sizes))))
+    if P > 2000:  # big nets: do not unroll everything (code size, compile time)
+        src = src.replace("#pragma GCC unroll 64", "#pragma GCC unroll 4")
+    return src
+
+
+_lock = threading.Lock()
+_kernels: dict[tuple[int, ...], Kernel] = {}
+_errors: dict[tuple[int, ...], str] = {}
+
+
+def build(sizes, verbose: bool = False) -> Path:
+    """Compile the kernel for ``sizes`` into the cache (if not already there); return the library's path."""
+    cc = _compiler()
+    code = source(sizes)
+    try:
+        version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise KernelUnavailable(f"C compiler {cc!r} does not run: {exc}") from exc
+    key = hashlib.sha256("\0".join([code, " ".join(CFLAGS + LIBS), version, _cpu_id()]).encode()).hexdigest()[:16]
+    out_dir = cache_dir()
+    target = out_dir / f"selpres_{'-'.join(map(str, sizes))}_{key}.so"
+    if target.exists():
+        return target
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
+            src = Path(tmp) / "kernel.c"
+            src.write_text(code)
+            so = Path(tmp) / "kernel.so"
+            proc = subprocess.run([cc, *CFLAGS, "-o", str(so), str(src), *LIBS],
+                                  capture_output=True, text=True, timeout=300)
+            if proc.returncode != 0:
+                raise KernelUnavailable(f"compiling the native kernel failed:\n{proc.stderr.strip()[:2000]}")
+            os.replace(so, target)  # atomic: concurrent builders each install a complete file
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise KernelUnavailable(f"cannot build the native kernel in {out_dir}: {exc}") from exc
+    if verbose:
+        print(f"selpres: built native kernel {target}")
+    return target
+
+
+def load(sizes) -> Kernel:
+    """The kernel for topology ``sizes`` (built on first use); raises :class:`KernelUnavailable` if it cannot be had."""
+    sizes = tuple(int(s) for s in sizes)
+    if os.environ.get("SELPRES_NO_NATIVE", "") not in ("", "0"):
+        raise KernelUnavailable("disabled by SELPRES_NO_NATIVE")
+    if len(sizes) - 1 > 32:
+        raise KernelUnavailable("more than 32 layers")
+    with _lock:
+        if sizes in _kernels:
+            return _kernels[sizes]
+        if sizes in _errors:
+            raise KernelUnavailable(_errors[sizes])
+        try:
+            path = build(sizes)
+            try:
+                _kernels[sizes] = Kernel(path)
+            except OSError as exc:
+                raise KernelUnavailable(f"cannot load {path}: {exc}") from exc
+        except KernelUnavailable as exc:
+            _errors[sizes] = str(exc)
+            raise
+        return _kernels[sizes]

@@ -1,0 +1,287 @@
+"""Training engines: online / mini-batch SGD with momentum for R independent replicas of a sigmoid BPN.
+
+Every engine does the same thing, defined by :class:`ReferenceEngine` (plain PyTorch, one
+``nn.Module`` and one ``torch.optim.SGD`` per replica); the others only do it faster:
+
+* ``"reference"`` -- :class:`ReferenceEngine`: the idiomatic loop. Read it to know what the others do.
+* ``"torch"``     -- :class:`TorchEngine`: all replicas at once in eager PyTorch (batched matmuls,
+  hand-written sigmoid/MSE backward). Pure torch; the fallback when no native kernel can be built.
+* ``"native"``    -- :class:`NativeEngine`: an AVX2 C kernel (4 float64 replicas per vector, inline
+  vector ``exp``, topology compiled in), built with the system C compiler at first use and cached
+  (see :mod:`selpres._kernels`).
+* ``"fast"``      -- the best available of ``native`` then ``torch``.
+
+Interface (all engines)::
+
+    eng = make_engine(name, sizes, params, lr, momentum, batch_size)   # params: [W1, b1, W2, b2, ...], leading dim R
+    losses = eng.train_epoch(X, Y, order)   # order [R, m] int64; returns [R] mean pre-update per-pattern loss
+    eng.params(); eng.state_dict(); eng.load_state_dict(state)
+
+Semantics: replica r presents ``X[order[r, j]]`` for j = 0..m-1 in consecutive mini-batches of
+``batch_size`` (the last may be smaller); per mini-batch the loss is
+``mse_loss(out, target)`` (mean over batch and outputs), then ``zero_grad(); backward(); step()`` with
+``SGD(lr, momentum)`` (no dampening/nesterov/weight decay): ``buf = momentum*buf + g; p -= lr*buf``.
+Momentum buffers persist across ``train_epoch`` calls and are part of ``state_dict``.
+
+Threads: ``native`` splits replicas (in groups of 4) over ``threads`` OS threads; the default is
+``torch.get_num_threads()`` (set it, or pass ``threads=1`` to ``make_engine``, e.g. when a joblib
+sweep already runs one process per core). Environment variable ``SELPRES_THREADS`` overrides the default.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Protocol
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from selpres.model import BPN, load_into
+
+ENGINE_NAMES = ("reference", "torch", "native", "fast")
+
+
+class Engine(Protocol):
+    name: str
+
+    def train_epoch(self, X: torch.Tensor, Y: torch.Tensor, order: torch.Tensor) -> torch.Tensor: ...
+
+    def params(self) -> list[torch.Tensor]: ...
+
+    def state_dict(self) -> dict: ...
+
+    def load_state_dict(self, state: dict) -> None: ...
+
+
+def _check_inputs(sizes, X: torch.Tensor, Y: torch.Tensor, order: torch.Tensor, R: int) -> None:
+    if X.dim() != 2 or X.shape[1] != sizes[0]:
+        raise ValueError(f"X must be [n, {sizes[0]}], got {tuple(X.shape)}")
+    if Y.dim() != 2 or Y.shape[1] != sizes[-1] or Y.shape[0] != X.shape[0]:
+        raise ValueError(f"Y must be [{X.shape[0]}, {sizes[-1]}], got {tuple(Y.shape)}")
+    if order.dim() != 2 or order.shape[0] != R:
+        raise ValueError(f"order must be [R={R}, m], got {tuple(order.shape)}")
+    o = order.detach().cpu().numpy()  # numpy: see NativeEngine.train_epoch
+    if o.size and (int(o.min()) < 0 or int(o.max()) >= X.shape[0]):
+        raise IndexError(f"order has indices outside [0, {X.shape[0]})")
+
+
+def _default_threads(threads: int | None) -> int:
+    if threads is None:
+        env = os.environ.get("SELPRES_THREADS")
+        threads = int(env) if env else torch.get_num_threads()
+    return max(1, int(threads))
+
+
+# ----------------------------------------------------------------------------------------------
+# reference: the idiomatic code that defines correct results
+# ----------------------------------------------------------------------------------------------
+class ReferenceEngine:
+    """One ``BPN`` + one ``torch.optim.SGD`` per replica, trained pattern by pattern with autograd."""
+
+    name = "reference"
+
+    def __init__(self, sizes, params, lr, momentum, batch_size):
+        self.sizes = tuple(sizes)
+        self.batch_size = int(batch_size)
+        self.R = params[0].shape[0]
+        self.models = [load_into(BPN(self.sizes), params, r) for r in range(self.R)]
+        self.optimizers = [torch.optim.SGD(m.parameters(), lr=lr, momentum=momentum) for m in self.models]
+
+    def train_epoch(self, X, Y, order):
+        _check_inputs(self.sizes, X, Y, order, self.R)
+        m = order.shape[1]
+        losses = torch.zeros(self.R, dtype=torch.float64)
+        for r, (model, opt) in enumerate(zip(self.models, self.optimizers)):
+            total = 0.0
+            for start in range(0, m, self.batch_size):
+                idx = order[r, start : start + self.batch_size]
+                out = model(X[idx])
+                loss = F.mse_loss(out, Y[idx])
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                total += loss.item() * len(idx)  # loss is the batch mean: back to a per-pattern sum
+            losses[r] = total / m if m else float("nan")
+        return losses
+
+    def params(self):
+        return [torch.stack(group) for group in zip(*(
+            [p.detach().clone() for p in model.flat_params()] for model in self.models))]
+
+    def _momentum(self, model, opt):
+        out = []
+        for p in model.flat_params():
+            buf = opt.state.get(p, {}).get("momentum_buffer")
+            out.append(torch.zeros_like(p.detach()) if buf is None else buf.detach().clone())
+        return out
+
+    def state_dict(self):
+        mom = [self._momentum(model, opt) for model, opt in zip(self.models, self.optimizers)]
+        return {"params": self.params(), "momentum": [torch.stack(group) for group in zip(*mom)]}
+
+    def load_state_dict(self, state):
+        for r, (model, opt) in enumerate(zip(self.models, self.optimizers)):
+            load_into(model, state["params"], r)
+            for p, buf in zip(model.flat_params(), state["momentum"]):
+                opt.state[p]["momentum_buffer"] = buf[r].detach().clone().to(p.dtype)
+
+
+# ----------------------------------------------------------------------------------------------
+# torch: all replicas at once, eager PyTorch (the pure-torch fallback)
+# ----------------------------------------------------------------------------------------------
+class TorchEngine:
+    """Replica-batched eager PyTorch with a hand-written backward. Same updates as the reference."""
+
+    name = "torch"
+
+    def __init__(self, sizes, params, lr, momentum, batch_size):
+        self.sizes = tuple(sizes)
+        self.lr, self.mom, self.batch_size = float(lr), float(momentum), int(batch_size)
+        self.R = params[0].shape[0]
+        self.p = [t.detach().to(torch.float64).clone().contiguous() for t in params]
+        self.buf = [torch.zeros_like(t) for t in self.p]
+
+    @torch.no_grad()
+    def train_epoch(self, X, Y, order):
+        _check_inputs(self.sizes, X, Y, order, self.R)
+        R, m = order.shape
+        X, Y = X.to(torch.float64), Y.to(torch.float64)
+        Ws, bs = self.p[0::2], self.p[1::2]
+        Wm, bm = self.buf[0::2], self.buf[1::2]
+        nout = self.sizes[-1]
+        total = torch.zeros(R, dtype=torch.float64)
+        for start in range(0, m, self.batch_size):
+            idx = order[:, start : start + self.batch_size]  # [R, B]
+            B = idx.shape[1]
+            acts = [X[idx]]  # [R, B, in]
+            for W, b in zip(Ws, bs):
+                acts.append(torch.sigmoid(torch.baddbmm(b.unsqueeze(1), acts[-1], W.transpose(1, 2))))
+            y, t = acts[-1], Y[idx]
+            diff = y - t
+            total += diff.square().sum(dim=(1, 2)) / nout
+            delta = diff * (2.0 / (B * nout)) * y * (1 - y)  # dL/dz of the output layer, [R, B, out]
+            for layer in range(len(Ws) - 1, -1, -1):
+                a_prev = acts[layer]
+                gW = torch.bmm(delta.transpose(1, 2), a_prev)
+                gb = delta.sum(dim=1)
+                if layer:
+                    delta = torch.bmm(delta, Ws[layer]) * a_prev * (1 - a_prev)  # uses W before its update
+                for p, buf, g in ((Ws[layer], Wm[layer], gW), (bs[layer], bm[layer], gb)):
+                    buf.mul_(self.mom).add_(g)
+                    p.sub_(buf, alpha=self.lr)
+        return total / m if m else torch.full((R,), float("nan"), dtype=torch.float64)
+
+    def params(self):
+        return [t.clone() for t in self.p]
+
+    def state_dict(self):
+        return {"params": self.params(), "momentum": [t.clone() for t in self.buf]}
+
+    def load_state_dict(self, state):
+        self.p = [t.detach().to(torch.float64).clone().contiguous() for t in state["params"]]
+        self.buf = [t.detach().to(torch.float64).clone().contiguous() for t in state["momentum"]]
+
+
+# ----------------------------------------------------------------------------------------------
+# native: the C kernel
+# ----------------------------------------------------------------------------------------------
+class NativeEngine:
+    """AVX2 C kernel over groups of 4 replicas (replica index innermost), threads over groups."""
+
+    name = "native"
+    LANES = 4
+
+    def __init__(self, sizes, params, lr, momentum, batch_size, threads: int | None = None):
+        from selpres import _kernels
+
+        self._k = _kernels.load(sizes)  # raises _kernels.KernelUnavailable when it cannot be built
+        self.sizes = tuple(sizes)
+        self.lr, self.mom, self.batch_size = float(lr), float(momentum), int(batch_size)
+        self.threads = _default_threads(threads)
+        self.R = params[0].shape[0]
+        self.G = -(-self.R // self.LANES)
+        self.shapes = [tuple(t.shape[1:]) for t in params]
+        self.P = sum(int(torch.Size(s).numel()) for s in self.shapes)
+        self.w = self._pack(params)
+        self.buf = torch.zeros_like(self.w)
+
+    # [W1, b1, ...] with leading R  <->  [G, P, 4] (per group: parameters in list order, 4 lanes innermost)
+    def _pack(self, tensors):
+        flat = torch.cat([t.detach().to(torch.float64).reshape(self.R, -1) for t in tensors], dim=1)  # [R, P]
+        padded = torch.zeros(self.G * self.LANES, self.P, dtype=torch.float64)
+        padded[: self.R] = flat
+        return padded.reshape(self.G, self.LANES, self.P).transpose(1, 2).contiguous()
+
+    def _unpack(self, packed):
+        flat = packed.transpose(1, 2).reshape(self.G * self.LANES, self.P)[: self.R]
+        out, k = [], 0
+        for s in self.shapes:
+            n = int(torch.Size(s).numel())
+            out.append(flat[:, k : k + n].reshape(self.R, *s).clone())
+            k += n
+        return out
+
+    def train_epoch(self, X, Y, order):
+        _check_inputs(self.sizes, X, Y, order, self.R)
+        m = order.shape[1]
+        X = X.detach().to(torch.float64).contiguous()
+        Y = Y.detach().to(torch.float64).contiguous()
+        # numpy, not torch, for the padding: a large torch op would wake torch's OpenMP pool, whose
+        # spinning threads then compete with the kernel's threads for the cores
+        padded = np.zeros((self.G * self.LANES, m), dtype=np.int64)
+        padded[: self.R] = order.detach().cpu().numpy()
+        padded_order = torch.from_numpy(padded)
+        loss = torch.zeros(self.G * self.LANES, dtype=torch.float64)
+        self._k.train(self.sizes, self.w, self.buf, X, Y, padded_order, self.batch_size,
+                      self.lr, self.mom, loss, self.threads)
+        return (loss[: self.R] / m) if m else torch.full((self.R,), float("nan"), dtype=torch.float64)
+
+    def params(self):
+        return self._unpack(self.w)
+
+    def state_dict(self):
+        return {"params": self._unpack(self.w), "momentum": self._unpack(self.buf)}
+
+    def load_state_dict(self, state):
+        self.w = self._pack(state["params"])
+        self.buf = self._pack(state["momentum"])
+
+
+def native_available(sizes=(6, 13, 2)) -> bool:
+    """Whether the native kernel can be built and loaded here (for topology ``sizes``)."""
+    from selpres import _kernels
+
+    try:
+        _kernels.load(sizes)
+        return True
+    except _kernels.KernelUnavailable:
+        return False
+
+
+def make_engine(name: str, sizes, params, lr: float, momentum: float, batch_size: int,
+                threads: int | None = None) -> Engine:
+    """``name``: ``"reference"``, ``"torch"``, ``"native"`` or ``"fast"`` (native if it can be built, else torch).
+
+    ``threads`` (native only): OS threads over replica groups; default ``$SELPRES_THREADS`` or
+    ``torch.get_num_threads()``.
+    """
+    sizes = tuple(int(s) for s in sizes)
+    if len(params) != 2 * (len(sizes) - 1):
+        raise ValueError(f"{len(params)} parameter tensors for topology {sizes}: expected {2 * (len(sizes) - 1)}")
+    if int(batch_size) < 1:
+        raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+    if name == "reference":
+        return ReferenceEngine(sizes, params, lr, momentum, batch_size)
+    if name == "torch":
+        return TorchEngine(sizes, params, lr, momentum, batch_size)
+    if name == "native":
+        return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
+    if name == "fast":
+        from selpres import _kernels
+
+        try:
+            return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
+        except _kernels.KernelUnavailable:
+            return TorchEngine(sizes, params, lr, momentum, batch_size)
+    raise ValueError(f"unknown engine {name!r}: choose one of {ENGINE_NAMES}")

@@ -1,0 +1,245 @@
+"""Engines: the reference against hand-written backprop, and every fast engine against the reference."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from selpres import _kernels
+from selpres.engine import make_engine, native_available
+from selpres.model import BPN, forward_replicas, init_replica_params, load_into
+
+LR, MOM = 0.15, 0.9
+FAST_NAMES = ["torch", "native", "fast"]
+
+
+def _needs(name):
+    if name == "native" and not native_available():
+        pytest.skip("native kernel unavailable here (no C compiler / AVX2 / libmvec)")
+
+
+def _data(n, sizes, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    X = torch.rand(n, sizes[0], generator=g, dtype=torch.float64)
+    Y = 0.1 + 0.8 * torch.rand(n, sizes[-1], generator=g, dtype=torch.float64)
+    return X, Y
+
+
+def _orders(R, n, widths, seed=1):
+    """A 'selective' sequence of growing widths: each replica its own random subset/permutation."""
+    g = torch.Generator().manual_seed(seed)
+    return [torch.stack([torch.randperm(n, generator=g)[:m] for _ in range(R)]) for m in widths]
+
+
+def _maxdiff(a, b):
+    return max((x - y).abs().max().item() for x, y in zip(a, b))
+
+
+# ---------------------------------------------------------------- reference vs independent formulas
+def _manual_step(sizes, params, x, t, buf):
+    """One SGD+momentum step of one replica by the textbook backprop formulas (no autograd)."""
+    Ws, bs = params[0::2], params[1::2]
+    acts = [x]
+    for W, b in zip(Ws, bs):
+        acts.append(1.0 / (1.0 + torch.exp(-(acts[-1] @ W.T + b))))
+    y = acts[-1]
+    B, nout = y.shape
+    loss = ((y - t) ** 2).mean()
+    delta = 2.0 * (y - t) / (B * nout) * y * (1.0 - y)
+    grads = [None] * len(params)
+    for l in range(len(Ws) - 1, -1, -1):
+        grads[2 * l] = delta.T @ acts[l]
+        grads[2 * l + 1] = delta.sum(0)
+        delta = (delta @ Ws[l]) * acts[l] * (1.0 - acts[l])
+    new_buf = [MOM * bb + g for bb, g in zip(buf, grads)]
+    new_p = [p - LR * bb for p, bb in zip(params, new_buf)]
+    return new_p, new_buf, loss.item()
+
+
+@pytest.mark.parametrize("B", [1, 2])
+def test_reference_matches_manual_backprop(B):
+    sizes = (3, 4, 2)
+    params = init_replica_params(sizes, [7])
+    X, Y = _data(6, sizes)
+    order = torch.tensor([[4, 1, 3, 0]])
+    eng = make_engine("reference", sizes, params, LR, MOM, B)
+    losses = eng.train_epoch(X, Y, order)
+
+    p = [t[0].clone() for t in params]
+    buf = [torch.zeros_like(t) for t in p]
+    per_pattern = []
+    for s in range(0, 4, B):
+        idx = order[0, s : s + B]
+        p, buf, loss = _manual_step(sizes, p, X[idx], Y[idx], buf)
+        per_pattern += [loss] * len(idx)
+    got = eng.state_dict()
+    assert _maxdiff([t[0] for t in got["params"]], p) < 1e-14
+    assert _maxdiff([t[0] for t in got["momentum"]], buf) < 1e-14
+    assert losses.shape == (1,)
+    assert math.isclose(losses.item(), sum(per_pattern) / 4, rel_tol=1e-12)
+
+
+def test_reference_matches_torch_func_and_returns_pre_update_loss():
+    sizes = (6, 5, 2)
+    R = 2
+    params = init_replica_params(sizes, [3, 4])
+    X, Y = _data(10, sizes)
+    order = torch.tensor([[0, 5, 2, 9, 7], [3, 3, 8, 1, 6]])
+    eng = make_engine("reference", sizes, params, LR, MOM, 2)
+    losses = eng.train_epoch(X, Y, order)
+
+    def loss_fn(p, x, t):
+        return torch.nn.functional.mse_loss(forward_replicas([q.unsqueeze(0) for q in p], x)[0], t)
+
+    for r in range(R):
+        p = [t[r].clone() for t in params]
+        buf = [torch.zeros_like(t) for t in p]
+        total = 0.0
+        for s in range(0, 5, 2):
+            idx = order[r, s : s + 2]
+            grads, loss = torch.func.grad_and_value(loss_fn)(p, X[idx], Y[idx])
+            total += loss.item() * len(idx)
+            buf = [MOM * bb + g for bb, g in zip(buf, grads)]
+            p = [q - LR * bb for q, bb in zip(p, buf)]
+        assert _maxdiff([t[r] for t in eng.params()], p) < 1e-14
+        assert math.isclose(losses[r].item(), total / 5, rel_tol=1e-12)
+
+
+# ---------------------------------------------------------------- fast engines vs reference
+def _run(name, sizes, params, B, X, Y, orders):
+    eng = make_engine(name, sizes, params, LR, MOM, B)
+    losses = [eng.train_epoch(X, Y, o) for o in orders]
+    return eng, losses
+
+
+@pytest.mark.parametrize("name", FAST_NAMES)
+@pytest.mark.parametrize("sizes", [(6, 4, 2), (6, 13, 2), (6, 8, 8, 2)], ids=lambda s: "-".join(map(str, s)))
+@pytest.mark.parametrize("B", [1, 7])
+@pytest.mark.parametrize("R", [1, 3])
+def test_fast_matches_reference(name, sizes, B, R):
+    _needs(name)
+    n = 200
+    X, Y = _data(n, sizes)
+    params = init_replica_params(sizes, list(range(10, 10 + R)))
+    orders = _orders(R, n, [20, 50, 200, 200])  # selective growth, then a conventional epoch; 7 divides none
+    ref, ref_losses = _run("reference", sizes, params, B, X, Y, orders)
+    fast, fast_losses = _run(name, sizes, params, B, X, Y, orders)
+    assert _maxdiff(ref.params(), fast.params()) <= 1e-9
+    assert _maxdiff(ref.state_dict()["momentum"], fast.state_dict()["momentum"]) <= 1e-9
+    for a, b in zip(ref_losses, fast_losses):
+        assert a.shape == b.shape == (R,) and (a - b).abs().max().item() <= 1e-9
+    for p, q in zip(ref.params(), params):
+        assert p.shape == q.shape and p.dtype == torch.float64
+
+
+def test_fast_engine_falls_back_to_torch(monkeypatch):
+    monkeypatch.setenv("SELPRES_NO_NATIVE", "1")
+    sizes = (6, 4, 2)
+    eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    assert eng.name == "torch"
+    with pytest.raises(_kernels.KernelUnavailable):
+        make_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+
+
+def test_does_not_modify_callers_params():
+    sizes = (6, 4, 2)
+    params = init_replica_params(sizes, [0, 1])
+    before = [t.clone() for t in params]
+    X, Y = _data(50, sizes)
+    for name in ["reference", *FAST_NAMES]:
+        if name == "native" and not native_available():
+            continue
+        make_engine(name, sizes, params, LR, MOM, 1).train_epoch(X, Y, _orders(2, 50, [50])[0])
+        assert all(torch.equal(a, b) for a, b in zip(params, before))
+
+
+# ---------------------------------------------------------------- checkpoint / resume
+@pytest.mark.parametrize("name", ["reference", *FAST_NAMES])
+def test_state_dict_round_trip_is_exact(name):
+    _needs(name)
+    sizes, R, n = (6, 5, 2), 3, 60
+    X, Y = _data(n, sizes)
+    params = init_replica_params(sizes, [1, 2, 3])
+    orders = _orders(R, n, [n, n, n])
+    straight = make_engine(name, sizes, params, LR, MOM, 3)
+    for o in orders:
+        straight.train_epoch(X, Y, o)
+
+    first = make_engine(name, sizes, params, LR, MOM, 3)
+    for o in orders[:2]:
+        first.train_epoch(X, Y, o)
+    state = first.state_dict()
+    assert [t.shape for t in state["momentum"]] == [t.shape for t in params]
+    assert any(t.abs().max() > 0 for t in state["momentum"])
+    fresh = make_engine(name, sizes, init_replica_params(sizes, [9, 9, 9]), LR, MOM, 3)
+    fresh.load_state_dict(state)
+    fresh.train_epoch(X, Y, orders[2])
+    for a, b in zip(straight.state_dict()["params"] + straight.state_dict()["momentum"],
+                    fresh.state_dict()["params"] + fresh.state_dict()["momentum"]):
+        assert torch.equal(a, b)
+
+
+def test_state_dicts_are_interchangeable_between_engines():
+    _needs("native")
+    sizes, n = (6, 4, 2), 40
+    X, Y = _data(n, sizes)
+    params = init_replica_params(sizes, [1, 2])
+    orders = _orders(2, n, [n, n])
+    ref = make_engine("reference", sizes, params, LR, MOM, 1)
+    ref.train_epoch(X, Y, orders[0])
+    nat = make_engine("native", sizes, params, LR, MOM, 1)
+    nat.load_state_dict(ref.state_dict())
+    ref.train_epoch(X, Y, orders[1])
+    nat.train_epoch(X, Y, orders[1])
+    assert _maxdiff(ref.params(), nat.params()) <= 1e-12
+
+
+# ---------------------------------------------------------------- divergence / independence
+@pytest.mark.parametrize("name", ["reference", *FAST_NAMES])
+def test_nan_replica_leaves_others_untouched(name):
+    _needs(name)
+    sizes, R, n = (6, 4, 2), 6, 50  # R=6: the NaN replica shares a 4-lane vector with others
+    X, Y = _data(n, sizes)
+    params = init_replica_params(sizes, list(range(R)))
+    poisoned = [t.clone() for t in params]
+    poisoned[0][1, 0, 0] = float("nan")
+    poisoned[2][4, 1, 1] = float("inf")
+    orders = _orders(R, n, [n, n])
+    clean, dirty = make_engine(name, sizes, params, LR, MOM, 2), make_engine(name, sizes, poisoned, LR, MOM, 2)
+    for o in orders:
+        clean_loss, dirty_loss = clean.train_epoch(X, Y, o), dirty.train_epoch(X, Y, o)
+    keep = [0, 2, 3, 5]
+    for a, b in zip(clean.params(), dirty.params()):
+        assert torch.equal(a[keep], b[keep])
+    assert torch.equal(clean_loss[keep], dirty_loss[keep])
+    assert torch.isnan(dirty_loss[1])
+    assert not torch.isfinite(dirty.params()[0][1]).all()
+
+
+def test_native_threads_give_identical_results():
+    _needs("native")
+    sizes, R, n = (6, 13, 2), 13, 100
+    X, Y = _data(n, sizes)
+    params = init_replica_params(sizes, list(range(R)))
+    orders = _orders(R, n, [n])
+    outs = []
+    for threads in (1, 2, 3):
+        eng = make_engine("native", sizes, params, LR, MOM, 1, threads=threads)
+        eng.train_epoch(X, Y, orders[0])
+        outs.append(eng.params())
+    for other in outs[1:]:
+        assert all(torch.equal(a, b) for a, b in zip(outs[0], other))
+
+
+def test_bad_inputs_are_rejected():
+    sizes = (6, 4, 2)
+    eng = make_engine("torch", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    X, Y = _data(10, sizes)
+    with pytest.raises(IndexError):
+        eng.train_epoch(X, Y, torch.tensor([[0, 10]]))
+    with pytest.raises(ValueError):
+        eng.train_epoch(X, Y, torch.tensor([[0, 1], [2, 3]]))
+    with pytest.raises(ValueError):
+        make_engine("nope", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
