@@ -24,7 +24,9 @@ from selpres.model import TopologyError, parse_topology
 
 class EngineName(Enum):
     reference = "reference"  # nn.Module + torch.optim.SGD, one replica at a time: defines correct results
-    fast = "fast"  # replica-batched kernel, same updates (see selpres/engine.py)
+    fast = "fast"  # the best available of native, then torch (see selpres/engine.py)
+    native = "native"  # AVX2 C kernel, 4 replicas a vector, built with gcc at first use
+    torch = "torch"  # replica-batched eager PyTorch: the pure-torch fallback
 
 
 class Order(Enum):
@@ -107,7 +109,7 @@ class EvalConfig:
 @dataclass
 class LoggingConfig:
     tensorboard: bool = True
-    per_replica: bool = True  # also log each replica's curves (aggregates are always logged)
+    per_replica: bool = True  # also log each replica's held-out curve (mean/min/max are always logged)
     progress: bool = True
 
 

@@ -9,20 +9,22 @@ sorting on the key (rank-within-stratum + U(0,1)) / stratum size). ``random`` is
 the literature's strongest simple baseline (Wu, Dyer & Neyshabur, ICLR 2021).
 
 Within an epoch the current set is reshuffled; ``set_epoch(e)`` picks the epoch (and so the stage),
-following ``DistributedSampler``'s convention. The shuffle of epoch e depends only on (seed, e), so a
-resumed run needs no sampler state beyond the epoch number.
+following ``DistributedSampler``'s convention. The shuffle of epoch e is a counter-based hash of
+(seed, e), so a resumed run needs no sampler state beyond the epoch number, and the shuffles of all
+replicas of a job are computed in one vectorised step (``epoch_orders``).
 """
 
 from __future__ import annotations
 
 from typing import Iterator
 
+import numpy as np
 import torch
 from torch.utils.data import Sampler
 
 from selpres.errors import ConfigError
 from selpres.schedule import Schedule
-from selpres.seeding import generator
+from selpres.seeding import derive_seed
 
 ORDERS = ("stratified", "random")
 
@@ -59,6 +61,36 @@ def priority_order(X: torch.Tensor, kind: str, gen: torch.Generator, bins: int =
     return shuffled[torch.argsort(key, stable=True)]
 
 
+_M = np.uint64(0xFFFFFFFFFFFFFFFF)
+
+
+def _mix64(z: np.ndarray) -> np.ndarray:
+    """splitmix64's finaliser: a bijective 64-bit hash, vectorised (uint64 arithmetic wraps)."""
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+def epoch_orders(samplers: list["SelectivePresentationSampler"]) -> torch.Tensor:
+    """Every sampler's current epoch order, stacked [R, m]: one vectorised shuffle for all replicas.
+
+    Replica r's shuffle is argsort of hash(key_r, epoch, i) over the current set's positions i, a
+    counter-based permutation, so it is the same whether computed alone or with other replicas, and
+    costs one argsort for the whole job instead of R generator set-ups per epoch.
+    """
+    plans = [s._plan[s.epoch] for s in samplers]
+    size, count = plans[0].size, plans[0].presentations
+    if any((p.size, p.presentations) != (size, count) for p in plans):
+        raise ValueError("samplers are at different stages; set_epoch them alike")
+    keys = np.array([[s._key, s.epoch] for s in samplers], dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        base = _mix64(keys[:, 0] ^ _mix64(keys[:, 1] + np.uint64(0x9E3779B97F4A7C15)))
+        h = _mix64(base[:, None] + np.arange(size, dtype=np.uint64)[None, :] * np.uint64(0x9E3779B97F4A7C15))
+    perm = torch.from_numpy(np.argsort(h, axis=1, kind="stable")[:, :count])
+    orders = torch.stack([s.order[:size] for s in samplers])
+    return torch.gather(orders, 1, perm)
+
+
 class SelectivePresentationSampler(Sampler[int]):
     """Yields the indices presented in one epoch: the current stage's subset of U, freshly shuffled."""
 
@@ -68,6 +100,7 @@ class SelectivePresentationSampler(Sampler[int]):
         self.order = order
         self.schedule = schedule
         self.seed = int(seed)
+        self._key = derive_seed(self.seed, "shuffle")
         self._plan = schedule.plan()
         self.epoch = 0
 
@@ -87,9 +120,7 @@ class SelectivePresentationSampler(Sampler[int]):
 
     def epoch_indices(self) -> torch.Tensor:
         """This epoch's presentation order as one tensor (what the engines consume)."""
-        plan = self._plan[self.epoch]
-        perm = torch.randperm(plan.size, generator=generator(self.seed, "shuffle", self.epoch))
-        return self.order[: plan.size][perm[: plan.presentations]]
+        return epoch_orders([self])[0]
 
     def __iter__(self) -> Iterator[int]:
         return iter(self.epoch_indices().tolist())

@@ -28,6 +28,7 @@ def _flat(d: dict, prefix: str = "") -> dict:
 
 class Tracker:
     def __init__(self, logdir: Path, enabled: bool = True, per_replica: bool = True):
+        """``per_replica`` adds each replica's held-out curve (at the points it is scored) to the aggregates."""
         self.enabled = enabled
         self.per_replica = per_replica
         self.logdir = Path(logdir)
@@ -55,7 +56,7 @@ class Tracker:
             for axis, step in (("epoch", rec["epoch"] + 1), ("presentations", rec["presentations"])):
                 for name, v in stats.items():
                     w.add_scalar(f"{metric}/{name}/by_{axis}", v, step)
-                if self.per_replica and len(vals) > 1:
+                if self.per_replica and len(vals) > 1 and metric == "heldout_rms_nm":
                     for r, v in enumerate(vals):
                         if v is not None and math.isfinite(v):
                             w.add_scalar(f"replicas/{metric}/r{r:03d}/by_{axis}", v, step)

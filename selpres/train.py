@@ -26,7 +26,7 @@ from selpres.engine import make_engine
 from selpres.errors import ConfigError
 from selpres.model import forward_replicas, init_replica_params
 from selpres.robot import TwoLinkArm
-from selpres.sampler import SelectivePresentationSampler, priority_order
+from selpres.sampler import SelectivePresentationSampler, epoch_orders, priority_order
 from selpres.schedule import Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
 from selpres.stats import summarize
@@ -175,7 +175,7 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
         t0 = time.perf_counter()
         for s in prob.samplers:
             s.set_epoch(ep.index)
-        order = torch.stack([s.epoch_indices() for s in prob.samplers])
+        order = epoch_orders(prob.samplers)
         loss = engine.train_epoch(prob.X, prob.Y, order)
         train_seconds += time.perf_counter() - t0
         presentations += ep.presentations
