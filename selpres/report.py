@@ -287,7 +287,7 @@ def table1_markdown(rows: list[dict]) -> str:
         if label == "total time T (paper)":
             return (f"{paper['presentations']:,}t" + (f" (printed {paper['printed']})" if m == "conventional" else "")
                     if paper else "not in paper")
-        if label == "paper's setting?":
+        if label == "paper's n_i, N_i (or budget)?":
             return r["paper_setting"]
         if label == "wall s per replica-run (job train / total)":
             return (f"{r['wall_train_per_replica_s']:.3g} ({r['wall_train_job_s']:.3g} / {r['wall_total_job_s']:.3g})")
@@ -312,7 +312,7 @@ for _set, _sname in SETS:
         LABEL_KEYS[f"{_sname} RMS {_uname}, mean ± std"] = (_set, _unit, "ms")
         LABEL_KEYS[f"{_sname} RMS {_uname}, 95 % CI"] = (_set, _unit, "ci")
 TABLE1_LABELS = [
-    "p", "size of the set n_i", "no. of epochs N_i", "total time T (ours)", "total time T (paper)", "paper's setting?",
+    "p", "size of the set n_i", "no. of epochs N_i", "total time T (ours)", "total time T (paper)", "paper's n_i, N_i (or budget)?",
     "wall s per replica-run (job train / total)", "replicas complete", "rms error, paper¹", *LABEL_KEYS,
 ]
 
