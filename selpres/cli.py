@@ -63,9 +63,8 @@ def run_job(cfg: DictConfig) -> float:
     try:
         if not cfg.overwrite and (res := _finished(out, cfg)) is not None:
             print(f"already done: {out / RESULTS} (overwrite=true to run it again)")
-            print(summary_table(res))
-            return _objective(res)
-        res = train(cfg, out)
+        else:
+            res = train(cfg, out)
     except ConfigError as e:
         if multirun:
             log.error("config error: %s", e)

@@ -18,8 +18,12 @@ from typing import Any, List, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
+from selpres.data import grid_points
 from selpres.errors import ConfigError
 from selpres.model import TopologyError, parse_topology
+
+
+MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
 
 
 class EngineName(Enum):
@@ -191,12 +195,23 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         if not cfg.robot[k] > 0:
             raise ConfigError(f"robot.{k}", cfg.robot[k], "a positive number")
     d = cfg.data
+    points = {}
     for k in ("theta", "dtheta", "tau1", "tau2"):
         r = d[k]
         if not r.step > 0:
             raise ConfigError(f"data.{k}.step", r.step, "a positive grid step")
         if not r.hi >= r.lo:
             raise ConfigError(f"data.{k}.hi", r.hi, f"a value >= data.{k}.lo = {r.lo}")
+        try:
+            points[k] = grid_points(r.lo, r.hi, r.step, f"data.{k}")
+        except ValueError:
+            raise ConfigError(f"data.{k}.step", r.step, f"a step that divides hi - lo = {r.hi - r.lo:g} into whole steps") from None
+    candidates = points["theta"] ** 2 * points["dtheta"] ** 2 * points["tau1"] * points["tau2"]
+    if candidates > MAX_GRID_CANDIDATES:
+        finest = max(points, key=points.get)
+        raise ConfigError(f"data.{finest}.step", d[finest].step,
+                          f"a coarser step: the grid (θ² × θ̇² × τ1 × τ2 points) would have {candidates:,} candidates, "
+                          f"at most {MAX_GRID_CANDIDATES:,} are allowed (the paper's has 1,050,625)")
     if not d.accel_limit > 0:
         raise ConfigError("data.accel_limit", d.accel_limit, "a positive acceleration bound in rad/s²")
     if d.test_patterns < 1:
@@ -213,7 +228,7 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
     try:
         return parse_topology(cfg.topology.layers, n_inputs=6, n_outputs=2)
     except TopologyError as e:
-        raise ConfigError("topology.layers", cfg.topology.layers, str(e).split(": ", 1)[-1]) from None
+        raise ConfigError("topology.layers", cfg.topology.layers, e.allowed) from None
 
 
 def to_container(cfg: DictConfig) -> dict:

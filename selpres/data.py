@@ -83,8 +83,8 @@ def _rows(q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor, tau: torch.Tenso
 # ------------------------------------------------------------------------------------ exemplar grid
 
 
-def grid_axis(lo: float, hi: float, step: float, name: str = "grid") -> torch.Tensor:
-    """``lo + i*step`` for i = 0..n (not repeated addition, so endpoints such as 18.0 come out exact)."""
+def grid_points(lo: float, hi: float, step: float, name: str = "grid") -> int:
+    """How many points ``grid_axis`` will have; checks the range without allocating it."""
     lo, hi, step = float(lo), float(hi), float(step)
     if not step > 0:
         raise ValueError(f"{name}: step must be > 0, got {step}")
@@ -93,7 +93,13 @@ def grid_axis(lo: float, hi: float, step: float, name: str = "grid") -> torch.Te
     n = round((hi - lo) / step)
     if abs(lo + n * step - hi) > 1e-9 * max(1.0, abs(hi)):
         raise ValueError(f"{name}: hi - lo = {hi - lo} is not a whole number of steps of {step}")
-    return lo + torch.arange(n + 1, dtype=DTYPE) * step
+    return n + 1
+
+
+def grid_axis(lo: float, hi: float, step: float, name: str = "grid") -> torch.Tensor:
+    """``lo + i*step`` for i = 0..n (not repeated addition, so endpoints such as 18.0 come out exact)."""
+    n = grid_points(lo, hi, step, name)
+    return float(lo) + torch.arange(n, dtype=DTYPE) * float(step)
 
 
 def _axis(data_cfg: Any, key: str) -> torch.Tensor:
@@ -142,6 +148,9 @@ def _uniform(n: int, lo: float, hi: float, generator: torch.Generator, cols: int
     return lo + (hi - lo) * torch.rand(n, cols, dtype=DTYPE, generator=generator)
 
 
+MAX_OUTSIDE_DRAWS = 20_000_000  # give up (rather than hang) when a filter accepts nothing in this many draws
+
+
 def sample_outside(
     arm: TwoLinkArm, data_cfg: Any, count: int, generator: torch.Generator, *, _reweight: bool = True
 ) -> Patterns:
@@ -163,9 +172,14 @@ def sample_outside(
     tau_lo = torch.tensor([t1_lo, t2_lo], dtype=DTYPE)
     tau_hi = torch.tensor([t1_hi, t2_hi], dtype=DTYPE)
 
-    parts: list[Patterns] = []
+    parts: list[Patterns] = [_rows(*(torch.empty(0, 2, dtype=DTYPE),) * 4)]
     have, drawn, accepted = 0, 0, 0
     while have < count:
+        if drawn >= MAX_OUTSIDE_DRAWS and accepted == 0:
+            raise ValueError(
+                f"no outside pattern in {drawn:,} random draws: the continuous ranges (theta, dtheta, tau1, tau2) "
+                f"and accel_limit={a} leave (almost) nothing to sample from"
+            )
         # batch sized from the acceptance rate seen so far (deterministic: depends only on the generator)
         rate = max(accepted / drawn, 1e-3) if drawn else 0.05
         n = int(min(max((count - have) / rate * 1.2, 1024), 2_000_000))

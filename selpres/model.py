@@ -20,25 +20,27 @@ _TOPOLOGY_RE = re.compile(r"^\d+(-\d+)+$")
 
 
 class TopologyError(ValueError):
-    """A topology string that cannot describe the network."""
+    """A topology string that cannot describe the network; ``allowed`` says what would."""
+
+    def __init__(self, topology: str, allowed: str):
+        self.allowed = allowed
+        super().__init__(f"topology={topology!r} is not allowed: expected {allowed}")
 
 
 def parse_topology(topology: str, n_inputs: int | None = None, n_outputs: int | None = None) -> tuple[int, ...]:
     """``"6-13-2"`` -> ``(6, 13, 2)``; checks widths against the data when they are given."""
     text = str(topology).strip()
     if not _TOPOLOGY_RE.match(text):
-        raise TopologyError(
-            f"topology={topology!r} is malformed: expected layer widths joined by '-', e.g. '6-13-2' or '6-8-8-2'"
-        )
+        raise TopologyError(topology, "layer widths joined by '-', e.g. '6-13-2' or '6-8-8-2'")
     sizes = tuple(int(s) for s in text.split("-"))
     if len(sizes) < 2:
-        raise TopologyError(f"topology={topology!r} needs at least an input and an output layer")
+        raise TopologyError(topology, "at least an input and an output layer")
     if any(s <= 0 for s in sizes):
-        raise TopologyError(f"topology={topology!r} has a layer of width 0: every width must be a positive integer")
+        raise TopologyError(topology, "positive layer widths (no layer of width 0)")
     if n_inputs is not None and sizes[0] != n_inputs:
-        raise TopologyError(f"topology={topology!r} has {sizes[0]} inputs but the data has {n_inputs} (θ1, θ̇1, θ̈1, θ2, θ̇2, θ̈2)")
+        raise TopologyError(topology, f"{n_inputs} inputs (θ1, θ̇1, θ̈1, θ2, θ̇2, θ̈2), not {sizes[0]}")
     if n_outputs is not None and sizes[-1] != n_outputs:
-        raise TopologyError(f"topology={topology!r} has {sizes[-1]} outputs but the data has {n_outputs} (τ1, τ2)")
+        raise TopologyError(topology, f"{n_outputs} outputs (τ1, τ2), not {sizes[-1]}")
     return sizes
 
 

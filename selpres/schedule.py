@@ -70,8 +70,9 @@ class Schedule:
 
     @property
     def conventional_presentations(self) -> int:
-        """T_con / t = n·N for conventional training with the same number of epochs N = Σ N_i."""
-        return self.n * sum(s.epochs for s in self.stages)
+        """T_con / t = n·N for conventional training with the same number of epochs N = Σ N_i
+        (a one-stage schedule's partial epoch counts as the fraction of an epoch it is)."""
+        return self.n * sum(s.epochs for s in self.stages) + sum(s.extra for s in self.stages)
 
     def plan(self) -> list[EpochPlan]:
         out: list[EpochPlan] = []
@@ -108,7 +109,7 @@ def _is_fraction(v) -> bool:
 
 
 def resolve_sizes(sizes: Sequence, n: int, key: str = "schedule.sizes") -> list[int]:
-    """Counts stay counts; floats are fractions of n in (0, 1] (rounded, at least 1)."""
+    """Counts stay counts; floats are fractions of n in (0, 1] (rounded half up, at least 1)."""
     if not isinstance(sizes, (list, tuple)) or len(sizes) == 0:
         raise ConfigError(key, sizes, "a non-empty list of counts (e.g. [50, 100, 1002]) or fractions of n (e.g. [0.05, 1.0])")
     out = []
@@ -120,7 +121,7 @@ def resolve_sizes(sizes: Sequence, n: int, key: str = "schedule.sizes") -> list[
         if _is_fraction(v):
             if not 0.0 < v <= 1.0:
                 raise ConfigError(key, sizes, f"fractions of n must lie in (0, 1]; got {v}")
-            out.append(max(1, round(v * n)))
+            out.append(max(1, math.floor(v * n + 0.5)))  # half up: 0.25 of 1002 -> 251
         else:
             if v <= 0:
                 raise ConfigError(key, sizes, f"counts must be positive; got {v}")

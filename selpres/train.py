@@ -60,29 +60,38 @@ def config_hash(cfg: DictConfig) -> str:
 
 
 @functools.lru_cache(maxsize=4)
-def _data(robot_json: str, data_json: str) -> tuple[D.ExemplarSet, D.TestSets, D.Scaler]:
-    """Exemplar set, test sets and scaler of one robot/data config; cached so that the jobs of an
-    in-process sweep (Hydra's basic launcher) build them once. Tensors are never modified in place."""
-    arm = TwoLinkArm.from_config(json.loads(robot_json))
-    data_cfg = OmegaConf.create(json.loads(data_json))
-    exemplar = D.build_exemplar_set(arm, data_cfg)
-    if exemplar.X.shape[0] == 0:
-        return exemplar, None, None
-    tests = D.make_test_sets(arm, data_cfg, exemplar, seed=data_cfg.test_seed)
-    return exemplar, tests, D.Scaler.fit(exemplar, data_cfg)
+def _exemplar(robot_json: str, data_json: str) -> D.ExemplarSet:
+    """Cached per robot/data config, so the jobs of an in-process sweep (Hydra's basic launcher) build
+    the data once. Cached tensors are never modified in place."""
+    return D.build_exemplar_set(TwoLinkArm.from_config(json.loads(robot_json)), OmegaConf.create(json.loads(data_json)))
+
+
+@functools.lru_cache(maxsize=4)
+def _tests_and_scaler(robot_json: str, data_json: str) -> tuple[D.TestSets, D.Scaler]:
+    arm, data_cfg = TwoLinkArm.from_config(json.loads(robot_json)), OmegaConf.create(json.loads(data_json))
+    exemplar = _exemplar(robot_json, data_json)
+    return D.make_test_sets(arm, data_cfg, exemplar, seed=data_cfg.test_seed), D.Scaler.fit(exemplar, data_cfg)
 
 
 def prepare(cfg: DictConfig) -> Problem:
     sizes = validate(cfg)
     # plain values (enums as strings) for the data module
-    exemplar, tests, scaler = _data(json.dumps(to_container(cfg.robot), sort_keys=True),
-                                    json.dumps(to_container(cfg.data), sort_keys=True))
+    keys = json.dumps(to_container(cfg.robot), sort_keys=True), json.dumps(to_container(cfg.data), sort_keys=True)
+    exemplar = _exemplar(*keys)
     n = exemplar.X.shape[0]
     if n == 0:
         raise ConfigError(
             "data.accel_limit", cfg.data.accel_limit,
-            "ranges and a filter that keep at least one pattern (this data config keeps none)",
+            f"a filter that keeps at least one of the {exemplar.n_candidates:,} grid candidates of "
+            "data.theta/dtheta/tau1/tau2 (none has both |θ̈| within it: widen the limit or move the ranges)",
         )
+    if cfg.data.test_from_exemplar > n:
+        raise ConfigError("data.test_from_exemplar", cfg.data.test_from_exemplar,
+                          f"at most the exemplar set's size n = {n}")
+    try:
+        tests, scaler = _tests_and_scaler(*keys)
+    except ValueError as e:  # the continuous ranges leave nothing to draw test patterns from
+        raise ConfigError("data", "theta/dtheta/tau1/tau2 ranges", str(e)) from None
     sch = to_container(cfg.schedule)
     schedule = build_schedule(sch["sizes"], sch["epochs"], n, sch["budget"])
     seeds = [cfg.seed + r for r in range(cfg.replicas)]
@@ -300,7 +309,8 @@ def summary_table(results: dict) -> str:
         ("schedule", f"{sch['name']} (p={sch['p']}, sizes {sch['sizes']}, epochs {sch['epochs']})"),
         ("topology", results["topology"]),
         ("replicas", f"{results['replicas']} (seeds {results['seeds'][0]}..{results['seeds'][-1]}), {results['diverged_replicas']} diverged"),
-        ("cost T/t", f"{sch['presentations']:,} presentations  (T_con/t at equal epochs {sch['conventional_presentations']:,}; ratio {sch['cost_ratio']:.3f})"),
+        ("cost T/t", f"{sch['presentations']:,} presentations  (T_con/t at equal epochs {sch['conventional_presentations']:,}; "
+                     f"ratio {sch['cost_ratio']:.3f})" if sch["cost_ratio"] is not None else f"{sch['presentations']:,} presentations"),
         ("wall time", f"{results['wall_seconds']['total']:.2f} s total, {results['wall_seconds']['train']:.2f} s in updates ({results['engine']} engine)"),
         ("test-10 RMS", f"{fmt('test10_rms_nm_overall')} Nm   {fmt('test10_rms_scaled_overall')} scaled"),
         ("held-out RMS", f"{fmt('heldout_rms_nm_overall')} Nm   {fmt('heldout_rms_scaled_overall')} scaled"),

@@ -1,0 +1,42 @@
+"""Shared fixtures: paths, the paper's robot/data configs, the real exemplar set, Hydra composition."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIGS = REPO / "configs"
+
+
+def load_group(group: str, option: str):
+    return OmegaConf.load(CONFIGS / group / f"{option}.yaml")
+
+
+@pytest.fixture(scope="session")
+def exemplar():
+    """The paper's exemplar set (n = 1002) built from configs/robot/two_link.yaml and configs/data/paper.yaml."""
+    from selpres.data import build_exemplar_set
+    from selpres.robot import TwoLinkArm
+
+    return build_exemplar_set(TwoLinkArm.from_config(load_group("robot", "two_link")), load_group("data", "paper"))
+
+
+@pytest.fixture
+def compose_cfg():
+    """``compose_cfg(*overrides, hydra=False)`` -> the composed ``train`` config; GlobalHydra is cleared around it."""
+    import selpres.config  # noqa: F401  registers the typed schema and resolvers
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    def _compose(*overrides: str, hydra: bool = False):
+        GlobalHydra.instance().clear()
+        try:
+            with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
+                return compose("train", overrides=list(overrides), return_hydra_config=hydra)
+        finally:
+            GlobalHydra.instance().clear()
+
+    return _compose
