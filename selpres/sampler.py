@@ -86,7 +86,7 @@ def epoch_orders(samplers: list["SelectivePresentationSampler"]) -> torch.Tensor
     with np.errstate(over="ignore"):
         base = _mix64(keys[:, 0] ^ _mix64(keys[:, 1] + np.uint64(0x9E3779B97F4A7C15)))
         h = _mix64(base[:, None] + np.arange(size, dtype=np.uint64)[None, :] * np.uint64(0x9E3779B97F4A7C15))
-    perm = torch.from_numpy(np.argsort(h, axis=1, kind="stable")[:, :count])
+    perm = torch.from_numpy(np.argsort(h, axis=1)[:, :count])  # keys are distinct (bijective hash), so no ties
     orders = torch.stack([s.order[:size] for s in samplers])
     return torch.gather(orders, 1, perm)
 
