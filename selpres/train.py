@@ -207,6 +207,9 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
         tracker.log_epoch(rec)
         if cfg.logging.progress and ep.index in stage_ends:
             _print_stage(rec, prob.schedule, R)
+        if all(d is not None for d in diverged_at):  # nothing left to train: stop the job here
+            print(f"every replica diverged by epoch {ep.index + 1}; stopping")
+            break
         if out is not None and cfg.checkpoint.enabled and not last and (
             ep.index in stage_ends or (cfg.checkpoint.every and (ep.index + 1) % cfg.checkpoint.every == 0)
         ):

@@ -112,6 +112,25 @@ def test_divergence_is_reported_not_fatal(monkeypatch):
     json.dumps(res, allow_nan=False)  # strict JSON: no NaN leaks into results.json
 
 
+def test_a_job_whose_replicas_all_diverged_stops(monkeypatch):
+    import selpres.train as T
+
+    real = T.make_engine
+
+    def poisoned(*args, **kwargs):
+        engine = real(*args, **kwargs)
+        state = engine.state_dict()
+        state["params"][0][:, 0, 0] = float("inf")
+        engine.load_state_dict(state)
+        return engine
+
+    monkeypatch.setattr(T, "make_engine", poisoned)
+    res = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2"))
+    assert res["status"] == "diverged" and res["diverged_replicas"] == 2
+    assert len(res["curves"]) == 2 and res["presentations_done"] == 50  # stopped after the first epoch
+    assert all(r["diverged"] == {"epoch": 1, "presentations": 50} for r in res["replica_results"])
+
+
 def test_compute_matched_schedule_spends_the_budget():
     res = train(cfg_of("schedule=matched", "schedule.budget=2500"))
     assert res["presentations_done"] == 2500
