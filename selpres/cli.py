@@ -21,6 +21,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from selpres.errors import ConfigError
+from selpres.storage import write_json
 from selpres.train import RESULTS, config_hash, summary_table, train
 
 log = logging.getLogger("selpres")
@@ -51,7 +52,7 @@ def _failed(out: Path, cfg: DictConfig, error: str, kind: str) -> None:
         "topology": cfg.topology.layers, "replicas": cfg.replicas,
         "seeds": [cfg.seed + r for r in range(cfg.replicas)] if isinstance(cfg.replicas, int) else None,
     }
-    (out / RESULTS).write_text(json.dumps(record, indent=1, default=str))
+    write_json(out / RESULTS, record)
 
 
 def run_job(cfg: DictConfig) -> float:

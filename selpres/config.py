@@ -8,15 +8,13 @@ message naming the key. ``validate`` then checks values against each other and a
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, List, Optional
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf
 
 from selpres.data import grid_points
 from selpres.errors import ConfigError
@@ -233,9 +231,3 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
 
 def to_container(cfg: DictConfig) -> dict:
     return OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
-
-
-def stable_hash(obj) -> str:
-    """First 16 hex digits of the sha256 of a canonical JSON: the identity of a config or of data."""
-    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]

@@ -7,11 +7,9 @@ randomness comes only from an explicit ``torch.Generator`` or seed.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +19,7 @@ import numpy as np
 import torch
 
 from selpres.robot import TwoLinkArm
+from selpres.storage import atomic_write, stable_hash
 
 INPUT_NAMES = ("theta1", "dtheta1", "ddtheta1", "theta2", "dtheta2", "ddtheta2")
 TARGET_NAMES = ("tau1", "tau2")
@@ -327,29 +326,9 @@ def _plain(cfg: Any) -> Any:
     return cfg
 
 
-def _canonical_json(cfg: Any) -> str:
-    return json.dumps(_plain(cfg), sort_keys=True, separators=(",", ":"))
-
-
 def config_hash(robot_cfg: Any, data_cfg: Any) -> str:
-    """Identity of the data: first 16 hex of sha256 over the canonical JSON of both resolved configs."""
-    text = _canonical_json({"robot": robot_cfg, "data": data_cfg})
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def _atomic_write(path: Path, write) -> None:
-    """Write through a temp file in the same directory, then os.replace: readers never see half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; exported data is meant to be shared
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Identity of the data: a stable hash of both resolved configs (ints folded into floats)."""
+    return stable_hash(_plain({"robot": robot_cfg, "data": data_cfg}))
 
 
 def _table(p: Patterns) -> np.ndarray:
@@ -368,15 +347,15 @@ def export(path_stem: str | os.PathLike, exemplar: ExemplarSet, tests: TestSets,
     arrays["input_names"] = np.array(INPUT_NAMES)
     arrays["target_names"] = np.array(TARGET_NAMES)
     arrays["config_hash"] = np.array(h)
-    arrays["robot_config"] = np.array(_canonical_json(robot_cfg))
-    arrays["data_config"] = np.array(_canonical_json(data_cfg))
+    arrays["robot_config"] = np.array(json.dumps(_plain(robot_cfg), sort_keys=True))
+    arrays["data_config"] = np.array(json.dumps(_plain(data_cfg), sort_keys=True))
 
     paths = {"npz": stem.with_name(stem.name + ".npz")}
-    _atomic_write(paths["npz"], lambda f: np.savez(f, **arrays))
+    atomic_write(paths["npz"], lambda f: np.savez(f, **arrays))
     header = f"# config_hash={h}\n" + ",".join(COLUMN_NAMES)
     for name, t in tables.items():
         paths[name] = stem.with_name(f"{stem.name}_{name}.csv")
-        _atomic_write(paths[name], lambda f, t=t: np.savetxt(f, t, fmt="%.17g", delimiter=",", header=header, comments=""))
+        atomic_write(paths[name], lambda f, t=t: np.savetxt(f, t, fmt="%.17g", delimiter=",", header=header, comments=""))
     return paths
 
 

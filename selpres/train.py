@@ -11,7 +11,6 @@ from __future__ import annotations
 import functools
 import json
 import math
-import os
 import subprocess
 import time
 from dataclasses import dataclass
@@ -21,7 +20,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from selpres import data as D
-from selpres.config import stable_hash, to_container, validate
+from selpres.config import to_container, validate
 from selpres.engine import make_engine
 from selpres.errors import ConfigError
 from selpres.model import forward_replicas, init_replica_params
@@ -30,6 +29,7 @@ from selpres.sampler import SelectivePresentationSampler, epoch_orders, priority
 from selpres.schedule import Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
 from selpres.stats import summarize
+from selpres.storage import atomic_write, stable_hash, write_json
 from selpres.tracking import Tracker
 
 CHECKPOINT = "checkpoint.pt"
@@ -124,12 +124,6 @@ def _as_list(t: torch.Tensor) -> list:
     return [v if math.isfinite(v) else None for v in t.tolist()]
 
 
-def _atomic_write(path: Path, write) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    write(tmp)
-    os.replace(tmp, path)
-
-
 def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
     """Train ``cfg.replicas`` replicas through the schedule; returns the results dict.
 
@@ -168,7 +162,7 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
             "train_seconds": train_seconds, "engine": engine.state_dict(), "history": history,
             "diverged_at": diverged_at,
         }
-        _atomic_write(ckpt_path, lambda p: torch.save(state, p))
+        atomic_write(ckpt_path, lambda f: torch.save(state, f))
 
     if start_epoch == 0 and not history:  # the untrained network: every curve starts at 0 presentations
         params = engine.params()
@@ -221,8 +215,8 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
     results = _results(cfg, chash, prob, params, final, history, diverged_at, presentations,
                        train_seconds, loop_seconds, time.perf_counter() - t_start)
     if out is not None:
-        _atomic_write(out / "weights.pt", lambda p: torch.save({"params": params, "seeds": prob.seeds}, p))
-        _atomic_write(out / RESULTS, lambda p: p.write_text(json.dumps(results, indent=1)))
+        atomic_write(out / "weights.pt", lambda f: torch.save({"params": params, "seeds": prob.seeds}, f))
+        write_json(out / RESULTS, results)
         if ckpt_path.exists():
             ckpt_path.unlink()
         hp = {"schedule": cfg.schedule.name, "topology": cfg.topology.layers, "seed": cfg.seed,

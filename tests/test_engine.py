@@ -9,7 +9,7 @@ import torch
 
 from selpres import _kernels
 from selpres.engine import make_engine, native_available
-from selpres.model import BPN, forward_replicas, init_replica_params, load_into
+from selpres.model import forward_replicas, init_replica_params
 
 LR, MOM = 0.15, 0.9
 FAST_NAMES = ["torch", "native", "fast"]
