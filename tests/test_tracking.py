@@ -1,0 +1,42 @@
+"""TensorBoard: curves against epochs and presentations, replica aggregates, stages, hparams in the job folder."""
+
+from __future__ import annotations
+
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+from tensorboard.plugins.hparams import plugin_data_pb2
+
+from helpers import cfg_of
+from selpres.train import train
+
+
+def load(tb_dir) -> EventAccumulator:
+    acc = EventAccumulator(str(tb_dir), size_guidance={"scalars": 0, "tensors": 0})
+    acc.Reload()
+    return acc
+
+
+def test_curves_by_epoch_and_by_presentations(tmp_path):
+    res = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=3", "eval.every=1"), tmp_path)
+    acc = load(tmp_path / "tb")
+    tags = set(acc.Tags()["scalars"])
+    for metric in ("train_mse", "test10_rms_nm", "heldout_rms_nm"):
+        for stat in ("mean", "min", "max"):
+            assert {f"{metric}/{stat}/by_epoch", f"{metric}/{stat}/by_presentations"} <= tags
+    assert {f"replicas/heldout_rms_nm/r{r:03d}/by_presentations" for r in range(3)} <= tags
+
+    by_pres = acc.Scalars("heldout_rms_nm/mean/by_presentations")
+    assert [e.step for e in by_pres] == [rec["presentations"] for rec in res["curves"]]  # starts at 0, no duplicates
+    mean_last = sum(res["curves"][-1]["heldout_rms_nm"]) / 3
+    assert abs(by_pres[-1].value - mean_last) < 1e-6  # float32 in the event file
+    stages = acc.Scalars("schedule/stage/by_epoch")
+    assert [int(e.value) for e in stages] == [1, 1, 2, 3, 4, 5, 5]
+
+    # add_hparams wrote into the job's own folder (run_name="."), not a timestamped sub-folder
+    assert [p for p in (tmp_path / "tb").iterdir() if p.is_dir()] == []
+    content = acc.PluginTagToContent("hparams")
+    start = plugin_data_pb2.HParamsPluginData.FromString(content["_hparams_/session_start_info"]).session_start_info
+    assert {"schedule", "topology", "seed", "lr", "momentum", "sizes", "epochs"} <= set(start.hparams)
+    assert start.hparams["topology"].string_value == "6-13-2"
+    assert start.hparams["sizes"].string_value == "[50, 100, 400, 800, 1002]"  # lists flattened to strings
+    experiment = plugin_data_pb2.HParamsPluginData.FromString(content["_hparams_/experiment"]).experiment
+    assert "final/heldout_rms_nm_overall" in {m.name.tag for m in experiment.metric_infos}
