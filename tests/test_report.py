@@ -135,13 +135,20 @@ def test_time_to_target_on_known_curve(tmp_path):
     write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.1, 0.11], curves=sel_curve))
     write_job(s, "random_growth", "6-4-2", results("random_growth", "6-4-2", [0.2, 0.2], curves=rg_curve))
     groups, tops, methods = R.aggregate(R.load_jobs(s))
-    rows = {r["method"]: r for r in R.time_to_target_rows(groups, tops, methods)}
+    all_rows = R.time_to_target_rows(groups, tops, methods)
+    rows = {r["method"]: r for r in all_rows if r["target_method"] == "conventional"}
     assert rows["conventional"]["target_heldout_curve_rms_nm"] == pytest.approx(0.11)
     assert rows["conventional"]["presentations_to_target"] == 150300
     sel = rows["selective"]
     assert (sel["reached"], sel["presentations_to_target"], sel["previous_curve_point"]) == ("yes", 70560, 40560)
     assert sel["fraction_of_conventional_cost"] == pytest.approx(70560 / 150300)
     assert rows["random_growth"]["reached"] == "not reached"
+    # second target: selective's final curve value (0.105), which conventional's curve (ending at 0.11) never reaches
+    vs_sel = {r["method"]: r for r in all_rows if r["target_method"] == "selective"}
+    assert vs_sel["conventional"]["target_heldout_curve_rms_nm"] == pytest.approx(0.105)
+    assert vs_sel["conventional"]["reached"] == "not reached"
+    assert (vs_sel["selective"]["presentations_to_target"], vs_sel["selective"]["previous_curve_point"]) == (70560, 40560)
+    assert vs_sel["random_growth"]["reached"] == "not reached"
 
 
 def test_runs_lists_failed_missing_diverged_and_files_written(sweep, tmp_path, capsys):
