@@ -34,6 +34,7 @@ from pathlib import Path
 import torch
 
 LANES = 4
+INTERLEAVE = 2  # groups of 4 replicas advanced together in one instruction stream (see the C comment)
 
 C_TEMPLATE = r"""#include <immintrin.h>
 #include <stdint.h>
@@ -89,12 +90,18 @@ static inline __m256d sigmoid4(__m256d z) {
     return _mm256_div_pd(one, _mm256_add_pd(one, exp4(_mm256_xor_pd(z, _mm256_set1_pd(-0.0)))));
 }
 
-int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t P,
-                  double *W, double *M, const double *X, const double *Y,
-                  const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss)
+/* Interleave. One presentation is a long chain of dependent operations (forward, backward, update;
+   the next presentation reads the updated weights), so a single group of 4 replicas leaves the core
+   mostly waiting on latencies. train_groups() therefore advances ni independent groups in one
+   instruction stream (every value is an array of ni vectors, one per group) and the CPU overlaps
+   their chains. Each replica still sees exactly the same sequence of IEEE operations, so results do
+   not depend on how replicas are grouped. Called with ni = NI, and ni = 1 for the leftover groups. */
+#define NI @NI@
+
+static inline __attribute__((always_inline)) void
+train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const double *X, const double *Y,
+             const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss)
 {
-    if (nl != NL || P != P_TOTAL) return -3;
-    for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
     const int64_t nin = S[0], nout = S[NL];
     int64_t woff[NL], boff[NL], aoff[NL + 1];
     {
@@ -102,113 +109,147 @@ int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t 
         for (int l = 0; l < NL; l++) { woff[l] = off; off += S[l + 1] * S[l]; boff[l] = off; off += S[l + 1]; }
         for (int l = 0; l <= NL; l++) { aoff[l] = tot; tot += S[l]; }
     }
-    double act[TOT_UNITS * 4] __attribute__((aligned(32)));
-    double da[MAXW * 4] __attribute__((aligned(32))), db[MAXW * 4] __attribute__((aligned(32)));
-    double *G = B > 1 ? (double *)aligned_alloc(32, (size_t)P_TOTAL * 32) : NULL;
-    if (B > 1 && !G) return -1;
-
+    double act[NI][TOT_UNITS * 4] __attribute__((aligned(32)));
+    double da[NI][MAXW * 4] __attribute__((aligned(32))), db[NI][MAXW * 4] __attribute__((aligned(32)));
+    double *w[NI], *mb[NI], *G[NI];
+    const int64_t *ord[NI][4];
+    __m256d lsum[NI];
     const __m256d one = _mm256_set1_pd(1.0);
     const __m256d vmom = _mm256_set1_pd(mom), vlr = _mm256_set1_pd(lr);
 
-    for (int64_t g = g0; g < g1; g++) {
-        double *__restrict w = W + g * P_TOTAL * 4, *__restrict mb = M + g * P_TOTAL * 4;
-        const int64_t *o0 = order + (g * 4 + 0) * m, *o1 = order + (g * 4 + 1) * m;
-        const int64_t *o2 = order + (g * 4 + 2) * m, *o3 = order + (g * 4 + 3) * m;
-        __m256d lsum = _mm256_setzero_pd();
-        for (int64_t s = 0; s < m; s += B) {
-            const int64_t bs = (m - s < B) ? (m - s) : B;
-            const __m256d scale = _mm256_set1_pd(2.0 / (double)(bs * nout));
-            if (B > 1) memset(G, 0, (size_t)P_TOTAL * 32);
-            for (int64_t k = 0; k < bs; k++) {
-                const int64_t j = s + k;
-                const double *x0 = X + o0[j] * nin, *x1 = X + o1[j] * nin, *x2 = X + o2[j] * nin, *x3 = X + o3[j] * nin;
+#define EACH for (int u = 0; u < ni; u++)
+#pragma GCC unroll 4
+    EACH {
+        w[u] = W + (g + u) * P_TOTAL * 4;
+        mb[u] = M + (g + u) * P_TOTAL * 4;
+        G[u] = Gb + u * P_TOTAL * 4;
+        for (int k = 0; k < 4; k++) ord[u][k] = order + ((g + u) * 4 + k) * m;
+        lsum[u] = _mm256_setzero_pd();
+    }
+    for (int64_t s = 0; s < m; s += B) {
+        const int64_t bs = (m - s < B) ? (m - s) : B;
+        const __m256d scale = _mm256_set1_pd(2.0 / (double)(bs * nout));
+        if (B > 1) memset(Gb, 0, (size_t)ni * P_TOTAL * 32);
+        for (int64_t k = 0; k < bs; k++) {
+            const int64_t j = s + k;
+#pragma GCC unroll 4
+            EACH {
+                const double *x0 = X + ord[u][0][j] * nin, *x1 = X + ord[u][1][j] * nin;
+                const double *x2 = X + ord[u][2][j] * nin, *x3 = X + ord[u][3][j] * nin;
 #pragma GCC unroll 64
-                for (int64_t i = 0; i < nin; i++) ST(act + i * 4, _mm256_set_pd(x3[i], x2[i], x1[i], x0[i]));
+                for (int64_t i = 0; i < nin; i++) ST(act[u] + i * 4, _mm256_set_pd(x3[i], x2[i], x1[i], x0[i]));
+            }
 #pragma GCC unroll 8
-                for (int l = 0; l < NL; l++) {
-                    const int64_t ni = S[l], no = S[l + 1];
-                    const double *wl = w + woff[l] * 4, *bl = w + boff[l] * 4;
-                    const double *ain = act + aoff[l] * 4;
-                    double *aout = act + aoff[l + 1] * 4;
+            for (int l = 0; l < NL; l++) {
+                const int64_t ni_ = S[l], no = S[l + 1];
 #pragma GCC unroll 64
-                    for (int64_t o = 0; o < no; o++) {
-                        __m256d z = LD(bl + o * 4);
-                        const double *wr = wl + o * ni * 4;
+                for (int64_t o = 0; o < no; o++) {
+                    __m256d z[NI];
+#pragma GCC unroll 4
+                    EACH z[u] = LD(w[u] + (boff[l] + o) * 4);
 #pragma GCC unroll 64
-                        for (int64_t i = 0; i < ni; i++) z = _mm256_fmadd_pd(LD(wr + i * 4), LD(ain + i * 4), z);
-                        ST(aout + o * 4, sigmoid4(z));
+                    for (int64_t i = 0; i < ni_; i++) {
+#pragma GCC unroll 4
+                        EACH z[u] = _mm256_fmadd_pd(LD(w[u] + (woff[l] + o * ni_ + i) * 4), LD(act[u] + (aoff[l] + i) * 4), z[u]);
                     }
+#pragma GCC unroll 4
+                    EACH ST(act[u] + (aoff[l + 1] + o) * 4, sigmoid4(z[u]));
                 }
-                const double *y = act + aoff[NL] * 4;
-                const double *t0 = Y + o0[j] * nout, *t1 = Y + o1[j] * nout, *t2 = Y + o2[j] * nout, *t3 = Y + o3[j] * nout;
-                double *d = da, *dn = db;
+            }
+            double (*d)[MAXW * 4] = da, (*dn)[MAXW * 4] = db;
+#pragma GCC unroll 4
+            EACH {
+                const double *y = act[u] + aoff[NL] * 4;
+                const double *t0 = Y + ord[u][0][j] * nout, *t1 = Y + ord[u][1][j] * nout;
+                const double *t2 = Y + ord[u][2][j] * nout, *t3 = Y + ord[u][3][j] * nout;
 #pragma GCC unroll 64
                 for (int64_t o = 0; o < nout; o++) {
                     __m256d yv = LD(y + o * 4);
                     __m256d diff = _mm256_sub_pd(yv, _mm256_set_pd(t3[o], t2[o], t1[o], t0[o]));
-                    lsum = _mm256_fmadd_pd(diff, diff, lsum);
-                    ST(d + o * 4, _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(diff, scale), yv), _mm256_sub_pd(one, yv)));
-                }
-#pragma GCC unroll 8
-                for (int l = NL - 1; l >= 0; l--) {
-                    const int64_t ni = S[l], no = S[l + 1];
-                    double *wl = w + woff[l] * 4, *bl = w + boff[l] * 4;
-                    const double *ain = act + aoff[l] * 4;
-                    if (l > 0) {
-#pragma GCC unroll 64
-                        for (int64_t i = 0; i < ni; i++) {
-                            __m256d acc = _mm256_setzero_pd();
-#pragma GCC unroll 64
-                            for (int64_t o = 0; o < no; o++) acc = _mm256_fmadd_pd(LD(wl + (o * ni + i) * 4), LD(d + o * 4), acc);
-                            __m256d a = LD(ain + i * 4);
-                            ST(dn + i * 4, _mm256_mul_pd(_mm256_mul_pd(acc, a), _mm256_sub_pd(one, a)));
-                        }
-                    }
-                    if (B == 1) {
-                        double *ml = mb + woff[l] * 4, *mbl = mb + boff[l] * 4;
-#pragma GCC unroll 64
-                        for (int64_t o = 0; o < no; o++) {
-                            __m256d dv = LD(d + o * 4);
-#pragma GCC unroll 64
-                            for (int64_t i = 0; i < ni; i++) {
-                                double *pw = wl + (o * ni + i) * 4, *pm = ml + (o * ni + i) * 4;
-                                __m256d bv = _mm256_fmadd_pd(vmom, LD(pm), _mm256_mul_pd(dv, LD(ain + i * 4)));
-                                ST(pm, bv);
-                                ST(pw, _mm256_fnmadd_pd(vlr, bv, LD(pw)));
-                            }
-                            __m256d bv = _mm256_fmadd_pd(vmom, LD(mbl + o * 4), dv);
-                            ST(mbl + o * 4, bv);
-                            ST(bl + o * 4, _mm256_fnmadd_pd(vlr, bv, LD(bl + o * 4)));
-                        }
-                    } else {
-                        double *gl = G + woff[l] * 4, *gbl = G + boff[l] * 4;
-#pragma GCC unroll 64
-                        for (int64_t o = 0; o < no; o++) {
-                            __m256d dv = LD(d + o * 4);
-#pragma GCC unroll 64
-                            for (int64_t i = 0; i < ni; i++) {
-                                double *pg = gl + (o * ni + i) * 4;
-                                ST(pg, _mm256_fmadd_pd(dv, LD(ain + i * 4), LD(pg)));
-                            }
-                            ST(gbl + o * 4, _mm256_add_pd(LD(gbl + o * 4), dv));
-                        }
-                    }
-                    double *tmp = d; d = dn; dn = tmp;
+                    lsum[u] = _mm256_fmadd_pd(diff, diff, lsum[u]);
+                    ST(d[u] + o * 4, _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(diff, scale), yv), _mm256_sub_pd(one, yv)));
                 }
             }
-            if (B > 1) {
-                for (int64_t p = 0; p < P_TOTAL; p++) {
-                    __m256d bv = _mm256_fmadd_pd(vmom, LD(mb + p * 4), LD(G + p * 4));
-                    ST(mb + p * 4, bv);
-                    ST(w + p * 4, _mm256_fnmadd_pd(vlr, bv, LD(w + p * 4)));
+#pragma GCC unroll 8
+            for (int l = NL - 1; l >= 0; l--) {
+                const int64_t ni_ = S[l], no = S[l + 1];
+                if (l > 0) {
+#pragma GCC unroll 64
+                    for (int64_t i = 0; i < ni_; i++) {
+                        __m256d acc[NI];
+#pragma GCC unroll 4
+                        EACH acc[u] = _mm256_setzero_pd();
+#pragma GCC unroll 64
+                        for (int64_t o = 0; o < no; o++) {
+#pragma GCC unroll 4
+                            EACH acc[u] = _mm256_fmadd_pd(LD(w[u] + (woff[l] + o * ni_ + i) * 4), LD(d[u] + o * 4), acc[u]);
+                        }
+#pragma GCC unroll 4
+                        EACH {
+                            __m256d a = LD(act[u] + (aoff[l] + i) * 4);
+                            ST(dn[u] + i * 4, _mm256_mul_pd(_mm256_mul_pd(acc[u], a), _mm256_sub_pd(one, a)));
+                        }
+                    }
                 }
+#pragma GCC unroll 64
+                for (int64_t o = 0; o < no; o++) {
+#pragma GCC unroll 4
+                    EACH {
+                        const __m256d dv = LD(d[u] + o * 4);
+                        const double *ain = act[u] + aoff[l] * 4;
+                        if (B == 1) {
+                            double *wr = w[u] + (woff[l] + o * ni_) * 4, *mr = mb[u] + (woff[l] + o * ni_) * 4;
+#pragma GCC unroll 64
+                            for (int64_t i = 0; i < ni_; i++) {
+                                __m256d bv = _mm256_fmadd_pd(vmom, LD(mr + i * 4), _mm256_mul_pd(dv, LD(ain + i * 4)));
+                                ST(mr + i * 4, bv);
+                                ST(wr + i * 4, _mm256_fnmadd_pd(vlr, bv, LD(wr + i * 4)));
+                            }
+                            double *pb = w[u] + (boff[l] + o) * 4, *pm = mb[u] + (boff[l] + o) * 4;
+                            __m256d bv = _mm256_fmadd_pd(vmom, LD(pm), dv);
+                            ST(pm, bv);
+                            ST(pb, _mm256_fnmadd_pd(vlr, bv, LD(pb)));
+                        } else {
+                            double *gr = G[u] + (woff[l] + o * ni_) * 4, *pgb = G[u] + (boff[l] + o) * 4;
+#pragma GCC unroll 64
+                            for (int64_t i = 0; i < ni_; i++) ST(gr + i * 4, _mm256_fmadd_pd(dv, LD(ain + i * 4), LD(gr + i * 4)));
+                            ST(pgb, _mm256_add_pd(LD(pgb), dv));
+                        }
+                    }
+                }
+                double (*tmp)[MAXW * 4] = d; d = dn; dn = tmp;
             }
         }
-        double ls[4];
-        _mm256_storeu_pd(ls, lsum);
-        for (int k = 0; k < 4; k++) loss[g * 4 + k] = ls[k] / (double)nout;
+        if (B > 1) {
+#pragma GCC unroll 4
+            EACH for (int64_t p = 0; p < P_TOTAL; p++) {
+                __m256d bv = _mm256_fmadd_pd(vmom, LD(mb[u] + p * 4), LD(G[u] + p * 4));
+                ST(mb[u] + p * 4, bv);
+                ST(w[u] + p * 4, _mm256_fnmadd_pd(vlr, bv, LD(w[u] + p * 4)));
+            }
+        }
     }
-    free(G);
+#pragma GCC unroll 4
+    EACH {
+        double ls[4];
+        _mm256_storeu_pd(ls, lsum[u]);
+        for (int k = 0; k < 4; k++) loss[(g + u) * 4 + k] = ls[k] / (double)nout;
+    }
+#undef EACH
+}
+
+int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t P,
+                  double *W, double *M, const double *X, const double *Y,
+                  const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss)
+{
+    if (nl != NL || P != P_TOTAL) return -3;
+    for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
+    double *Gb = B > 1 ? (double *)aligned_alloc(32, (size_t)NI * P_TOTAL * 32) : NULL;
+    if (B > 1 && !Gb) return -1;
+    int64_t g = g0;
+    for (; g + NI <= g1; g += NI) train_groups(NI, g, W, M, Gb, X, Y, order, m, B, lr, mom, loss);
+    for (; g < g1; g++) train_groups(1, g, W, M, Gb, X, Y, order, m, B, lr, mom, loss);
+    free(Gb);
     return 0;
 }
 """
@@ -302,7 +343,7 @@ def source(sizes) -> str:
     nl = len(sizes) - 1
     P = sum(o * i + o for i, o in zip(sizes[:-1], sizes[1:]))
     src = (C_TEMPLATE.replace("@NL@", str(nl)).replace("@SIZES@", ", ".join(map(str, sizes)))
-           .replace("@P@", str(P)).replace("@TOT@", str(sum(sizes))).replace("@MAXW@", str(max(sizes))))
+           .replace("@NI@", str(INTERLEAVE)).replace("@P@", str(P)).replace("@TOT@", str(sum(sizes))).replace("@MAXW@", str(max(sizes))))
     if P > 2000:  # big nets: do not unroll everything (code size, compile time)
         src = src.replace("#pragma GCC unroll 64", "#pragma GCC unroll 4")
     return src

@@ -22,7 +22,7 @@ from omegaconf import DictConfig
 
 from selpres.errors import ConfigError
 from selpres.storage import write_json
-from selpres.train import RESULTS, config_hash, summary_table, train
+from selpres.train import CHECKPOINT, RESULTS, WEIGHTS, config_hash, summary_table, train
 
 log = logging.getLogger("selpres")
 
@@ -50,7 +50,7 @@ def _failed(out: Path, cfg: DictConfig, error: str, kind: str) -> None:
     record = {
         "status": "failed", "error": error, "kind": kind, "schedule": {"name": cfg.schedule.name},
         "topology": cfg.topology.layers, "replicas": cfg.replicas,
-        "seeds": [cfg.seed + r for r in range(cfg.replicas)] if isinstance(cfg.replicas, int) else None,
+        "seeds": [cfg.seed + r for r in range(cfg.replicas)],
     }
     write_json(out / RESULTS, record)
 
@@ -60,7 +60,7 @@ def run_job(cfg: DictConfig) -> float:
     hc = HydraConfig.get()
     out = Path(hc.runtime.output_dir)
     multirun = hc.mode == RunMode.MULTIRUN
-    fresh = not any((out / f).exists() for f in (RESULTS, "checkpoint.pt", "weights.pt"))
+    fresh = not any((out / f).exists() for f in (RESULTS, CHECKPOINT, WEIGHTS))
     try:
         if not cfg.overwrite and (res := _finished(out, cfg)) is not None:
             print(f"already done: {out / RESULTS} (overwrite=true to run it again)")

@@ -8,6 +8,7 @@ logs, checkpoints, and returns the results that ``results.json`` holds.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -34,6 +35,7 @@ from selpres.tracking import Tracker
 
 CHECKPOINT = "checkpoint.pt"
 RESULTS = "results.json"
+WEIGHTS = "weights.pt"
 
 
 @dataclass
@@ -215,7 +217,10 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
     results = _results(cfg, chash, prob, params, final, history, diverged_at, presentations,
                        train_seconds, loop_seconds, time.perf_counter() - t_start)
     if out is not None:
-        atomic_write(out / "weights.pt", lambda f: torch.save({"params": params, "seeds": prob.seeds}, f))
+        # everything needed to use a trained net: load_into(BPN(topology), params, r) + the scaler's bounds
+        trained = {"params": params, "seeds": prob.seeds, "topology": cfg.topology.layers,
+                   "scaler": dataclasses.asdict(prob.scaler), "config_hash": chash}
+        atomic_write(out / WEIGHTS, lambda f: torch.save(trained, f))
         write_json(out / RESULTS, results)
         if ckpt_path.exists():
             ckpt_path.unlink()

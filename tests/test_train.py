@@ -52,3 +52,22 @@ def test_compute_matched_schedule_spends_the_budget():
     assert [rec["presentations"] for rec in res["curves"]][-1] == 2500
     assert res["schedule"]["epochs"] == [2] and res["schedule"]["extra_presentations"] == [2500 - 2 * 1002]
     assert all(math.isfinite(v) for v in res["curves"][-1]["train_mse"])
+
+
+def test_saved_weights_and_scaler_reproduce_the_reported_error(tmp_path):
+    """weights.pt is enough to use a trained net: BPN + saved scaler give results.json's held-out RMS."""
+    from selpres.data import Scaler
+    from selpres.model import BPN, load_into
+    from selpres.train import prepare
+
+    cfg = cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2")
+    res = train(cfg, tmp_path)
+    saved = torch.load(tmp_path / "weights.pt")
+    scaler = Scaler(**saved["scaler"])
+    X_scaled, Y_nm = prepare(cfg).tests["heldout"]
+    for r in range(2):
+        net = load_into(BPN(saved["topology"]), saved["params"], r)
+        with torch.no_grad():
+            tau = scaler.inverse_y(net(X_scaled))  # torques in Nm
+        rms = (tau - Y_nm).square().mean().sqrt().item()
+        assert rms == pytest.approx(res["replica_results"][r]["final"]["heldout"]["nm"]["overall"], rel=1e-12)
