@@ -188,8 +188,37 @@ def _topology_rank(t: str) -> tuple:
     return tuple(int(x) if x.isdigit() else 0 for x in t.split("-")), t
 
 
+# settings that never make two jobs different methods: bookkeeping, or what a group pools over
+_NOT_A_METHOD = ("seed", "replicas", "name", "threads", "overwrite", "engine", "topology.", "logging.", "checkpoint.", "eval.")
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        out.update(_flat(v, key + ".") if isinstance(v, dict) else {key: json.dumps(v)})
+    return out
+
+
+def label_methods(jobs: list[Job]) -> None:
+    """A job's method is its schedule's name; when jobs of one name differ in other settings (a sweep over
+    stage sizes, epochs, lr, ...), the settings that differ are added to the name, so they are not pooled."""
+    by_name: dict[str, list[tuple[Job, dict]]] = {}
+    for j in jobs:
+        if j.results and "config" in j.results:
+            flat = {k: v for k, v in _flat(j.results["config"]).items() if not k.startswith(_NOT_A_METHOD)}
+            by_name.setdefault(j.schedule, []).append((j, flat))
+    for name, members in by_name.items():
+        keys = sorted({k for _, f in members for k in f})
+        varying = [k for k in keys if len({f.get(k) for _, f in members}) > 1]
+        for j, f in members:
+            if varying:
+                j.schedule = name + " " + " ".join(f"{k}={f.get(k)}".replace('"', "").replace(" ", "") for k in varying)
+
+
 def aggregate(jobs: list[Job]) -> tuple[dict[tuple[str, str], Group], list[str], list[str]]:
-    """Groups keyed (topology, schedule), and the sorted topologies and methods seen in the sweep."""
+    """Groups keyed (topology, method), and the sorted topologies and methods seen in the sweep."""
+    label_methods(jobs)
     groups: dict[tuple[str, str], Group] = {}
     for job in sorted(jobs, key=lambda j: str(j.path)):
         key = (job.topology or "?", job.schedule or "?")

@@ -197,3 +197,18 @@ def test_cli_as_module_exit_code(tmp_path):
     p = subprocess.run([sys.executable, "-m", "selpres.report", str(tmp_path / "nope")], cwd=root,
                        capture_output=True, text=True)
     assert p.returncode == 2 and "Traceback" not in p.stderr and p.stderr.startswith("error:")
+
+
+def test_jobs_of_one_schedule_name_that_differ_become_separate_methods(tmp_path):
+    s = tmp_path / "sw"
+    for topology in ("6-4-2", "6-8-2"):
+        for sizes in ([50, 1002], [100, 1002]):
+            res = results("selective", topology, [0.1, 0.2])
+            res["config"] = {"schedule": {"name": "selective", "sizes": sizes}, "topology": {"layers": topology},
+                             "optim": {"lr": 0.15}, "seed": 0, "replicas": 2}
+            d = write_job(s, "selective", topology, res)
+            d.rename(d.with_name(d.name + f",sizes={sizes[0]}"))
+    groups, tops, methods = R.aggregate(R.load_jobs(s))
+    assert methods == ["selective schedule.sizes=[100,1002]", "selective schedule.sizes=[50,1002]"]
+    assert tops == ["6-4-2", "6-8-2"]  # topology alone never splits a method
+    assert all(len(g.by_seed) == 2 for g in groups.values())  # nothing pooled across the two size lists
