@@ -1,10 +1,12 @@
 """The native SGD kernel behind ``make_engine("native"/"fast")``: C source, build-at-first-use, ctypes binding.
 
 Layout: replicas are packed in groups of 4 (one AVX2 vector of float64 per parameter), a group's
-parameters contiguous as ``[P, 4]`` in the replica list's order (W1 row-major, b1, W2, b2, ...). A
-group is trained through the whole epoch before the next one, so its weights, momentum buffers and
-activations (~11 KB at 6-13-2) stay in L1. The topology is compiled in (one small shared library per
-topology, loops fully unrolled for small nets). The sigmoid's ``exp`` is an inline AVX2 polynomial
+parameters contiguous as ``[P, 4]`` in the replica list's order (W1 row-major, b1, W2, b2, ...).
+``INTERLEAVE`` (2) groups are trained together, their instructions interleaved so the CPU overlaps
+their dependency chains, through the whole epoch before the next ones, so their weights, momentum
+buffers and activations (~11 KB a group at 6-13-2) stay in L1; a leftover group runs alone. The
+topology is compiled in (one small shared library per topology; loops unrolled by 4, not fully:
+fully unrolled, the interleaved code was slower). The sigmoid's ``exp`` is an inline AVX2 polynomial
 (Cody-Waite reduction + degree-13 Taylor, relative error ~1e-16; argument clamped to +-708, NaN kept),
 so there is no -ffast-math and no vector-math library: only a C compiler is needed.
 
@@ -90,12 +92,14 @@ static inline __m256d sigmoid4(__m256d z) {
     return _mm256_div_pd(one, _mm256_add_pd(one, exp4(_mm256_xor_pd(z, _mm256_set1_pd(-0.0)))));
 }
 
-/* Interleave. One presentation is a long chain of dependent operations (forward, backward, update;
-   the next presentation reads the updated weights), so a single group of 4 replicas leaves the core
-   mostly waiting on latencies. train_groups() therefore advances ni independent groups in one
-   instruction stream (every value is an array of ni vectors, one per group) and the CPU overlaps
-   their chains. Each replica still sees exactly the same sequence of IEEE operations, so results do
-   not depend on how replicas are grouped. Called with ni = NI, and ni = 1 for the leftover groups. */
+/* Interleave. One presentation is a long chain of dependent operations (forward with ~90-cycle
+   sigmoid chains, backward, update; the next presentation reads the updated weights), so a single
+   group of 4 replicas leaves the core partly idle. train_groups() therefore advances ni independent
+   groups in one instruction stream (every value is an array of ni vectors, one per group) and the CPU
+   overlaps their chains (~1.3x at 6-13-2; the update's loads/stores then bound it). Each replica still
+   sees exactly the same sequence of IEEE operations, so results do not depend on how replicas are
+   grouped. Called with ni = NI, then ni = 1 for a leftover group. Loops are unrolled by 4 only: fully
+   unrolled, the interleaved code was slower. */
 #define NI @NI@
 
 static inline __attribute__((always_inline)) void
@@ -136,18 +140,18 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
             EACH {
                 const double *x0 = X + ord[u][0][j] * nin, *x1 = X + ord[u][1][j] * nin;
                 const double *x2 = X + ord[u][2][j] * nin, *x3 = X + ord[u][3][j] * nin;
-#pragma GCC unroll 64
+#pragma GCC unroll 4
                 for (int64_t i = 0; i < nin; i++) ST(act[u] + i * 4, _mm256_set_pd(x3[i], x2[i], x1[i], x0[i]));
             }
 #pragma GCC unroll 8
             for (int l = 0; l < NL; l++) {
                 const int64_t ni_ = S[l], no = S[l + 1];
-#pragma GCC unroll 64
+#pragma GCC unroll 4
                 for (int64_t o = 0; o < no; o++) {
                     __m256d z[NI];
 #pragma GCC unroll 4
                     EACH z[u] = LD(w[u] + (boff[l] + o) * 4);
-#pragma GCC unroll 64
+#pragma GCC unroll 4
                     for (int64_t i = 0; i < ni_; i++) {
 #pragma GCC unroll 4
                         EACH z[u] = _mm256_fmadd_pd(LD(w[u] + (woff[l] + o * ni_ + i) * 4), LD(act[u] + (aoff[l] + i) * 4), z[u]);
@@ -162,7 +166,7 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
                 const double *y = act[u] + aoff[NL] * 4;
                 const double *t0 = Y + ord[u][0][j] * nout, *t1 = Y + ord[u][1][j] * nout;
                 const double *t2 = Y + ord[u][2][j] * nout, *t3 = Y + ord[u][3][j] * nout;
-#pragma GCC unroll 64
+#pragma GCC unroll 4
                 for (int64_t o = 0; o < nout; o++) {
                     __m256d yv = LD(y + o * 4);
                     __m256d diff = _mm256_sub_pd(yv, _mm256_set_pd(t3[o], t2[o], t1[o], t0[o]));
@@ -174,12 +178,12 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
             for (int l = NL - 1; l >= 0; l--) {
                 const int64_t ni_ = S[l], no = S[l + 1];
                 if (l > 0) {
-#pragma GCC unroll 64
+#pragma GCC unroll 4
                     for (int64_t i = 0; i < ni_; i++) {
                         __m256d acc[NI];
 #pragma GCC unroll 4
                         EACH acc[u] = _mm256_setzero_pd();
-#pragma GCC unroll 64
+#pragma GCC unroll 4
                         for (int64_t o = 0; o < no; o++) {
 #pragma GCC unroll 4
                             EACH acc[u] = _mm256_fmadd_pd(LD(w[u] + (woff[l] + o * ni_ + i) * 4), LD(d[u] + o * 4), acc[u]);
@@ -191,7 +195,7 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
                         }
                     }
                 }
-#pragma GCC unroll 64
+#pragma GCC unroll 4
                 for (int64_t o = 0; o < no; o++) {
 #pragma GCC unroll 4
                     EACH {
@@ -199,7 +203,7 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
                         const double *ain = act[u] + aoff[l] * 4;
                         if (B == 1) {
                             double *wr = w[u] + (woff[l] + o * ni_) * 4, *mr = mb[u] + (woff[l] + o * ni_) * 4;
-#pragma GCC unroll 64
+#pragma GCC unroll 4
                             for (int64_t i = 0; i < ni_; i++) {
                                 __m256d bv = _mm256_fmadd_pd(vmom, LD(mr + i * 4), _mm256_mul_pd(dv, LD(ain + i * 4)));
                                 ST(mr + i * 4, bv);
@@ -211,7 +215,7 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
                             ST(pb, _mm256_fnmadd_pd(vlr, bv, LD(pb)));
                         } else {
                             double *gr = G[u] + (woff[l] + o * ni_) * 4, *pgb = G[u] + (boff[l] + o) * 4;
-#pragma GCC unroll 64
+#pragma GCC unroll 4
                             for (int64_t i = 0; i < ni_; i++) ST(gr + i * 4, _mm256_fmadd_pd(dv, LD(ain + i * 4), LD(gr + i * 4)));
                             ST(pgb, _mm256_add_pd(LD(pgb), dv));
                         }
@@ -342,11 +346,9 @@ def source(sizes) -> str:
     sizes = tuple(int(s) for s in sizes)
     nl = len(sizes) - 1
     P = sum(o * i + o for i, o in zip(sizes[:-1], sizes[1:]))
-    src = (C_TEMPLATE.replace("@NL@", str(nl)).replace("@SIZES@", ", ".join(map(str, sizes)))
-           .replace("@NI@", str(INTERLEAVE)).replace("@P@", str(P)).replace("@TOT@", str(sum(sizes))).replace("@MAXW@", str(max(sizes))))
-    if P > 2000:  # big nets: do not unroll everything (code size, compile time)
-        src = src.replace("#pragma GCC unroll 64", "#pragma GCC unroll 4")
-    return src
+    return (C_TEMPLATE.replace("@NL@", str(nl)).replace("@SIZES@", ", ".join(map(str, sizes)))
+            .replace("@NI@", str(INTERLEAVE)).replace("@P@", str(P)).replace("@TOT@", str(sum(sizes)))
+            .replace("@MAXW@", str(max(sizes))))
 
 
 _lock = threading.Lock()
