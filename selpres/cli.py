@@ -21,8 +21,8 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from selpres.errors import ConfigError
-from selpres.storage import write_json
-from selpres.train import CHECKPOINT, RESULTS, WEIGHTS, config_hash, summary_table, train
+from selpres.storage import CHECKPOINT, RESULTS, WEIGHTS, write_json
+from selpres.train import job_hash, summary_table, train
 
 log = logging.getLogger("selpres")
 
@@ -35,7 +35,7 @@ def _finished(out: Path, cfg: DictConfig) -> dict | None:
         res = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError):
         return None
-    if res.get("status") in ("complete", "diverged") and res.get("config_hash") == config_hash(cfg):
+    if res.get("status") in ("complete", "diverged") and res.get("config_hash") == job_hash(cfg):
         return res
     return None
 
@@ -65,6 +65,8 @@ def run_job(cfg: DictConfig) -> float:
         if not cfg.overwrite and (res := _finished(out, cfg)) is not None:
             print(f"already done: {out / RESULTS} (overwrite=true to run it again)")
         else:
+            if cfg.overwrite:  # a fresh start: not a resume of whatever an earlier run left behind
+                (out / CHECKPOINT).unlink(missing_ok=True)
             res = train(cfg, out)
     except ConfigError as e:
         if multirun:

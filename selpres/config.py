@@ -22,6 +22,7 @@ from selpres.model import TopologyError, parse_topology
 
 
 MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
+MAX_LAYER_WIDTH = 4096  # the native kernel keeps a layer's activations on the stack (~200 bytes a unit)
 
 
 class EngineName(Enum):
@@ -224,9 +225,12 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
     if s.margin < 0:
         raise ConfigError("data.scaling.margin", s.margin, "a margin >= 0 (fraction of each column's range)")
     try:
-        return parse_topology(cfg.topology.layers, n_inputs=6, n_outputs=2)
+        sizes = parse_topology(cfg.topology.layers, n_inputs=6, n_outputs=2)
     except TopologyError as e:
         raise ConfigError("topology.layers", cfg.topology.layers, e.allowed) from None
+    if max(sizes) > MAX_LAYER_WIDTH:
+        raise ConfigError("topology.layers", cfg.topology.layers, f"layer widths of at most {MAX_LAYER_WIDTH} units")
+    return sizes
 
 
 def to_container(cfg: DictConfig) -> dict:

@@ -107,7 +107,3 @@ def forward_replicas(params: list[torch.Tensor], x: torch.Tensor) -> torch.Tenso
     for w, b in zip(params[2::2], params[3::2]):
         h = torch.sigmoid(torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2)))
     return h
-
-
-def n_params(sizes: tuple[int, ...]) -> int:
-    return sum(o * i + o for i, o in zip(sizes[:-1], sizes[1:]))

@@ -19,15 +19,14 @@ import csv
 import io
 import json
 import math
-import os
 import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from selpres.stats import summarize
+from selpres.storage import RESULTS, atomic_write
 
-RESULTS = "results.json"
 REFERENCE = "selective"  # the method every verdict compares against the others
 BASELINE = "conventional"  # the method whose final curve value is the time-to-target target
 METHOD_ORDER = ["conventional", "selective", "matched", "random_growth"]
@@ -165,19 +164,26 @@ def _add_job(g: Group, job: Job) -> None:
     if g.used and _sched_key(job.results["schedule"]) != _sched_key(g.sched):
         g.warnings.append(f"{job.path.name}: a different {g.schedule} schedule than {g.used[0].path.name}; not pooled")
         return
-    seeds = [r["seed"] for r in job.replicas]
-    dup = sorted(set(seeds) & set(g.by_seed))
-    if dup:
-        g.warnings.append(f"{job.path.name}: seeds {dup} already in {g.used[0].path.name}; not pooled")
-        return
+    # replica r of a job with seed s is the run with seed s + r, so jobs pool by seed: the union of their
+    # seeds, each seed once (a seed seen twice must give the same numbers, else it is a warning)
     g.used.append(job)
     for r, rep in enumerate(job.replicas):
+        if rep["seed"] in g.by_seed:
+            if not _same_final(g.by_seed[rep["seed"]], rep):
+                g.warnings.append(f"{job.path.name}: seed {rep['seed']} disagrees with an earlier job; kept the first")
+            continue
         g.by_seed[rep["seed"]] = rep
         g.curves[rep["seed"]] = [
             (c["epoch"], c["presentations"], c["heldout_rms_nm"][r])
             for c in job.results.get("curves") or []
             if c.get("heldout_rms_nm") is not None and c["heldout_rms_nm"][r] is not None
         ]
+
+
+def _same_final(a: dict, b: dict, rel: float = 1e-9) -> bool:
+    x = ((a.get("final") or {}).get("heldout") or {}).get("nm", {}).get("overall")
+    y = ((b.get("final") or {}).get("heldout") or {}).get("nm", {}).get("overall")
+    return (x is None and y is None) or (x is not None and y is not None and abs(x - y) <= rel * max(abs(x), abs(y)))
 
 
 def _method_rank(name: str) -> tuple:
@@ -346,8 +352,8 @@ TABLE1_LABELS = [
 ]
 
 
-def reading(s: dict, ref_mean: float | None, unit: str = "Nm") -> str:
-    """Plain words for a paired difference selective − other (negative = selective has the lower error)."""
+def reading(s: dict, ref_mean: float | None, unit: str = "Nm", name: str = REFERENCE) -> str:
+    """Plain words for a paired difference name − other (negative = ``name`` has the lower error)."""
     if s["n"] < 2 or s["ci95"][0] is None:
         return f"too few pairs ({s['n']}) for an interval"
     lo, hi = s["ci95"]
@@ -355,7 +361,7 @@ def reading(s: dict, ref_mean: float | None, unit: str = "Nm") -> str:
         return "no detectable difference"
     d = s["mean"]
     pct = f" ({abs(d) / ref_mean * 100:.1f} %)" if ref_mean else ""
-    return f"selective {'better' if d < 0 else 'worse'} by {abs(d):.4f} {unit}{pct}"
+    return f"{name} {'better' if d < 0 else 'worse'} by {abs(d):.4f} {unit}{pct}"
 
 
 def paired(a: dict[int, float], b: dict[int, float]) -> tuple[dict, float | None]:
@@ -365,27 +371,39 @@ def paired(a: dict[int, float], b: dict[int, float]) -> tuple[dict, float | None
     return st, (sum(b[s] for s in seeds) / len(seeds) if seeds else None)
 
 
+def _base(method: str) -> str:
+    """The schedule name a method label starts with ("selective schedule.sizes=[…]" -> "selective")."""
+    return method.split(" ", 1)[0]
+
+
+def comparisons(methods: list[str]) -> list[tuple[str, str]]:
+    """(a, b) pairs to compare as a − b: every selective variant against every other method; a sweep of
+    selective variants alone compares each variant with the first."""
+    refs = [m for m in methods if _base(m) == REFERENCE]
+    others = [m for m in methods if _base(m) != REFERENCE]
+    if others:
+        return [(r, o) for r in refs for o in others]
+    return [(r, refs[0]) for r in refs[1:]]
+
+
 def verdict_rows(groups, topologies, methods) -> list[dict]:
     """Selective against every other method, per topology, paired by seed, held-out and test-10 (Nm)."""
     rows = []
     for t in topologies:
-        sel = groups.get((t, REFERENCE))
-        for m in methods:
-            if m == REFERENCE:
-                continue
-            other = groups.get((t, m))
-            row = {"topology": t, "comparison": f"{REFERENCE} vs {m}"}
-            if sel is None or other is None or sel.sched is None or other.sched is None:
-                missing = REFERENCE if sel is None or sel.sched is None else m
+        for a, b in comparisons(methods):
+            ga, gb = groups.get((t, a)), groups.get((t, b))
+            row = {"topology": t, "comparison": f"{a} vs {b}"}
+            if ga is None or gb is None or ga.sched is None or gb.sched is None:
+                missing = a if ga is None or ga.sched is None else b
                 row["reading_heldout"] = f"no results for {missing}"
                 rows.append(row)
                 continue
-            row["cost_ratio"] = sel.sched["presentations"] / other.sched["presentations"]
+            row["cost_ratio"] = ga.sched["presentations"] / gb.sched["presentations"]
             for set_, _ in SETS:
-                st, ref = paired(sel.values(set_), other.values(set_))
+                st, ref = paired(ga.values(set_), gb.values(set_))
                 row.update({f"{set_}_pairs": st["n"], f"{set_}_diff_mean": st["mean"], f"{set_}_diff_std": st["std"],
                             f"{set_}_ci_lo": st["ci95"][0], f"{set_}_ci_hi": st["ci95"][1],
-                            f"{set_}_other_mean": ref, f"reading_{set_}": reading(st, ref)})
+                            f"{set_}_other_mean": ref, f"reading_{set_}": reading(st, ref, name=_base(a))})
             rows.append(row)
     return rows
 
@@ -423,20 +441,21 @@ def mean_curve(g: Group) -> list[tuple[int, float, dict]]:
 
 def time_to_target_rows(groups, topologies, methods) -> list[dict]:
     """Presentations each method needs until its mean held-out curve first reaches a target: the
-    conventional run's final value (the issue's question), and the selective run's final value (how long
-    each other method takes to get as far as selective presentation does: the speed-up in honest form)."""
+    conventional run's final value (the issue's question), and each selective variant's final value (how
+    long the other methods take to get as far as selective presentation does: the speed-up in honest form)."""
     rows = []
-    for target_method in (BASELINE, REFERENCE):
+    targets = ([BASELINE] if BASELINE in methods else []) + [m for m in methods if _base(m) == REFERENCE]
+    for target_method in targets:
         for t in topologies:
             tgt = groups.get((t, target_method))
             tgt_curve = mean_curve(tgt) if tgt else []
             base = groups.get((t, BASELINE))
             base_curve = mean_curve(base) if base else []
-            if not tgt_curve or not base_curve:
+            if not tgt_curve:
                 rows.append({"target_method": target_method, "topology": t, "method": "all",
-                             "reached": f"no {target_method} / {BASELINE} held-out curve: no target"})
+                             "reached": f"no {target_method} held-out curve: no target"})
                 continue
-            base_cost, target = base_curve[-1][0], tgt_curve[-1][1]
+            base_cost, target = (base_curve[-1][0] if base_curve else None), tgt_curve[-1][1]
             for m in methods:
                 g = groups.get((t, m))
                 curve = mean_curve(g) if g else []
@@ -452,7 +471,7 @@ def time_to_target_rows(groups, topologies, methods) -> list[dict]:
                     pres = curve[hit][0]
                     row.update(reached="yes", presentations_to_target=pres,
                                previous_curve_point=curve[hit - 1][0] if hit else 0,
-                               fraction_of_conventional_cost=pres / base_cost)
+                               fraction_of_conventional_cost=pres / base_cost if base_cost else None)
                 rows.append(row)
     return rows
 
@@ -464,7 +483,7 @@ def time_to_target_markdown(rows: list[dict]) -> str:
     for r in rows:
         if r.get("reached") == "yes":
             hit = [f"{r['presentations_to_target']:,}", f"{r['previous_curve_point']:,}",
-                   f"{r['fraction_of_conventional_cost']:.3f}"]
+                   _fmt(r["fraction_of_conventional_cost"], 3)]
         else:
             hit = [r.get("reached", ""), "", ""]
         lines.append("| " + " | ".join([f"{r['target_method']}'s final", r["topology"], r["method"],
@@ -596,15 +615,11 @@ def plot_cost(groups, topologies, methods, path: Path) -> None:
 
 # ------------------------------------------------------------------------------------------ write
 def _atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    atomic_write(path, lambda f: f.write(text.encode()))
 
 
 def _save_fig(fig, path: Path) -> None:
-    tmp = path.with_name(path.name + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    os.replace(tmp, path)
+    atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110))
 
 
 def to_csv(rows: list[dict]) -> str:

@@ -81,13 +81,13 @@ class Schedule:
             out += [EpochPlan(len(out) + j, k, st.size, c) for j, c in enumerate(counts)]
         return out
 
-    def stage_boundaries(self) -> list[int]:
-        """Global epoch index at which each stage starts."""
-        starts, e = [], 0
+    def stage_ends(self) -> list[int]:
+        """Global index of each stage's last epoch (where the loop scores, reports and checkpoints)."""
+        ends, e = [], -1
         for st in self.stages:
-            starts.append(e)
             e += st.epochs + (1 if st.extra else 0)
-        return starts
+            ends.append(e)
+        return ends
 
     def describe(self) -> dict:
         return {
@@ -98,9 +98,7 @@ class Schedule:
             "presentations_per_stage": [s.presentations for s in self.stages],
             "presentations": self.presentations,
             "conventional_presentations": self.conventional_presentations,
-            "cost_ratio": self.presentations / self.conventional_presentations
-            if self.conventional_presentations
-            else None,
+            "cost_ratio": self.presentations / self.conventional_presentations,
         }
 
 

@@ -9,6 +9,11 @@ import tempfile
 from pathlib import Path
 from typing import Any, BinaryIO, Callable
 
+# what a job folder holds besides Hydra's record: results.json marks it finished
+RESULTS = "results.json"
+WEIGHTS = "weights.pt"
+CHECKPOINT = "checkpoint.pt"
+
 
 def atomic_write(path: Path, write: Callable[[BinaryIO], Any]) -> None:
     """Write through a unique temp file in the same directory, then os.replace: readers (and a resumed

@@ -30,12 +30,9 @@ from selpres.sampler import SelectivePresentationSampler, epoch_orders, priority
 from selpres.schedule import Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
 from selpres.stats import summarize
-from selpres.storage import atomic_write, stable_hash, write_json
+from selpres.storage import CHECKPOINT, RESULTS, WEIGHTS, atomic_write, stable_hash, write_json
 from selpres.tracking import Tracker
 
-CHECKPOINT = "checkpoint.pt"
-RESULTS = "results.json"
-WEIGHTS = "weights.pt"
 
 
 @dataclass
@@ -53,10 +50,10 @@ class Problem:
     init_params: list[torch.Tensor]
 
 
-def config_hash(cfg: DictConfig) -> str:
+def job_hash(cfg: DictConfig) -> str:
     """Identity of a job's numbers: everything but the knobs that cannot change them."""
     c = to_container(cfg)
-    for k in ("logging", "overwrite", "threads", "checkpoint"):
+    for k in ("logging", "overwrite", "threads", "checkpoint", "name"):
         c.pop(k, None)
     return stable_hash(c)
 
@@ -137,10 +134,10 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
     if cfg.threads > 0:
         torch.set_num_threads(cfg.threads)
     prob = prepare(cfg)
-    chash = config_hash(cfg)
+    chash = job_hash(cfg)
     out = Path(out_dir) if out_dir is not None else None
     R, plan = len(prob.seeds), prob.schedule.plan()
-    stage_ends = {p.index for p in plan if p.index + 1 == len(plan) or plan[p.index + 1].stage != p.stage}
+    stage_ends = set(prob.schedule.stage_ends())
     engine = make_engine(cfg.engine.value, prob.sizes, prob.init_params, cfg.optim.lr, cfg.optim.momentum, cfg.optim.batch_size)
     curve_X, curve_Y = (t[: cfg.eval.heldout_curve] for t in prob.tests["heldout"])
 
@@ -312,7 +309,7 @@ def summary_table(results: dict) -> str:
         ("topology", results["topology"]),
         ("replicas", f"{results['replicas']} (seeds {results['seeds'][0]}..{results['seeds'][-1]}), {results['diverged_replicas']} diverged"),
         ("cost T/t", f"{sch['presentations']:,} presentations  (T_con/t at equal epochs {sch['conventional_presentations']:,}; "
-                     f"ratio {sch['cost_ratio']:.3f})" if sch["cost_ratio"] is not None else f"{sch['presentations']:,} presentations"),
+                     f"ratio {sch['cost_ratio']:.3f})"),
         ("wall time", f"{results['wall_seconds']['total']:.2f} s total, {results['wall_seconds']['train']:.2f} s in updates ({results['engine']} engine)"),
         ("test-10 RMS", f"{fmt('test10_rms_nm_overall')} Nm   {fmt('test10_rms_scaled_overall')} scaled"),
         ("held-out RMS", f"{fmt('heldout_rms_nm_overall')} Nm   {fmt('heldout_rms_scaled_overall')} scaled"),

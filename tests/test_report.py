@@ -212,3 +212,22 @@ def test_jobs_of_one_schedule_name_that_differ_become_separate_methods(tmp_path)
     assert methods == ["selective schedule.sizes=[100,1002]", "selective schedule.sizes=[50,1002]"]
     assert tops == ["6-4-2", "6-8-2"]  # topology alone never splits a method
     assert all(len(g.by_seed) == 2 for g in groups.values())  # nothing pooled across the two size lists
+    rows = R.verdict_rows(groups, tops, methods)  # only selective variants: each compared with the first
+    assert {r["comparison"] for r in rows} == {"selective schedule.sizes=[50,1002] vs selective schedule.sizes=[100,1002]"}
+
+
+def test_jobs_pool_by_seed_union(tmp_path):
+    """replicas=2 then replicas=4 of the same method: seeds 0..3 once each, the shared seeds agreeing."""
+    s = tmp_path / "sw"
+    d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.1, 0.2]))
+    d.rename(d.with_name("a_" + d.name))
+    d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.1, 0.2, 0.3, 0.4]))
+    d.rename(d.with_name("b_" + d.name))
+    groups, _, _ = R.aggregate(R.load_jobs(s))
+    g = groups[("6-4-2", "selective")]
+    assert sorted(g.values("heldout").items()) == [(0, 0.1), (1, 0.2), (2, 0.3), (3, 0.4)]
+    assert g.warnings == []
+    d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.9]))  # seed 0 again, other numbers
+    d.rename(d.with_name("c_" + d.name))
+    g = R.aggregate(R.load_jobs(s))[0][("6-4-2", "selective")]
+    assert g.values("heldout")[0] == 0.1 and any("seed 0 disagrees" in w for w in g.warnings)

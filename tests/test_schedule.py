@@ -55,7 +55,7 @@ def test_plan_matches_stages():
         (2, 1, 100, 100), (3, 1, 100, 100), (4, 1, 100, 100),
         (5, 2, 1002, 1002),
     ]
-    assert s.stage_boundaries() == [0, 2, 5]
+    assert s.stage_ends() == [1, 4, 5]
     assert sum(p.presentations for p in plan) == s.presentations == 50 * 2 + 100 * 3 + 1002
 
 
@@ -113,11 +113,12 @@ def test_budget_edges(budget, full, extra):
 
 
 def test_describe_is_json_safe_for_a_budget_below_one_epoch():
-    """A budget smaller than n gives zero full epochs; describe() must not divide by zero."""
+    """A budget smaller than n gives zero full epochs: the partial epoch is its own conventional equivalent."""
     import json
 
     d = build_schedule([N], None, N, budget=500).describe()
     json.dumps(d)
+    assert d["conventional_presentations"] == 500 and d["cost_ratio"] == 1.0
     assert d["presentations"] == 500
 
 
