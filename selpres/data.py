@@ -12,6 +12,7 @@ import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -314,7 +315,7 @@ def _plain(cfg: Any) -> Any:
         from omegaconf import DictConfig, ListConfig, OmegaConf
 
         if isinstance(cfg, (DictConfig, ListConfig)):
-            cfg = OmegaConf.to_container(cfg, resolve=True)
+            cfg = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
     except ImportError:  # pragma: no cover
         pass
     if isinstance(cfg, Mapping):
@@ -323,6 +324,8 @@ def _plain(cfg: Any) -> Any:
         return [_plain(v) for v in cfg]
     if isinstance(cfg, (int, float)) and not isinstance(cfg, bool):
         return float(cfg)
+    if isinstance(cfg, Enum):  # typed configs hold enums (e.g. scaling.mode): hash their names
+        return cfg.name
     return cfg
 
 
