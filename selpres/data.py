@@ -285,6 +285,11 @@ class Scaler:
         return self._inv(Ys, self.y_min, self.y_max)
 
 
+def rms_overall_nm(pred_scaled: torch.Tensor, Y_true_Nm: torch.Tensor, scaler: Scaler) -> torch.Tensor:
+    """The overall Nm entry of ``rms_errors`` alone (what a learning-curve point needs), shape ``[...]``."""
+    return (scaler.inverse_y(pred_scaled) - Y_true_Nm.to(pred_scaled)).square().mean((-2, -1)).sqrt()
+
+
 def rms_errors(pred_scaled: torch.Tensor, Y_true_Nm: torch.Tensor, scaler: Scaler) -> dict[str, torch.Tensor]:
     """The paper's criterion, RMS of (network output − actual output), in Nm and in scaled units.
 

@@ -103,7 +103,7 @@ def forward_replicas(params: list[torch.Tensor], x: torch.Tensor) -> torch.Tenso
     w, b = params[0], params[1]
     R, H, _ = w.shape
     h = torch.sigmoid(torch.addmm(b.reshape(1, R * H), x, w.reshape(R * H, -1).T))  # [N, R*H]
-    h = h.reshape(-1, R, H).transpose(0, 1)  # [R, N, H]
+    h = h.reshape(-1, R, H).transpose(0, 1).contiguous()  # [R, N, H]; contiguous: bmm is ~4x faster
     for w, b in zip(params[2::2], params[3::2]):
         h = torch.sigmoid(torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2)))
     return h

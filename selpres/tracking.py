@@ -11,8 +11,6 @@ import math
 import shutil
 from pathlib import Path
 
-import torch
-
 METRICS = ("train_mse", "test10_rms_nm", "heldout_rms_nm")
 
 
@@ -48,18 +46,17 @@ class Tracker:
             vals = rec.get(metric)
             if vals is None:
                 continue
-            t = torch.tensor([v if v is not None else math.nan for v in vals], dtype=torch.float64)
-            finite = t[torch.isfinite(t)]
-            if finite.numel() == 0:
+            finite = [v for v in vals if v is not None and math.isfinite(v)]
+            if not finite:
                 continue
-            stats = {"mean": finite.mean().item(), "min": finite.min().item(), "max": finite.max().item()}
+            stats = {"mean": sum(finite) / len(finite), "min": min(finite), "max": max(finite)}
             for axis, step in (("epoch", rec["epoch"] + 1), ("presentations", rec["presentations"])):
                 for name, v in stats.items():
                     w.add_scalar(f"{metric}/{name}/by_{axis}", v, step)
-                if self.per_replica and len(vals) > 1 and metric == "heldout_rms_nm":
-                    for r, v in enumerate(vals):
-                        if v is not None and math.isfinite(v):
-                            w.add_scalar(f"replicas/{metric}/r{r:03d}/by_{axis}", v, step)
+            if self.per_replica and len(vals) > 1 and metric == "heldout_rms_nm":  # against cost only
+                for r, v in enumerate(vals):
+                    if v is not None and math.isfinite(v):
+                        w.add_scalar(f"replicas/{metric}/r{r:03d}/by_presentations", v, rec["presentations"])
         w.add_scalar("schedule/stage/by_epoch", rec["stage"] + 1, rec["epoch"] + 1)
         w.add_scalar("schedule/stage/by_presentations", rec["stage"] + 1, rec["presentations"])
         w.add_scalar("schedule/training_set_size/by_epoch", rec["size"], rec["epoch"] + 1)

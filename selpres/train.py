@@ -112,6 +112,12 @@ def prepare(cfg: DictConfig) -> Problem:
     )
 
 
+def curve_rms(params: list[torch.Tensor], X: torch.Tensor, Y_nm: torch.Tensor, scaler: D.Scaler) -> list:
+    """Overall RMS (Nm) of every replica, the one number a curve point needs (cheaper than ``evaluate``)."""
+    with torch.no_grad():
+        return _as_list(D.rms_overall_nm(forward_replicas(params, X), Y_nm, scaler))
+
+
 def evaluate(params: list[torch.Tensor], X: torch.Tensor, Y_nm: torch.Tensor, scaler: D.Scaler) -> dict:
     """RMS errors of every replica on one test set, batched across replicas: {unit: {joint: [R]}}."""
     with torch.no_grad():
@@ -149,7 +155,7 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
         ck = torch.load(ckpt_path, weights_only=False)
         if ck["config_hash"] == chash:
             engine.load_state_dict(ck["engine"])
-            history, diverged_at = ck["history"], ck["diverged_at"]
+            history, diverged_at = json.loads(ck["history"]), ck["diverged_at"]
             start_epoch, presentations, train_seconds = ck["epoch"], ck["presentations"], ck["train_seconds"]
             print(f"resuming from {ckpt_path} at epoch {start_epoch}/{len(plan)}")
     tracker = Tracker(out / "tb", cfg.logging.tensorboard, cfg.logging.per_replica) if out else Tracker(Path("."), False)
@@ -158,8 +164,8 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
     def save_checkpoint(epoch_done: int) -> None:
         state = {
             "config_hash": chash, "epoch": epoch_done, "presentations": presentations,
-            "train_seconds": train_seconds, "engine": engine.state_dict(), "history": history,
-            "diverged_at": diverged_at,
+            "train_seconds": train_seconds, "engine": engine.state_dict(),
+            "history": json.dumps(history), "diverged_at": diverged_at,  # JSON: one object to pickle, not thousands
         }
         atomic_write(ckpt_path, lambda f: torch.save(state, f))
 
@@ -167,8 +173,8 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
         params = engine.params()
         history.append({
             "epoch": -1, "stage": 0, "size": plan[0].size, "presentations": 0, "train_mse": [None] * R,
-            "test10_rms_nm": _as_list(evaluate(params, *prob.tests["test10"], prob.scaler)["nm"]["overall"]),
-            "heldout_rms_nm": _as_list(evaluate(params, curve_X, curve_Y, prob.scaler)["nm"]["overall"]),
+            "test10_rms_nm": curve_rms(params, *prob.tests["test10"], prob.scaler),
+            "heldout_rms_nm": curve_rms(params, curve_X, curve_Y, prob.scaler),
         })
         tracker.log_epoch(history[0])
 
@@ -191,11 +197,11 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
         rec = {
             "epoch": ep.index, "stage": ep.stage, "size": ep.size, "presentations": presentations,
             "train_mse": _as_list(loss),
-            "test10_rms_nm": _as_list(evaluate(params, *prob.tests["test10"], prob.scaler)["nm"]["overall"]),
+            "test10_rms_nm": curve_rms(params, *prob.tests["test10"], prob.scaler),
             "heldout_rms_nm": None,
         }
         if ep.index in stage_ends or (cfg.eval.every and (ep.index + 1) % cfg.eval.every == 0):
-            rec["heldout_rms_nm"] = _as_list(evaluate(params, curve_X, curve_Y, prob.scaler)["nm"]["overall"])
+            rec["heldout_rms_nm"] = curve_rms(params, curve_X, curve_Y, prob.scaler)
         history.append(rec)
         tracker.log_epoch(rec)
         if cfg.logging.progress and ep.index in stage_ends:
