@@ -9,3 +9,7 @@ class ConfigError(ValueError):
     def __init__(self, key: str, value, allowed: str):
         self.key, self.value, self.allowed = key, value, allowed
         super().__init__(f"{key}={value!r} is not allowed: expected {allowed}")
+
+    def __reduce__(self):
+        """Picklable with its three fields: launchers (joblib, submitit) send a failed job's error home."""
+        return type(self), (self.key, self.value, self.allowed)

@@ -23,8 +23,11 @@ class TopologyError(ValueError):
     """A topology string that cannot describe the network; ``allowed`` says what would."""
 
     def __init__(self, topology: str, allowed: str):
-        self.allowed = allowed
+        self.topology, self.allowed = topology, allowed
         super().__init__(f"topology={topology!r} is not allowed: expected {allowed}")
+
+    def __reduce__(self):
+        return type(self), (self.topology, self.allowed)
 
 
 def parse_topology(topology: str, n_inputs: int | None = None, n_outputs: int | None = None) -> tuple[int, ...]:

@@ -244,3 +244,15 @@ def test_valid_variants_prepare(compose_cfg, overrides, sizes, presentations):
 
     prob = prepare(compose_cfg(*SMALL, *overrides))
     assert prob.schedule.sizes == sizes and prob.schedule.presentations == presentations
+
+
+def test_errors_survive_pickling():
+    """Parallel launchers pickle a failed job's exception back to the sweep: it must round-trip."""
+    import pickle
+
+    from selpres.model import TopologyError
+
+    e = pickle.loads(pickle.dumps(ConfigError("optim.lr", -1.0, "a learning rate > 0")))
+    assert (e.key, e.value, e.allowed) == ("optim.lr", -1.0, "a learning rate > 0") and "optim.lr=-1.0" in str(e)
+    t = pickle.loads(pickle.dumps(TopologyError("6-x-2", "layer widths joined by '-'")))
+    assert t.allowed == "layer widths joined by '-'" and "6-x-2" in str(t)

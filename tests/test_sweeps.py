@@ -69,11 +69,11 @@ def test_a_crash_leaves_its_traceback_in_the_job_log(tmp_path):
 
 
 @pytest.mark.parametrize("launcher", ["local2", "submitit_local"])
-def test_parallel_launchers_run_the_sweep(tmp_path, launcher):
+def test_parallel_launchers_run_the_sweep_and_survive_a_failing_job(tmp_path, launcher):
     sweep = tmp_path / "sweep"
     extra = ["threads=1"] + (["hydra.launcher.timeout_min=10"] if launcher == "submitit_local" else [])
-    out = multirun(sweep, f"hydra/launcher={launcher}", "topology=6-4-2,6-8-2", *extra)
-    assert out.returncode == 0, out.stderr[-2000:]
-    res = results(sweep, "topology")
-    assert sorted(res) == ["topology=6-4-2", "topology=6-8-2"]
-    assert all(r["status"] == "complete" for r in res.values())
+    out = multirun(sweep, f"hydra/launcher={launcher}", "optim.lr=0.15,-1,0.3", *extra)
+    res = results(sweep, "optim.lr")
+    assert sorted(res) == ["optim.lr=-1", "optim.lr=0.15", "optim.lr=0.3"], out.stderr[-2000:]
+    assert res["optim.lr=0.15"]["status"] == res["optim.lr=0.3"]["status"] == "complete"
+    assert res["optim.lr=-1"]["status"] == "failed" and "optim.lr" in res["optim.lr=-1"]["error"]
