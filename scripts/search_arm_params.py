@@ -5,7 +5,7 @@ chose the boxes "based on a few tests using the inverse dynamic model"), then th
 is simulated and filtered. Prints each candidate's pattern count, gravity torques and boundary margin
 (smallest | |θ̈| − accel_limit | over the grid: tiny margins make the count depend on rounding).
 
-    python scripts/search_arm_params.py [--n 60] [--seed 0] [--target 1002] [--spread 0.1 | --wide]
+    python scripts/search_arm_params.py [--n 60] [--seed 0] [--target 1002] [--spread 0.05 | --wide]
 """
 
 from __future__ import annotations
