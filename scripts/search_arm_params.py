@@ -21,17 +21,13 @@ from omegaconf import OmegaConf
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from selpres.data import accel_filter, grid_axis  # noqa: E402
+from selpres.data import accel_filter, grid_accelerations  # noqa: E402
 from selpres.robot import TwoLinkArm  # noqa: E402
 
 
 def evaluate(arm: TwoLinkArm, cfg) -> tuple[int, float, torch.Tensor]:
     """(pattern count, boundary margin, gravity torques at θ = 0) for one arm on the configured grid."""
-    th = grid_axis(cfg.theta.lo, cfg.theta.hi, cfg.theta.step)
-    w = grid_axis(cfg.dtheta.lo, cfg.dtheta.hi, cfg.dtheta.step)
-    s = torch.cartesian_prod(th, w, th, w)
-    tau = torch.cartesian_prod(grid_axis(cfg.tau1.lo, cfg.tau1.hi, cfg.tau1.step), grid_axis(cfg.tau2.lo, cfg.tau2.hi, cfg.tau2.step))
-    qdd = arm.forward_dynamics(s[:, None, [0, 2]], s[:, None, [1, 3]], tau)
+    qdd = grid_accelerations(arm, cfg)[-1]
     count = int(accel_filter(qdd, cfg.accel_limit).sum())
     margin = float((qdd.abs() - cfg.accel_limit).abs().min())
     return count, margin, arm.gravity(torch.zeros(2, dtype=torch.float64))

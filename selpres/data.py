@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from selpres.robot import TwoLinkArm
+from selpres.robot import TwoLinkArm, cfg_get
 from selpres.storage import atomic_write, stable_hash
 
 INPUT_NAMES = ("theta1", "dtheta1", "ddtheta1", "theta2", "dtheta2", "ddtheta2")
@@ -32,13 +32,9 @@ class DataMismatchError(ValueError):
     """An exported data file was made with a different robot/data config than the one in use."""
 
 
-def _get(cfg: Any, key: str) -> Any:
-    return cfg[key] if isinstance(cfg, Mapping) else getattr(cfg, key)
-
-
 def _range(data_cfg: Any, key: str) -> tuple[float, float]:
-    node = _get(data_cfg, key)
-    return float(_get(node, "lo")), float(_get(node, "hi"))
+    node = cfg_get(data_cfg, key)
+    return float(cfg_get(node, "lo")), float(cfg_get(node, "hi"))
 
 
 # ----------------------------------------------------------------------------------------- patterns
@@ -103,8 +99,8 @@ def grid_axis(lo: float, hi: float, step: float, name: str = "grid") -> torch.Te
 
 
 def _axis(data_cfg: Any, key: str) -> torch.Tensor:
-    node = _get(data_cfg, key)
-    return grid_axis(_get(node, "lo"), _get(node, "hi"), _get(node, "step"), name=key)
+    node = cfg_get(data_cfg, key)
+    return grid_axis(cfg_get(node, "lo"), cfg_get(node, "hi"), cfg_get(node, "step"), name=key)
 
 
 def accel_filter(qdd: torch.Tensor, limit: float) -> torch.Tensor:
@@ -112,10 +108,10 @@ def accel_filter(qdd: torch.Tensor, limit: float) -> torch.Tensor:
     return (qdd.abs() <= float(limit)).all(-1)
 
 
-def build_exemplar_set(arm: TwoLinkArm, data_cfg: Any) -> ExemplarSet:
-    """Simulate the full θ1×θ̇1×θ2×θ̇2×τ1×τ2 grid in one batched call and keep the |θ̈| <= limit rows.
+def grid_accelerations(arm: TwoLinkArm, data_cfg: Any) -> tuple[torch.Tensor, ...]:
+    """The whole θ1×θ̇1×θ2×θ̇2×τ1×τ2 grid through one batched forward-dynamics call.
 
-    Rows come out in lexicographic order (θ1, θ̇1, θ2, θ̇2, τ1, τ2), θ1 slowest, so the set is deterministic.
+    Returns (states [S, 4] as θ1, θ̇1, θ2, θ̇2; τ1 axis; τ2 axis; θ̈ [S, T1, T2, 2]).
     """
     th, w = _axis(data_cfg, "theta"), _axis(data_cfg, "dtheta")
     t1, t2 = _axis(data_cfg, "tau1"), _axis(data_cfg, "tau2")
@@ -123,8 +119,16 @@ def build_exemplar_set(arm: TwoLinkArm, data_cfg: Any) -> ExemplarSet:
     q = states[:, [0, 2]].view(-1, 1, 1, 2)
     qd = states[:, [1, 3]].view(-1, 1, 1, 2)
     tau = torch.stack(torch.broadcast_tensors(t1[:, None], t2[None, :]), -1)  # [T1, T2, 2]
-    qdd = arm.forward_dynamics(q, qd, tau)  # broadcasts to [S, T1, T2, 2]
-    s, i, j = accel_filter(qdd, _get(data_cfg, "accel_limit")).nonzero(as_tuple=True)
+    return states, t1, t2, arm.forward_dynamics(q, qd, tau)  # θ̈ broadcasts to [S, T1, T2, 2]
+
+
+def build_exemplar_set(arm: TwoLinkArm, data_cfg: Any) -> ExemplarSet:
+    """Simulate the grid and keep the |θ̈| <= limit rows (paper, section 5.1).
+
+    Rows come out in lexicographic order (θ1, θ̇1, θ2, θ̇2, τ1, τ2), θ1 slowest, so the set is deterministic.
+    """
+    states, t1, t2, qdd = grid_accelerations(arm, data_cfg)
+    s, i, j = accel_filter(qdd, cfg_get(data_cfg, "accel_limit")).nonzero(as_tuple=True)
     tau_kept = torch.stack((t1[i], t2[j]), -1)
     p = _rows(states[s][:, [0, 2]], states[s][:, [1, 3]], qdd[s, i, j], tau_kept)
     return ExemplarSet(p.X, p.Y, n_candidates=int(qdd.shape[:-1].numel()))
@@ -167,7 +171,7 @@ def sample_outside(
     w_lo, w_hi = _range(data_cfg, "dtheta")
     t1_lo, t1_hi = _range(data_cfg, "tau1")
     t2_lo, t2_hi = _range(data_cfg, "tau2")
-    a = float(_get(data_cfg, "accel_limit"))
+    a = float(cfg_get(data_cfg, "accel_limit"))
     det_max = _max_det_mass_matrix(arm, th_lo, th_hi)
     tau_lo = torch.tensor([t1_lo, t2_lo], dtype=DTYPE)
     tau_hi = torch.tensor([t1_hi, t2_hi], dtype=DTYPE)
@@ -203,14 +207,14 @@ def sample_outside(
 def make_test_sets(arm: TwoLinkArm, data_cfg: Any, exemplar: ExemplarSet, seed: int) -> TestSets:
     """The paper's 10 random test patterns ("some from the exemplar set and some outside") + a held-out set."""
     gen = torch.Generator().manual_seed(int(seed))
-    n_test, n_ex = int(_get(data_cfg, "test_patterns")), int(_get(data_cfg, "test_from_exemplar"))
+    n_test, n_ex = int(cfg_get(data_cfg, "test_patterns")), int(cfg_get(data_cfg, "test_from_exemplar"))
     if not 0 <= n_ex <= min(n_test, len(exemplar)):
         raise ValueError(f"test_from_exemplar: {n_ex} not in [0, min(test_patterns={n_test}, {len(exemplar)})]")
     idx = torch.randperm(len(exemplar), generator=gen)[:n_ex]
     out = sample_outside(arm, data_cfg, n_test - n_ex, gen)
     test10 = Patterns(torch.cat((exemplar.X[idx], out.X)), torch.cat((exemplar.Y[idx], out.Y)))
     from_ex = torch.arange(n_test) < n_ex
-    heldout = sample_outside(arm, data_cfg, int(_get(data_cfg, "heldout")), gen)
+    heldout = sample_outside(arm, data_cfg, int(cfg_get(data_cfg, "heldout")), gen)
     return TestSets(test10, from_ex, heldout)
 
 
@@ -238,14 +242,14 @@ class Scaler:
 
     @classmethod
     def fit(cls, exemplar: Patterns, data_cfg: Any) -> "Scaler":
-        sc = _get(data_cfg, "scaling")
-        mode, margin = str(_get(sc, "mode")), float(_get(sc, "margin"))
+        sc = cfg_get(data_cfg, "scaling")
+        mode, margin = str(cfg_get(sc, "mode")), float(cfg_get(sc, "margin"))
         if mode == "exemplar":
             x0, x1 = exemplar.X.min(0).values, exemplar.X.max(0).values
             y0, y1 = exemplar.Y.min(0).values, exemplar.Y.max(0).values
         elif mode == "commanded":
             th, w = _range(data_cfg, "theta"), _range(data_cfg, "dtheta")
-            a = float(_get(data_cfg, "accel_limit"))
+            a = float(cfg_get(data_cfg, "accel_limit"))
             x0 = torch.tensor([th[0], w[0], -a, th[0], w[0], -a], dtype=DTYPE)
             x1 = torch.tensor([th[1], w[1], a, th[1], w[1], a], dtype=DTYPE)
             t1, t2 = _range(data_cfg, "tau1"), _range(data_cfg, "tau2")
@@ -259,7 +263,7 @@ class Scaler:
             span = torch.where(span > 0, span, torch.ones_like(span))  # constant column: any invertible map
             return (v0 - margin * span).to(DTYPE), (v1 + margin * span).to(DTYPE)
 
-        lo, hi = float(_get(sc, "lo")), float(_get(sc, "hi"))
+        lo, hi = float(cfg_get(sc, "lo")), float(cfg_get(sc, "hi"))
         if not lo < hi:
             raise ValueError(f"scaling: lo ({lo}) must be < hi ({hi})")
         return cls(*widen(x0, x1), *widen(y0, y1), lo=lo, hi=hi)

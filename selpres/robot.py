@@ -17,7 +17,7 @@ import torch
 ROBOT_KEYS = ("m1", "m2", "l1", "l2", "g")
 
 
-def _get(cfg: Any, key: str) -> Any:
+def cfg_get(cfg: Any, key: str) -> Any:
     """Read ``key`` from a dict-like or attribute-style config (DictConfig supports both)."""
     return cfg[key] if isinstance(cfg, Mapping) else getattr(cfg, key)
 
@@ -35,7 +35,7 @@ class TwoLinkArm:
     @classmethod
     def from_config(cls, cfg: Any) -> "TwoLinkArm":
         """Build from any mapping/attribute object holding m1, m2, l1, l2, g (e.g. an OmegaConf node)."""
-        return cls(**{k: float(_get(cfg, k)) for k in ROBOT_KEYS})
+        return cls(**{k: float(cfg_get(cfg, k)) for k in ROBOT_KEYS})
 
     def _terms(self, q: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """The entries of H(q) that eq. 6 shares between H, C and the solve."""
