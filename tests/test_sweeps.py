@@ -59,8 +59,10 @@ def test_one_failing_job_does_not_take_the_sweep_down_and_rerun_fills_in(tmp_pat
 def test_a_crash_leaves_its_traceback_in_the_job_log(tmp_path):
     sweep = tmp_path / "sweep"
     assert multirun(sweep, "seed=0,1").returncode == 0
-    (job_dir(sweep, "seed=1") / "checkpoint.pt").write_bytes(b"not a checkpoint")  # a job that will crash
-    out = multirun(sweep, "seed=0,1", "overwrite=true")
+    job = job_dir(sweep, "seed=1")  # make it look killed mid-run, with a corrupt checkpoint: resuming crashes
+    (job / "results.json").unlink()
+    (job / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    out = multirun(sweep, "seed=0,1")
     assert out.returncode != 0
     res = results(sweep, "seed")
     assert res["seed=0"]["status"] == "complete"
