@@ -138,3 +138,13 @@ def test_bad_inputs_fail_cleanly(tmp_path):
         if problems:
             failures.append(f"{override}: {'; '.join(problems)}\n    output: {out.strip()[-400:]!r}")
     assert not failures, "\n".join(failures)
+
+
+def test_overwrite_starts_afresh_instead_of_resuming_a_stale_checkpoint(tmp_path):
+    run_dir = tmp_path / "run"
+    assert _run(run_dir, *TINY).returncode == 0
+    (run_dir / "checkpoint.pt").write_bytes(b"left over by an older, killed run")
+    proc = _run(run_dir, *TINY, "overwrite=true")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "resuming" not in proc.stdout and sum(line.startswith("stage ") for line in proc.stdout.splitlines()) == 5
+    assert not (run_dir / "checkpoint.pt").exists()
