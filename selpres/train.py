@@ -180,10 +180,10 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
 
     t_loop = time.perf_counter()
     for ep in plan[start_epoch:]:
-        t0 = time.perf_counter()
         for s in prob.samplers:
             s.set_epoch(ep.index)
         order = epoch_orders(prob.samplers)
+        t0 = time.perf_counter()  # train_seconds times the updates alone: the paper's t per presentation
         loss = engine.train_epoch(prob.X, prob.Y, order)
         train_seconds += time.perf_counter() - t0
         presentations += ep.presentations
@@ -217,7 +217,7 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
 
     params = engine.params()
     final = {name: evaluate(params, X, Y, prob.scaler) for name, (X, Y) in prob.tests.items()}
-    results = _results(cfg, chash, prob, params, final, history, diverged_at, presentations,
+    results = _results(cfg, chash, prob, final, history, diverged_at, presentations,
                        train_seconds, loop_seconds, time.perf_counter() - t_start)
     if out is not None:
         # everything needed to use a trained net: load_into(BPN(topology), params, r) + the scaler's bounds
@@ -235,7 +235,7 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
     return results
 
 
-def _results(cfg, chash, prob, params, final, history, diverged_at, presentations, train_s, loop_s, total_s) -> dict:
+def _results(cfg, chash, prob, final, history, diverged_at, presentations, train_s, loop_s, total_s) -> dict:
     R = len(prob.seeds)
     replicas = []
     for r, seed in enumerate(prob.seeds):

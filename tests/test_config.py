@@ -169,7 +169,7 @@ def _config_error(compose_cfg, *ov) -> ConfigError:
         (["optim.lr=nan"], "optim.lr", "nan"),
         (["robot.m1=inf"], "robot.m1", "inf"),
         (["data.accel_limit=1e-9"], "data.accel_limit", "1e-09"),  # the filter keeps no pattern
-        (["data.tau1.lo=100", "data.tau1.hi=110"], "data.", ""),  # ranges whose rows all fail the filter
+        (["data.tau1.lo=100", "data.tau1.hi=110"], "data.accel_limit", "2.0"),  # ranges whose rows all fail the filter
         (["data.theta.hi=-1"], "data.theta.hi", "-1.0"),
         (["data.dtheta.step=0"], "data.dtheta.step", "0.0"),
         (["data.heldout=0"], "data.heldout", "0"),
