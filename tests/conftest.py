@@ -40,3 +40,18 @@ def compose_cfg():
             GlobalHydra.instance().clear()
 
     return _compose
+
+
+def _native_reason() -> str | None:
+    """Why the native kernel cannot run here (None when it can): native-only tests skip with this reason."""
+    from selpres import _kernels
+
+    try:
+        _kernels.load((6, 13, 2))
+        return None
+    except _kernels.KernelUnavailable as exc:
+        return str(exc).splitlines()[0]
+
+
+_NATIVE_REASON = _native_reason()
+requires_native = pytest.mark.skipif(_NATIVE_REASON is not None, reason=f"native kernel unavailable: {_NATIVE_REASON}")
