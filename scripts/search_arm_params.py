@@ -11,18 +11,13 @@ is simulated and filtered. Prints each candidate's pattern count, gravity torque
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
-
 import torch
 from omegaconf import OmegaConf
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from selpres.data import accel_filter, grid_accelerations  # noqa: E402
-from selpres.robot import TwoLinkArm  # noqa: E402
+from selpres.config import CONFIG_DIR
+from selpres.data import accel_filter, grid_accelerations
+from selpres.robot import TwoLinkArm
 
 
 def evaluate(arm: TwoLinkArm, cfg) -> tuple[int, float, torch.Tensor]:
@@ -43,8 +38,8 @@ def main() -> None:
     ap.add_argument("--tolerance", type=int, default=20, help="also list counts this close to the target")
     ap.add_argument("--g", type=float, default=9.81)
     args = ap.parse_args()
-    cfg = OmegaConf.load(REPO / "configs/data/paper.yaml")
-    robot = OmegaConf.load(REPO / "configs/robot/two_link.yaml")
+    cfg = OmegaConf.load(CONFIG_DIR / "data/paper.yaml")
+    robot = OmegaConf.load(CONFIG_DIR / "robot/two_link.yaml")
 
     count, margin, G = evaluate(TwoLinkArm.from_config(robot), cfg)
     print(f"current configs/robot/two_link.yaml {dict(robot)}: count={count} G(0)=({G[0]:.3f}, {G[1]:.3f}) Nm margin={margin:.2e}")

@@ -13,6 +13,7 @@ from typing import Any, BinaryIO, Callable
 RESULTS = "results.json"
 WEIGHTS = "weights.pt"
 CHECKPOINT = "checkpoint.pt"
+HISTORY = "history.jsonl"  # the checkpoint's append-only record log
 
 
 def atomic_write(path: Path, write: Callable[[BinaryIO], Any]) -> None:

@@ -11,28 +11,34 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import logging
 import math
-import subprocess
 import time
+from collections import defaultdict
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import torch
 from omegaconf import DictConfig, OmegaConf
 
 from selpres import data as D
-from selpres.config import to_container, validate
+from selpres import results as results_json
+from selpres.checkpoint import Checkpoints, Progress
+from selpres.checks import validate
+from selpres.config import to_container
 from selpres.engine import make_engine
 from selpres.errors import ConfigError
 from selpres.model import forward_replicas, init_replica_params
 from selpres.robot import TwoLinkArm
 from selpres.sampler import SelectivePresentationSampler, epoch_orders, priority_order
-from selpres.schedule import Schedule, build_schedule
+from selpres.schedule import EpochPlan, Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
-from selpres.stats import summarize
-from selpres.storage import CHECKPOINT, RESULTS, WEIGHTS, atomic_write, stable_hash, write_json
+from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
 from selpres.tracking import Tracker
 
+log = logging.getLogger("selpres")
 
 
 @dataclass
@@ -49,20 +55,21 @@ class Problem:
     samplers: list[SelectivePresentationSampler]
     init_params: list[torch.Tensor]
 
+    @functools.cached_property
+    def plan(self) -> list[EpochPlan]:
+        return self.schedule.plan()
 
-def job_hash(cfg: DictConfig) -> str:
-    """Identity of a job's numbers: everything but the knobs that cannot change them."""
-    c = to_container(cfg)
-    for k in ("logging", "overwrite", "threads", "checkpoint", "name"):
-        c.pop(k, None)
-    return stable_hash(c)
+    @functools.cached_property
+    def stage_ends(self) -> frozenset[int]:
+        return frozenset(self.schedule.stage_ends())
 
 
 @functools.lru_cache(maxsize=4)
 def _exemplar(robot_json: str, data_json: str) -> D.ExemplarSet:
     """Cached per robot/data config, so the jobs of an in-process sweep (Hydra's basic launcher) build
     the data once. Cached tensors are never modified in place."""
-    return D.build_exemplar_set(TwoLinkArm.from_config(json.loads(robot_json)), OmegaConf.create(json.loads(data_json)))
+    arm = TwoLinkArm.from_config(json.loads(robot_json))
+    return D.build_exemplar_set(arm, OmegaConf.create(json.loads(data_json)))
 
 
 @functools.lru_cache(maxsize=4)
@@ -73,8 +80,8 @@ def _tests_and_scaler(robot_json: str, data_json: str) -> tuple[D.TestSets, D.Sc
 
 
 def prepare(cfg: DictConfig) -> Problem:
+    """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
     sizes = validate(cfg)
-    # plain values (enums as strings) for the data module
     keys = json.dumps(to_container(cfg.robot), sort_keys=True), json.dumps(to_container(cfg.data), sort_keys=True)
     exemplar = _exemplar(*keys)
     n = exemplar.X.shape[0]
@@ -100,225 +107,203 @@ def prepare(cfg: DictConfig) -> Problem:
         for s in seeds
     ]
     return Problem(
-        sizes=sizes,
-        schedule=schedule,
-        seeds=seeds,
-        scaler=scaler,
-        X=scaler.transform_x(exemplar.X),
-        Y=scaler.transform_y(exemplar.Y),
+        sizes=sizes, schedule=schedule, seeds=seeds, scaler=scaler,
+        X=scaler.transform_x(exemplar.X), Y=scaler.transform_y(exemplar.Y),
         tests={name: (scaler.transform_x(p.X), p.Y) for name, p in (("test10", tests.test10), ("heldout", tests.heldout))},
         samplers=samplers,
         init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
     )
 
 
-def curve_rms(params: list[torch.Tensor], X: torch.Tensor, Y_nm: torch.Tensor, scaler: D.Scaler) -> list:
-    """Overall RMS (Nm) of every replica, the one number a curve point needs (cheaper than ``evaluate``)."""
-    with torch.no_grad():
-        return _as_list(D.rms_overall_nm(forward_replicas(params, X), Y_nm, scaler))
+def job_engine(cfg: DictConfig, prob: Problem):
+    """The engine the config asks for; ``engine=native`` where the kernel cannot run is a user error."""
+    from selpres._kernels import KernelUnavailable
+
+    try:
+        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, cfg.optim.lr, cfg.optim.momentum,
+                           cfg.optim.batch_size)
+    except KernelUnavailable as exc:
+        raise ConfigError("engine", cfg.engine.value,
+                          f"fast, torch or reference: the native kernel cannot run here ({exc})") from None
 
 
-def evaluate(params: list[torch.Tensor], X: torch.Tensor, Y_nm: torch.Tensor, scaler: D.Scaler) -> dict:
-    """RMS errors of every replica on one test set, batched across replicas: {unit: {joint: [R]}}."""
-    with torch.no_grad():
-        flat = D.rms_errors(forward_replicas(params, X), Y_nm, scaler)
-    return {unit: {j: flat[f"{j}_{u}"] for j in ("overall", "tau1", "tau2")} for unit, u in (("nm", "Nm"), ("scaled", "scaled"))}
+class Clock:
+    """Seconds per named phase of a job (``with clock("eval"): ...``), accumulated over resumes."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = defaultdict(float)
+        self._t0 = time.perf_counter()
+
+    @contextmanager
+    def __call__(self, phase: str):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[phase] += time.perf_counter() - t0
+
+    def add(self, earlier: dict) -> None:
+        """Count the seconds of an earlier process of this job (from its checkpoint)."""
+        for k, v in earlier.items():
+            self.seconds[k] += v
+
+    def snapshot(self) -> dict:
+        """The phases so far, and ``total``: wall seconds of this job, earlier processes included."""
+        total = self.seconds["total"] + time.perf_counter() - self._t0
+        return {**self.seconds, "total": total}
 
 
 def _as_list(t: torch.Tensor) -> list:
     return [v if math.isfinite(v) else None for v in t.tolist()]
 
 
-def train(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
-    """Train ``cfg.replicas`` replicas through the schedule; returns the results dict.
+def curve_point(engine, prob: Problem, cfg: DictConfig, ep: EpochPlan | None, loss, progress: Progress) -> dict:
+    """One history record: where the job is, the training MSE, test-10 RMS and (when due) held-out RMS."""
+    epoch = -1 if ep is None else ep.index
+    heldout_due = ep is None or epoch in prob.stage_ends or (cfg.eval.every and (epoch + 1) % cfg.eval.every == 0)
+    heldout_X, heldout_Y = (t[: cfg.eval.heldout_curve] for t in prob.tests["heldout"])
+    with torch.no_grad():
+        params = engine.params()
+        rms = lambda X, Y: _as_list(D.rms_overall_nm(forward_replicas(params, X), Y, prob.scaler))  # noqa: E731
+        return {
+            "epoch": epoch, "stage": 0 if ep is None else ep.stage, "size": (ep or prob.plan[0]).size,
+            "presentations": progress.presentations,
+            "train_mse": [None] * len(prob.seeds) if loss is None else _as_list(loss),
+            "test10_rms_nm": rms(*prob.tests["test10"]),
+            "heldout_rms_nm": rms(heldout_X, heldout_Y) if heldout_due else None,
+        }
 
-    With ``out_dir`` the job logs to TensorBoard, checkpoints and writes ``results.json`` there, and
-    resumes from a checkpoint of the same config if one is present.
-    """
-    t_start = time.perf_counter()
+
+def mark_diverged(progress: Progress, engine, loss: torch.Tensor, epoch: int) -> None:
+    """A replica whose loss or weights are no longer finite diverged here (its results are withheld)."""
+    finite = torch.isfinite(loss) & torch.stack([torch.isfinite(p).flatten(1).all(1) for p in engine.params()]).all(0)
+    for r in torch.nonzero(~finite).flatten().tolist():
+        if progress.diverged_at[r] is None:
+            progress.diverged_at[r] = {"epoch": epoch + 1, "presentations": progress.presentations}
+
+
+def final_scores(engine, prob: Problem) -> dict:
+    """RMS of every replica on each test set, per joint and overall, in Nm and scaled units."""
+    out = {}
+    with torch.no_grad():
+        params = engine.params()
+        for name, (X, Y) in prob.tests.items():
+            flat = D.rms_errors(forward_replicas(params, X), Y, prob.scaler)
+            out[name] = {unit: {j: flat[f"{j}_{u}"] for j in results_json.JOINTS}
+                         for unit, u in (("nm", "Nm"), ("scaled", "scaled"))}
+    return out
+
+
+@dataclass
+class Job:
+    """A job under way: its problem, engine, progress and where it writes (``out`` None: nowhere)."""
+
+    cfg: DictConfig
+    prob: Problem
+    engine: object
+    progress: Progress
+    chash: str
+    out: Path | None
+    ckpts: Checkpoints | None
+    tracker: Tracker
+
+    def checkpoint_due(self, ep: EpochPlan) -> bool:
+        every = self.cfg.checkpoint.every and (ep.index + 1) % self.cfg.checkpoint.every == 0
+        last = ep.index == len(self.prob.plan) - 1
+        return self.ckpts is not None and not last and (ep.index in self.prob.stage_ends or bool(every))
+
+
+def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
+    """Validate and prepare; resume from this job's checkpoint if there is one (overwrite: start afresh)."""
     seed_everything(cfg.seed)
     if cfg.threads > 0:
         torch.set_num_threads(cfg.threads)
     prob = prepare(cfg)
-    chash = job_hash(cfg)
+    engine = job_engine(cfg, prob)
     out = Path(out_dir) if out_dir is not None else None
-    R, plan = len(prob.seeds), prob.schedule.plan()
-    stage_ends = set(prob.schedule.stage_ends())
-    engine = make_engine(cfg.engine.value, prob.sizes, prob.init_params, cfg.optim.lr, cfg.optim.momentum, cfg.optim.batch_size)
-    curve_X, curve_Y = (t[: cfg.eval.heldout_curve] for t in prob.tests["heldout"])
+    chash = results_json.job_hash(cfg)
+    ckpts = Checkpoints(out, chash) if out is not None and cfg.checkpoint.enabled else None
+    if ckpts and cfg.overwrite:
+        ckpts.discard()
+    progress = ckpts.resume(engine, len(prob.seeds)) if ckpts else Progress.fresh(len(prob.seeds))
+    clock.add(progress.seconds)
+    tracker = Tracker(out / "tb" if out else Path("tb"), cfg.logging.tensorboard and out is not None,
+                      cfg.logging.per_replica)
+    tracker.replay(progress.history)
+    job = Job(cfg, prob, engine, progress, chash, out, ckpts, tracker)
+    if not progress.history:  # the untrained network: every curve starts at 0 presentations
+        record(job, curve_point(engine, prob, cfg, None, None, progress))
+    return job
 
-    history: list[dict] = []
-    diverged_at: list[dict | None] = [None] * R
-    start_epoch, presentations, train_seconds = 0, 0, 0.0
-    ckpt_path = out / CHECKPOINT if out else None
-    if ckpt_path is not None and ckpt_path.exists() and cfg.checkpoint.enabled:
-        ck = torch.load(ckpt_path, weights_only=False)
-        if ck["config_hash"] == chash:
-            engine.load_state_dict(ck["engine"])
-            history, diverged_at = json.loads(ck["history"]), ck["diverged_at"]
-            start_epoch, presentations, train_seconds = ck["epoch"], ck["presentations"], ck["train_seconds"]
-            print(f"resuming from {ckpt_path} at epoch {start_epoch}/{len(plan)}")
-    tracker = Tracker(out / "tb", cfg.logging.tensorboard, cfg.logging.per_replica) if out else Tracker(Path("."), False)
-    tracker.replay(history)
 
-    def save_checkpoint(epoch_done: int) -> None:
-        state = {
-            "config_hash": chash, "epoch": epoch_done, "presentations": presentations,
-            "train_seconds": train_seconds, "engine": engine.state_dict(),
-            "history": json.dumps(history), "diverged_at": diverged_at,  # JSON: one object to pickle, not thousands
-        }
-        atomic_write(ckpt_path, lambda f: torch.save(state, f))
+def record(job: Job, rec: dict) -> None:
+    job.progress.history.append(rec)
+    job.tracker.log_epoch(rec)
 
-    if start_epoch == 0 and not history:  # the untrained network: every curve starts at 0 presentations
-        params = engine.params()
-        history.append({
-            "epoch": -1, "stage": 0, "size": plan[0].size, "presentations": 0, "train_mse": [None] * R,
-            "test10_rms_nm": curve_rms(params, *prob.tests["test10"], prob.scaler),
-            "heldout_rms_nm": curve_rms(params, curve_X, curve_Y, prob.scaler),
-        })
-        tracker.log_epoch(history[0])
 
-    t_loop = time.perf_counter()
-    for ep in plan[start_epoch:]:
+def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
+    """One epoch: every replica's shuffle of its current A_i, the engine's updates, then scoring."""
+    prob, progress = job.prob, job.progress
+    with clock("shuffle"):
         for s in prob.samplers:
             s.set_epoch(ep.index)
         order = epoch_orders(prob.samplers)
-        t0 = time.perf_counter()  # train_seconds times the updates alone: the paper's t per presentation
-        loss = engine.train_epoch(prob.X, prob.Y, order)
-        train_seconds += time.perf_counter() - t0
-        presentations += ep.presentations
+    with clock("train"):
+        loss = job.engine.train_epoch(prob.X, prob.Y, order)
+    progress.epoch, progress.presentations = ep.index + 1, progress.presentations + ep.presentations
+    with clock("eval"):
+        mark_diverged(progress, job.engine, loss, ep.index)
+        rec = curve_point(job.engine, prob, job.cfg, ep, loss, progress)
+    with clock("log"):
+        record(job, rec)
+    return rec
 
-        params = engine.params()
-        finite = torch.isfinite(loss) & torch.stack([torch.isfinite(p).flatten(1).all(1) for p in params]).all(0)
-        for r in torch.nonzero(~finite).flatten().tolist():
-            if diverged_at[r] is None:
-                diverged_at[r] = {"epoch": ep.index + 1, "presentations": presentations}
-        last = ep.index == len(plan) - 1
-        rec = {
-            "epoch": ep.index, "stage": ep.stage, "size": ep.size, "presentations": presentations,
-            "train_mse": _as_list(loss),
-            "test10_rms_nm": curve_rms(params, *prob.tests["test10"], prob.scaler),
-            "heldout_rms_nm": None,
-        }
-        if ep.index in stage_ends or (cfg.eval.every and (ep.index + 1) % cfg.eval.every == 0):
-            rec["heldout_rms_nm"] = curve_rms(params, curve_X, curve_Y, prob.scaler)
-        history.append(rec)
-        tracker.log_epoch(rec)
-        if cfg.logging.progress and ep.index in stage_ends:
-            _print_stage(rec, prob.schedule, R)
-        if all(d is not None for d in diverged_at):  # nothing left to train: stop the job here
-            print(f"every replica diverged by epoch {ep.index + 1}; stopping")
-            break
-        if out is not None and cfg.checkpoint.enabled and not last and (
-            ep.index in stage_ends or (cfg.checkpoint.every and (ep.index + 1) % cfg.checkpoint.every == 0)
-        ):
-            save_checkpoint(ep.index + 1)
-    loop_seconds = time.perf_counter() - t_loop
 
-    params = engine.params()
-    final = {name: evaluate(params, X, Y, prob.scaler) for name, (X, Y) in prob.tests.items()}
-    results = _results(cfg, chash, prob, final, history, diverged_at, presentations,
-                       train_seconds, loop_seconds, time.perf_counter() - t_start)
-    if out is not None:
-        # everything needed to use a trained net: load_into(BPN(topology), params, r) + the scaler's bounds
-        trained = {"params": params, "seeds": prob.seeds, "topology": cfg.topology.layers,
-                   "scaler": dataclasses.asdict(prob.scaler), "config_hash": chash}
-        atomic_write(out / WEIGHTS, lambda f: torch.save(trained, f))
-        write_json(out / RESULTS, results)
-        if ckpt_path.exists():
-            ckpt_path.unlink()
-        hp = {"schedule": cfg.schedule.name, "topology": cfg.topology.layers, "seed": cfg.seed,
-              "replicas": R, "lr": cfg.optim.lr, "momentum": cfg.optim.momentum,
-              "batch_size": cfg.optim.batch_size, "sizes": str(prob.schedule.sizes),
-              "epochs": str(prob.schedule.epochs), "order": cfg.schedule.order.value, "engine": cfg.engine.value}
-        tracker.close(hp, {f"final/{k}": v["mean"] for k, v in results["summary"].items()})
+def train(cfg: DictConfig, out_dir: str | Path | None = None,
+          on_stage_end: Callable[[dict, Problem], None] | None = None) -> dict:
+    """Train ``cfg.replicas`` replicas through the schedule; returns the results dict.
+
+    With ``out_dir`` the job logs to TensorBoard, checkpoints and writes ``results.json`` and ``weights.pt``
+    there, and resumes from a checkpoint of the same config (``overwrite=true``: starts afresh).
+    ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it).
+    """
+    clock = Clock()
+    with clock("prepare"):
+        job = start(cfg, out_dir, clock)
+    with clock("loop"):
+        for ep in job.prob.plan[job.progress.epoch:]:
+            rec = run_epoch(job, ep, clock)
+            if on_stage_end is not None and ep.index in job.prob.stage_ends:
+                on_stage_end(rec, job.prob)
+            if job.progress.all_diverged:  # nothing left to train: stop the job here
+                log.warning("every replica diverged by epoch %d; stopping", ep.index + 1)
+                break
+            if job.checkpoint_due(ep):
+                with clock("checkpoint"):
+                    job.progress.seconds = clock.snapshot()
+                    job.ckpts.save(job.engine, job.progress)
+    with clock("eval"):
+        final = final_scores(job.engine, job.prob)
+    return finish(job, final, clock.snapshot())
+
+
+def finish(job: Job, final: dict, seconds: dict) -> dict:
+    """results.json, weights.pt (everything needed to use a trained net: load_into(BPN(topology), params, r)
+    + the scaler) and the TensorBoard hparams; the checkpoint is no longer needed."""
+    cfg, prob = job.cfg, job.prob
+    results = results_json.build(cfg, job.chash, prob, job.engine, final, job.progress, seconds)
+    if job.out is None:
+        return results
+    trained = {"params": job.engine.params(), "seeds": prob.seeds, "topology": cfg.topology.layers,
+               "scaler": dataclasses.asdict(prob.scaler), "config_hash": job.chash}
+    atomic_write(job.out / WEIGHTS, lambda f: torch.save(trained, f))
+    write_json(job.out / RESULTS, results)
+    hp = {"schedule": cfg.schedule.name, "topology": cfg.topology.layers, "seed": cfg.seed,
+          "replicas": len(prob.seeds), "lr": cfg.optim.lr, "momentum": cfg.optim.momentum,
+          "batch_size": cfg.optim.batch_size, "sizes": str(prob.schedule.sizes),
+          "epochs": str(prob.schedule.epochs), "order": cfg.schedule.order.value,
+          "engine": results["engine"], "engine_requested": results["engine_requested"]}
+    job.tracker.close(hp, {f"final/{k}": v["mean"] for k, v in results["summary"].items()})
+    if job.ckpts:
+        job.ckpts.discard()
     return results
-
-
-def _results(cfg, chash, prob, final, history, diverged_at, presentations, train_s, loop_s, total_s) -> dict:
-    R = len(prob.seeds)
-    replicas = []
-    for r, seed in enumerate(prob.seeds):
-        ok = diverged_at[r] is None
-        metrics = {
-            name: {unit: {k: (v[r].item() if ok else None) for k, v in ev[unit].items()} for unit in ("nm", "scaled")}
-            for name, ev in final.items()
-        }
-        replicas.append({
-            "seed": seed, "status": "complete" if ok else "diverged", "diverged": diverged_at[r],
-            "final": metrics, "train_mse": history[-1]["train_mse"][r] if ok else None,
-        })
-    summary = {}
-    for name in final:
-        for unit in ("nm", "scaled"):
-            for joint in ("overall", "tau1", "tau2"):
-                summary[f"{name}_rms_{unit}_{joint}"] = summarize(
-                    rep["final"][name][unit][joint] for rep in replicas)
-    n_div = sum(d is not None for d in diverged_at)
-    return {
-        "status": "diverged" if n_div == R else "complete",
-        "diverged_replicas": n_div,
-        "config_hash": chash,
-        "schedule": {"name": cfg.schedule.name, "order": cfg.schedule.order.value, **prob.schedule.describe()},
-        "topology": cfg.topology.layers,
-        "engine": cfg.engine.value,
-        "replicas": R,
-        "seeds": prob.seeds,
-        "presentations_done": presentations,
-        "tests": {"test10": {"n": int(prob.tests["test10"][0].shape[0])},
-                  "heldout": {"n": int(prob.tests["heldout"][0].shape[0]), "curve_n": min(cfg.eval.heldout_curve, int(prob.tests["heldout"][0].shape[0]))},
-                  "heldout_curve_every": cfg.eval.every},
-        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        "git_commit": _git_commit(),
-        "wall_seconds": {"total": total_s, "train": train_s, "loop": loop_s},
-        "seconds_per_presentation": train_s / max(1, presentations * R),
-        "summary": summary,
-        "replica_results": replicas,
-        "curves": history,
-        "config": to_container(cfg),
-    }
-
-
-def _git_commit() -> str | None:
-    try:
-        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).parent,
-                             capture_output=True, text=True, timeout=5)
-        return out.stdout.strip() or None
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
-def _print_stage(rec: dict, schedule: Schedule, R: int) -> None:
-    def mean(vals):
-        f = [v for v in vals if v is not None]
-        return sum(f) / len(f) if f else math.nan
-
-    held = f"  held-out RMS {mean(rec['heldout_rms_nm']):.4f} Nm" if rec["heldout_rms_nm"] else ""
-    print(
-        f"stage {rec['stage'] + 1}/{len(schedule.stages)}  n_i={rec['size']:5d}  epoch {rec['epoch'] + 1:4d}  "
-        f"presentations {rec['presentations']:7d}  train MSE {mean(rec['train_mse']):.3e}  "
-        f"test-10 RMS {mean(rec['test10_rms_nm']):.4f} Nm{held}" + (f"  (mean of {R} replicas)" if R > 1 else ""),
-        flush=True,
-    )
-
-
-def summary_table(results: dict) -> str:
-    """The short table printed at the end of a job."""
-    s, sch = results["summary"], results["schedule"]
-    def fmt(key):
-        m = s[key]
-        if m["mean"] is None:
-            return "n/a"
-        return f"{m['mean']:.4f}" + (f" ± {m['std']:.4f}" if m["std"] is not None else "")
-    rows = [
-        ("schedule", f"{sch['name']} (p={sch['p']}, sizes {sch['sizes']}, epochs {sch['epochs']})"),
-        ("topology", results["topology"]),
-        ("replicas", f"{results['replicas']} (seeds {results['seeds'][0]}..{results['seeds'][-1]}), {results['diverged_replicas']} diverged"),
-        ("cost T/t", f"{sch['presentations']:,} presentations  (T_con/t at equal epochs {sch['conventional_presentations']:,}; "
-                     f"ratio {sch['cost_ratio']:.3f})"),
-        ("wall time", f"{results['wall_seconds']['total']:.2f} s total, {results['wall_seconds']['train']:.2f} s in updates ({results['engine']} engine)"),
-        ("test-10 RMS", f"{fmt('test10_rms_nm_overall')} Nm   {fmt('test10_rms_scaled_overall')} scaled"),
-        ("held-out RMS", f"{fmt('heldout_rms_nm_overall')} Nm   {fmt('heldout_rms_scaled_overall')} scaled"),
-    ]
-    w = max(len(k) for k, _ in rows)
-    return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)

@@ -24,22 +24,39 @@ def exemplar():
     return build_exemplar_set(TwoLinkArm.from_config(load_group("robot", "two_link")), load_group("data", "paper"))
 
 
-@pytest.fixture
-def compose_cfg():
-    """``compose_cfg(*overrides, hydra=False)`` -> the composed ``train`` config; GlobalHydra is cleared around it."""
+def compose(*overrides: str, hydra: bool = False):
+    """The ``train`` config composed as ``python train.py`` composes it (Hydra's compose API), GlobalHydra
+    cleared around it. The one place tests compose configs."""
     import selpres.config  # noqa: F401  registers the typed schema and resolvers
-    from hydra import compose, initialize_config_dir
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
 
-    def _compose(*overrides: str, hydra: bool = False):
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
+            return hydra_compose("train", overrides=list(overrides), return_hydra_config=hydra)
+    finally:
         GlobalHydra.instance().clear()
-        try:
-            with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
-                return compose("train", overrides=list(overrides), return_hydra_config=hydra)
-        finally:
-            GlobalHydra.instance().clear()
 
-    return _compose
+
+@pytest.fixture
+def compose_cfg():
+    """``compose_cfg(*overrides, hydra=False)`` -> the composed ``train`` config."""
+    return compose
+
+
+SMALL = ["data.heldout=300", "eval.heldout_curve=300", "logging.progress=false"]
+
+
+def cfg_of(*overrides: str):
+    """A training config with a small held-out set (fast to prepare); the test's own overrides win."""
+    return compose(*SMALL, *overrides)
+
+
+def numbers(res: dict) -> dict:
+    """Everything in results.json that must be reproducible (wall times excluded)."""
+    return {k: res[k] for k in ("summary", "replica_results", "curves", "schedule", "config_hash")}
 
 
 def _native_reason() -> str | None:

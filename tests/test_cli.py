@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -12,6 +13,8 @@ from pathlib import Path
 import pytest
 
 from conftest import REPO
+
+pytestmark = pytest.mark.slow  # subprocesses: each pays for interpreter and torch start-up
 
 TINY = ["schedule.epochs=[1,1,1,1,1]", "data.heldout=200", "eval.heldout_curve=200", "engine=fast"]
 TIMEOUT = 180
@@ -80,7 +83,7 @@ def test_summary_table_for_a_budget_below_one_epoch(smoke):
     """schedule=matched with a budget < n has no full epoch, only a partial one: the summary table must
     still render it (a crash there would turn a finished job into a 'failed' results.json)."""
     from selpres.schedule import build_schedule
-    from selpres.train import summary_table
+    from selpres.cli import summary_table
 
     _, run_dir = smoke
     res = json.loads((run_dir / "results.json").read_text())
@@ -148,3 +151,112 @@ def test_overwrite_starts_afresh_instead_of_resuming_a_stale_checkpoint(tmp_path
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "resuming" not in proc.stdout and sum(line.startswith("stage ") for line in proc.stdout.splitlines()) == 5
     assert not (run_dir / "checkpoint.pt").exists()
+
+
+# ------------------------------------------------------------------ a refused run deletes nothing it did not create
+def _user_folder(root: Path) -> dict:
+    """A folder a user already had (a file and a subfolder), as a snapshot of paths and contents."""
+    (root / "sub").mkdir(parents=True)
+    (root / "notes.txt").write_text("my own notes")
+    (root / "sub" / "data.csv").write_text("1,2,3\n")
+    return _snapshot(root)
+
+
+def _snapshot(root: Path) -> dict:
+    return {p.relative_to(root).as_posix(): (p.read_bytes() if p.is_file() else "dir") for p in sorted(root.rglob("*"))}
+
+
+@pytest.mark.parametrize("override, code", [
+    ("optim.lr=-1", 2),  # our ConfigError, raised inside the job after Hydra made .hydra/ and train.log
+    ("schedule.sizes=[50,2000]", 2),  # refused against the exemplar set (needs the data first)
+    ("optim.lrr=1", 1),  # Hydra's own error, before any job starts
+])
+def test_a_refused_run_into_an_existing_folder_leaves_it_exactly_as_it_was(tmp_path, override, code):
+    folder = tmp_path / "mine"
+    before = _user_folder(folder)
+    proc = _run(folder, *TINY, override)
+    assert proc.returncode == code, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stdout + proc.stderr
+    assert _snapshot(folder) == before  # the user's files intact, and no .hydra/ or train.log left behind
+
+
+def test_a_refused_rerun_restores_the_record_of_the_finished_run(tmp_path):
+    """A folder holding a finished job: a refused run in it restores Hydra's record and the log it appended to."""
+    folder = tmp_path / "done"
+    assert _run(folder, *TINY).returncode == 0
+    before = _snapshot(folder)
+    proc = _run(folder, *TINY, "optim.momentum=1.5")
+    assert proc.returncode == 2 and "optim.momentum" in proc.stderr
+    assert _snapshot(folder) == before
+
+
+def test_a_failing_job_in_a_multirun_keeps_the_users_sweep_folder(tmp_path):
+    sweep = tmp_path / "sweep"
+    before = _user_folder(sweep)
+    proc = subprocess.run([sys.executable, "train.py", "-m", f"hydra.sweep.dir={sweep}", *TINY, "optim.lr=-1,0.15"],
+                          cwd=REPO, env=_env(), capture_output=True, text=True, timeout=TIMEOUT)
+    assert proc.returncode != 0
+    after = _snapshot(sweep)
+    assert {k: v for k, v in after.items() if k in before} == before
+    assert sum(1 for k in after if k.endswith("/results.json")) == 2  # the failed job and the good one
+
+
+def test_ctrl_c_during_set_up_keeps_the_users_folder(tmp_path):
+    """SIGINT while the job builds a large held-out set: exit 130, no traceback, the folder as it was."""
+    folder = tmp_path / "mine"
+    before = _user_folder(folder)
+    p = subprocess.Popen(_cmd(folder, *TINY, "data.heldout=1000000"), cwd=REPO, env=_env(),
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + TIMEOUT
+    while not (folder / ".hydra" / "overrides.yaml").exists() and time.monotonic() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.5)  # inside the job now: building the data
+    p.send_signal(signal.SIGINT)
+    stdout, stderr = p.communicate(timeout=TIMEOUT)
+    assert p.returncode == 130, stdout + stderr
+    assert "interrupted" in stderr and "Traceback" not in stdout + stderr
+    assert _snapshot(folder) == before
+
+
+# ------------------------------------------------------------------ a stale checkpoint is set aside, said and recorded
+def test_a_checkpoint_of_another_config_is_moved_aside_with_a_warning(tmp_path):
+    import torch
+
+    folder = tmp_path / "run"
+    folder.mkdir()
+    torch.save({"config_hash": "0123456789abcdef", "epoch": 3}, folder / "checkpoint.pt")
+    stale_bytes = (folder / "checkpoint.pt").read_bytes()
+    proc = _run(folder, *TINY)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "belongs to another config" in proc.stdout and "resuming" not in proc.stdout
+    (moved,) = folder.glob("checkpoint.stale-*.pt")
+    assert moved.read_bytes() == stale_bytes
+    res = json.loads((folder / "results.json").read_text())
+    assert res["stale_checkpoint"] == str(moved) and res["resumed_from_epoch"] is None
+    assert "belongs to another config" in (folder / "train.log").read_text()
+
+
+# ------------------------------------------------------------------ what ran is what is recorded
+def test_a_fallback_from_the_native_engine_is_said_and_recorded(tmp_path):
+    folder = tmp_path / "run"
+    env = {**_env(), "SELPRES_NO_NATIVE": "1"}
+    proc = subprocess.run(_cmd(folder, *TINY), cwd=REPO, env=env, capture_output=True, text=True, timeout=TIMEOUT)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    res = json.loads((folder / "results.json").read_text())
+    assert (res["engine"], res["engine_requested"]) == ("torch", "fast")
+    assert "SELPRES_NO_NATIVE" in res["engine_fallback"]
+    log = (folder / "train.log").read_text()
+    assert sum("SELPRES_NO_NATIVE" in line for line in (proc.stdout + proc.stderr).splitlines()) >= 1
+    assert "SELPRES_NO_NATIVE" in log and "stage 5/5" in log  # Python logging reaches train.log
+    assert "torch (requested fast" in proc.stdout  # the summary names the engine that ran
+    # asking for the native engine where it cannot run is a user error, not a silent substitute
+    bad = subprocess.run(_cmd(tmp_path / "native", *TINY[:-1], "engine=native"), cwd=REPO, env=env,
+                         capture_output=True, text=True, timeout=TIMEOUT)
+    assert bad.returncode == 2 and bad.stderr.startswith("error: engine='native'"), bad.stderr
+    assert not (tmp_path / "native").exists()
+
+
+def test_the_job_log_holds_what_the_console_showed(smoke):
+    proc, run_dir = smoke
+    log = (run_dir / "train.log").read_text()
+    assert "stage 5/5" in log and "held-out RMS" in log and "results:" in log

@@ -7,7 +7,8 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from selpres.config import EngineName, TrainConfig, validate
+from selpres.checks import validate
+from selpres.config import EngineName, TrainConfig
 from selpres.errors import ConfigError
 
 from conftest import CONFIGS

@@ -10,7 +10,7 @@ import torch
 import selpres.train as T
 from selpres.storage import RESULTS
 from selpres.train import train
-from helpers import cfg_of, numbers
+from conftest import cfg_of, numbers
 
 
 @pytest.mark.parametrize("engine", ["reference", "torch", "native"])

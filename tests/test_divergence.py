@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 from selpres.train import train
-from helpers import cfg_of
+from conftest import cfg_of
 
 
 def test_divergence_is_reported_not_fatal(monkeypatch):

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.slow  # subprocesses
 TINY = ["schedule.epochs=[1,1,1,1,1]", "data.heldout=200", "eval.heldout_curve=200", "logging.progress=false"]
 
 
@@ -59,15 +60,31 @@ def test_one_failing_job_does_not_take_the_sweep_down_and_rerun_fills_in(tmp_pat
 def test_a_crash_leaves_its_traceback_in_the_job_log(tmp_path):
     sweep = tmp_path / "sweep"
     assert multirun(sweep, "seed=0,1").returncode == 0
-    job = job_dir(sweep, "seed=1")  # make it look killed mid-run, with a corrupt checkpoint: resuming crashes
+    job = job_dir(sweep, "seed=1")  # make it look unfinished, with a file where its TensorBoard folder goes
     (job / "results.json").unlink()
-    (job / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    (job / "tb").rename(job / "tb.moved")
+    (job / "tb").write_text("a file where a folder belongs: the job crashes when it opens its log")
     out = multirun(sweep, "seed=0,1")
     assert out.returncode != 0
     res = results(sweep, "seed")
     assert res["seed=0"]["status"] == "complete"
     assert res["seed=1"]["status"] == "failed" and res["seed=1"]["kind"] == "exception"
     assert "Traceback" in (job_dir(sweep, "seed=1") / "train.log").read_text()
+
+
+def test_a_checkpoint_that_cannot_be_read_is_moved_aside_not_resumed_or_lost(tmp_path):
+    sweep = tmp_path / "sweep"
+    assert multirun(sweep, "seed=0,1").returncode == 0
+    job = job_dir(sweep, "seed=1")  # make it look killed mid-run, with a corrupt checkpoint
+    (job / "results.json").unlink()
+    (job / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    out = multirun(sweep, "seed=0,1")
+    assert out.returncode == 0, out.stderr[-2000:]
+    res = results(sweep, "seed")["seed=1"]
+    assert res["status"] == "complete" and res["resumed_from_epoch"] is None
+    (stale,) = job.glob("checkpoint.stale-*.pt")
+    assert stale.read_bytes() == b"not a checkpoint" and res["stale_checkpoint"] == str(stale)
+    assert "cannot be read" in (job / "train.log").read_text() and "moved it to" in out.stdout
 
 
 @pytest.mark.parametrize("launcher", ["local2", "submitit_local"])

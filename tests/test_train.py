@@ -6,7 +6,7 @@ import math
 
 import pytest
 import torch
-from helpers import cfg_of
+from conftest import cfg_of
 from selpres.train import train
 
 @pytest.mark.parametrize("engine", ["reference", "fast"])

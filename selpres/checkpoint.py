@@ -1,0 +1,105 @@
+"""Checkpoints: what a killed job needs to resume exactly, written so that its cost stays flat.
+
+A checkpoint is the engine's state (weights, momentum buffers), the epoch reached (the sampler's only
+state: shuffles are counter-based), the presentations and seconds so far, and which replicas diverged.
+The logged history is not re-encoded each time: its records are appended once to ``history.jsonl``
+and the checkpoint remembers how many bytes of that file belong to it, so a kill between the append
+and the checkpoint's atomic rename loses nothing and duplicates nothing.
+
+A checkpoint of another config (or one that cannot be read) is never resumed and never overwritten in
+silence: it is moved aside with a warning, and ``results.json`` names where it went.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from selpres.storage import CHECKPOINT, HISTORY, atomic_write
+
+log = logging.getLogger("selpres")
+
+
+@dataclass
+class Progress:
+    """Where a job stands: exactly what a resume restores."""
+
+    history: list[dict]  # one record per scored epoch (epoch -1 = the untrained network)
+    diverged_at: list[dict | None]  # per replica: None, or the epoch/presentations where it diverged
+    epoch: int = 0  # epochs done
+    presentations: int = 0
+    seconds: dict = field(default_factory=dict)  # accumulated seconds per phase of the loop
+    resumed_from: int | None = None  # the epoch a resume started from
+    stale_checkpoint: str | None = None  # where a checkpoint of another config was moved
+
+    @classmethod
+    def fresh(cls, replicas: int) -> "Progress":
+        return cls([], [None] * replicas)
+
+    @property
+    def all_diverged(self) -> bool:
+        return all(d is not None for d in self.diverged_at)
+
+
+class Checkpoints:
+    """``checkpoint.pt`` + ``history.jsonl`` in a job folder, for one job identity (its config hash)."""
+
+    def __init__(self, folder: Path, config_hash: str):
+        self.path, self.history_path, self.hash = folder / CHECKPOINT, folder / HISTORY, config_hash
+        self._saved = 0  # history records already in the file
+
+    def resume(self, engine, replicas: int) -> Progress:
+        """The saved progress (engine state loaded) if a checkpoint of this job is here, else a fresh start."""
+        if not self.path.exists():
+            return Progress.fresh(replicas)
+        try:
+            ck = torch.load(self.path, weights_only=False)
+            ok = ck.get("config_hash") == self.hash and "history_bytes" in ck
+            why = (f"it belongs to another config or an older selpres (hash {ck.get('config_hash')}, "
+                   f"this job {self.hash})")
+        except Exception as exc:  # noqa: BLE001 - any unreadable file is set aside, never resumed
+            ok, why = False, f"it cannot be read ({type(exc).__name__}: {exc})"
+        if not ok:
+            moved = self.move_aside()
+            log.warning("%s: %s; moved it to %s and started afresh", self.path, why, moved.name)
+            progress = Progress.fresh(replicas)
+            progress.stale_checkpoint = str(moved)
+            return progress
+        engine.load_state_dict(ck["engine"])
+        with open(self.history_path, "r+b") as f:
+            f.truncate(ck["history_bytes"])  # drop records appended after this checkpoint
+            history = [json.loads(line) for line in f.read().splitlines()]
+        self._saved = len(history)
+        log.info("resuming from %s at epoch %d", self.path, ck["epoch"])
+        return Progress(history, ck["diverged_at"], ck["epoch"], ck["presentations"], ck["seconds"],
+                        resumed_from=ck["epoch"])
+
+    def save(self, engine, progress: Progress) -> None:
+        """Append the new history records, then write the checkpoint atomically (write, then rename)."""
+        with open(self.history_path, "ab" if self._saved else "wb") as f:
+            f.writelines((json.dumps(rec) + "\n").encode() for rec in progress.history[self._saved:])
+            size = f.tell()
+        self._saved = len(progress.history)
+        state = {"config_hash": self.hash, "epoch": progress.epoch, "presentations": progress.presentations,
+                 "seconds": progress.seconds, "engine": engine.state_dict(),
+                 "diverged_at": progress.diverged_at, "history_bytes": size}
+        atomic_write(self.path, lambda f: torch.save(state, f))
+
+    def move_aside(self) -> Path:
+        """Rename the checkpoint (and its history log) to ``*.stale-<time>``; returns the checkpoint's new path."""
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        target = self.path.with_name(f"{self.path.stem}.stale-{stamp}{self.path.suffix}")
+        self.path.rename(target)
+        if self.history_path.exists():
+            self.history_path.rename(self.history_path.with_name(f"history.stale-{stamp}.jsonl"))
+        return target
+
+    def discard(self) -> None:
+        """A finished (or deliberately restarted) job needs neither file."""
+        self.path.unlink(missing_ok=True)
+        self.history_path.unlink(missing_ok=True)

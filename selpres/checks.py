@@ -1,0 +1,100 @@
+"""Checks a type cannot express, run before any training or output: each failure is one ConfigError
+naming the key, the bad value and what is allowed (exit code 2 from ``python train.py``).
+
+``validate`` checks values against each other (ranges, grid steps, topology widths); the checks that
+need the exemplar set (stage sizes against n, filters that keep nothing) run in
+``selpres.train.prepare``, still before anything is written.
+"""
+
+from __future__ import annotations
+
+import math
+
+from omegaconf import DictConfig
+
+from selpres.config import to_container
+from selpres.data import grid_points
+from selpres.errors import ConfigError
+from selpres.model import TopologyError, parse_topology
+
+MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
+MAX_LAYER_WIDTH = 4096  # wider layers are refused: a guard against typos such as 6-13000-2
+def _walk(node, prefix=""):
+    """(dotted key, value) for every leaf of a plain container."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _walk(v, f"{prefix}.{k}" if prefix else str(k))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _walk(v, f"{prefix}[{i}]")
+    else:
+        yield prefix, node
+
+
+def validate(cfg: DictConfig) -> tuple[int, ...]:
+    """Checks that need more than a type; returns the parsed topology. Raises ConfigError."""
+    for key, value in _walk(to_container(cfg)):
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
+    o = cfg.optim
+    if not o.lr > 0:
+        raise ConfigError("optim.lr", o.lr, "a learning rate > 0 (the paper uses 0.15)")
+    if not 0 <= o.momentum < 1:
+        raise ConfigError("optim.momentum", o.momentum, "a momentum in [0, 1) (the paper uses 0.9)")
+    if o.batch_size < 1:
+        raise ConfigError("optim.batch_size", o.batch_size, "a whole number >= 1 (1 = online, as in the paper)")
+    if cfg.replicas < 1:
+        raise ConfigError("replicas", cfg.replicas, "a whole number >= 1")
+    if cfg.threads < 0:
+        raise ConfigError("threads", cfg.threads, "0 (all cores) or a positive number of threads")
+    if cfg.eval.every < 0:
+        raise ConfigError("eval.every", cfg.eval.every, "0 (stage ends only) or a positive number of epochs")
+    if cfg.eval.heldout_curve < 1:
+        raise ConfigError("eval.heldout_curve", cfg.eval.heldout_curve, "a positive number of held-out patterns")
+    if cfg.checkpoint.every < 0:
+        raise ConfigError("checkpoint.every", cfg.checkpoint.every, "0 (stage boundaries only) or a positive number of epochs")
+    if cfg.schedule.strata_bins < 1:
+        raise ConfigError("schedule.strata_bins", cfg.schedule.strata_bins, "a whole number >= 1")
+    for k in ("m1", "m2", "l1", "l2", "g"):
+        if not cfg.robot[k] > 0:
+            raise ConfigError(f"robot.{k}", cfg.robot[k], "a positive number")
+    d = cfg.data
+    points = {}
+    for k in ("theta", "dtheta", "tau1", "tau2"):
+        r = d[k]
+        if not r.step > 0:
+            raise ConfigError(f"data.{k}.step", r.step, "a positive grid step")
+        if not r.hi >= r.lo:
+            raise ConfigError(f"data.{k}.hi", r.hi, f"a value >= data.{k}.lo = {r.lo}")
+        try:
+            points[k] = grid_points(r.lo, r.hi, r.step, f"data.{k}")
+        except ValueError:
+            raise ConfigError(f"data.{k}.step", r.step, f"a step that divides hi - lo = {r.hi - r.lo:g} into whole steps") from None
+    candidates = points["theta"] ** 2 * points["dtheta"] ** 2 * points["tau1"] * points["tau2"]
+    if candidates > MAX_GRID_CANDIDATES:
+        finest = max(points, key=points.get)
+        raise ConfigError(f"data.{finest}.step", d[finest].step,
+                          f"a coarser step: the grid (θ² × θ̇² × τ1 × τ2 points) would have {candidates:,} candidates, "
+                          f"at most {MAX_GRID_CANDIDATES:,} are allowed (the paper's has 1,050,625)")
+    if not d.accel_limit > 0:
+        raise ConfigError("data.accel_limit", d.accel_limit, "a positive acceleration bound in rad/s²")
+    if d.test_patterns < 1:
+        raise ConfigError("data.test_patterns", d.test_patterns, "a whole number >= 1")
+    if not 0 <= d.test_from_exemplar <= d.test_patterns:
+        raise ConfigError("data.test_from_exemplar", d.test_from_exemplar, f"a count in [0, data.test_patterns = {d.test_patterns}]")
+    if d.heldout < 1:
+        raise ConfigError("data.heldout", d.heldout, "a whole number >= 1")
+    s = d.scaling
+    if not (0 <= s.lo < s.hi <= 1):
+        raise ConfigError("data.scaling.lo", s.lo, f"0 <= lo < hi <= 1 (the sigmoid's range); hi = {s.hi}")
+    if s.margin < 0:
+        raise ConfigError("data.scaling.margin", s.margin, "a margin >= 0 (fraction of each column's range)")
+    try:
+        sizes = parse_topology(cfg.topology.layers, n_inputs=6, n_outputs=2)
+    except TopologyError as e:
+        raise ConfigError("topology.layers", cfg.topology.layers, e.allowed) from None
+    if max(sizes) > MAX_LAYER_WIDTH:
+        raise ConfigError("topology.layers", cfg.topology.layers, f"layer widths of at most {MAX_LAYER_WIDTH} units")
+    return sizes
+
+
