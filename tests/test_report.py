@@ -1,4 +1,5 @@
-"""selpres.report on synthetic sweeps with known numbers: paired verdicts, time-to-target, runs, files, CLI."""
+"""selpres.report on synthetic sweeps with known numbers: paired verdicts, time-to-target, runs, files,
+CLI."""
 
 from __future__ import annotations
 
@@ -9,7 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from selpres import report as R
+from selpres.report import aggregate, load_jobs
+from selpres.report.__main__ import main
+from selpres.report.compare import reading, time_to_target_rows, verdict_rows
+from selpres.report.jobs import job_folders
+from selpres.report.sections.table1 import table1_rows
 from selpres.stats import t_quantile
 
 SCHED = {
@@ -45,10 +50,12 @@ def results(schedule, topology, heldout, test10=None, curves=None, diverged=(), 
         "status": "diverged" if n_div == len(seeds) else "complete", "diverged_replicas": n_div,
         "config_hash": "x", "schedule": {
             "name": schedule, "order": "stratified", "p": len(sizes) - 1, "sizes": sizes, "epochs": epochs,
-            "extra_presentations": extra * len(sizes), "presentations_per_stage": [n * e for n, e in zip(sizes, epochs)],
+            "extra_presentations": extra * len(sizes),
+            "presentations_per_stage": [n * e for n, e in zip(sizes, epochs)],
             "presentations": pres, "conventional_presentations": 1002 * sum(epochs),
             "cost_ratio": pres / (1002 * sum(epochs))},
-        "topology": topology, "engine": "fast", "replicas": len(seeds), "seeds": seeds, "presentations_done": pres,
+        "topology": topology, "engine": "fast", "replicas": len(seeds), "seeds": seeds,
+        "presentations_done": pres,
         "wall_seconds": {"total": 3.0, "train": 2.0, "loop": 2.5}, "seconds_per_presentation": 1e-6,
         "summary": {}, "replica_results": reps, "curves": recs, "config": {},
     }
@@ -57,7 +64,8 @@ def results(schedule, topology, heldout, test10=None, curves=None, diverged=(), 
 def write_job(sweep: Path, schedule: str, topology: str, res: dict | None) -> Path:
     d = sweep / f"schedule={schedule},topology={topology}"
     (d / ".hydra").mkdir(parents=True)
-    (d / ".hydra" / "config.yaml").write_text(f"schedule:\n  name: {schedule}\ntopology:\n  layers: {topology}\n")
+    hydra_cfg = f"schedule:\n  name: {schedule}\ntopology:\n  layers: {topology}\n"
+    (d / ".hydra" / "config.yaml").write_text(hydra_cfg)
     if res is not None:
         (d / "results.json").write_text(json.dumps(res))
     return d
@@ -81,9 +89,9 @@ def sweep(tmp_path):
 
 
 def test_paired_difference_and_interval_by_hand(sweep):
-    groups, tops, methods = R.aggregate(R.load_jobs(sweep))
+    groups, tops, methods = aggregate(load_jobs(sweep))
     assert tops == ["6-4-2", "6-8-2"] and methods == ["conventional", "selective", "matched", "random_growth"]
-    rows = {(r["topology"], r["comparison"]): r for r in R.verdict_rows(groups, tops, methods)}
+    rows = {(r["topology"], r["comparison"]): r for r in verdict_rows(groups, tops, methods)}
     v = rows[("6-4-2", "selective vs conventional")]
     d = [a - b for a, b in zip(SEL, CON)]
     mean = sum(d) / 5
@@ -105,21 +113,22 @@ def test_paired_difference_and_interval_by_hand(sweep):
 
 
 def test_reading_wording():
-    assert R.reading({"n": 5, "mean": 0.01, "ci95": [-0.001, 0.02]}, 0.1) == "no detectable difference"
-    assert R.reading({"n": 5, "mean": 0.02, "ci95": [0.01, 0.03]}, 0.1) == "selective worse by 0.0200 Nm (20.0 %)"
-    assert R.reading({"n": 1, "mean": 0.02, "ci95": [None, None]}, 0.1).startswith("too few pairs (1)")
+    assert reading({"n": 5, "mean": 0.01, "ci95": [-0.001, 0.02]}, 0.1) == "no detectable difference"
+    worse = reading({"n": 5, "mean": 0.02, "ci95": [0.01, 0.03]}, 0.1)
+    assert worse == "selective worse by 0.0200 Nm (20.0 %)"
+    assert reading({"n": 1, "mean": 0.02, "ci95": [None, None]}, 0.1).startswith("too few pairs (1)")
 
 
 def test_pairs_only_seeds_complete_in_both(tmp_path):
     s = tmp_path / "sw"
     write_job(s, "selective", "6-4-2", results("selective", "6-4-2", SEL, diverged=(0, 3)))
     write_job(s, "conventional", "6-4-2", results("conventional", "6-4-2", CON[:4] + [0.2], diverged=(4,)))
-    groups, tops, methods = R.aggregate(R.load_jobs(s))
-    (v,) = R.verdict_rows(groups, tops, methods)
+    groups, tops, methods = aggregate(load_jobs(s))
+    (v,) = verdict_rows(groups, tops, methods)
     d = [SEL[i] - CON[i] for i in (1, 2)]
     assert v["heldout_pairs"] == 2
     assert v["heldout_diff_mean"] == pytest.approx(sum(d) / 2)
-    t1 = {r["method"]: r for r in R.table1_rows(groups, tops, methods)}
+    t1 = {r["method"]: r for r in table1_rows(groups, tops, methods)}
     assert t1["selective"]["replicas"] == "3/5 (2 diverged)"
     assert t1["selective"]["heldout_nm_n"] == 3
     assert t1["selective"]["heldout_nm_mean"] == pytest.approx((SEL[1] + SEL[2] + SEL[4]) / 3)
@@ -134,28 +143,32 @@ def test_time_to_target_on_known_curve(tmp_path):
     write_job(s, "conventional", "6-4-2", results("conventional", "6-4-2", [0.1, 0.12], curves=con_curve))
     write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.1, 0.11], curves=sel_curve))
     write_job(s, "random_growth", "6-4-2", results("random_growth", "6-4-2", [0.2, 0.2], curves=rg_curve))
-    groups, tops, methods = R.aggregate(R.load_jobs(s))
-    all_rows = R.time_to_target_rows(groups, tops, methods)
+    groups, tops, methods = aggregate(load_jobs(s))
+    all_rows = time_to_target_rows(groups, tops, methods)
     rows = {r["method"]: r for r in all_rows if r["target_method"] == "conventional"}
     assert rows["conventional"]["target_heldout_curve_rms_nm"] == pytest.approx(0.11)
     assert rows["conventional"]["presentations_to_target"] == 150300
     sel = rows["selective"]
-    assert (sel["reached"], sel["presentations_to_target"], sel["previous_curve_point"]) == ("yes", 70560, 40560)
+    hit = (sel["reached"], sel["presentations_to_target"], sel["previous_curve_point"])
+    assert hit == ("yes", 70560, 40560)
     assert sel["fraction_of_conventional_cost"] == pytest.approx(70560 / 150300)
     assert rows["random_growth"]["reached"] == "not reached"
-    # second target: selective's final curve value (0.105), which conventional's curve (ending at 0.11) never reaches
+    # second target: selective's final curve value (0.105), which conventional's curve (ending at 0.11)
+    # never reaches
     vs_sel = {r["method"]: r for r in all_rows if r["target_method"] == "selective"}
     assert vs_sel["conventional"]["target_heldout_curve_rms_nm"] == pytest.approx(0.105)
     assert vs_sel["conventional"]["reached"] == "not reached"
-    assert (vs_sel["selective"]["presentations_to_target"], vs_sel["selective"]["previous_curve_point"]) == (70560, 40560)
+    own = vs_sel["selective"]
+    assert (own["presentations_to_target"], own["previous_curve_point"]) == (70560, 40560)
     assert vs_sel["random_growth"]["reached"] == "not reached"
 
 
 def test_runs_lists_failed_missing_diverged_and_files_written(sweep, tmp_path, capsys):
     out = tmp_path / "rep"
-    assert R.main([str(sweep), "--out", str(out)]) == 0
+    assert main([str(sweep), "--out", str(out)]) == 0
     md = capsys.readouterr().out
-    for f in ("report.md", "table1.csv", "verdict.csv", "time_to_target.csv", "runs.csv", "curves.png", "cost.png"):
+    for f in ("report.md", "table1.csv", "verdict.csv", "time_to_target.csv", "runs.csv", "curves.png",
+              "cost.png"):
         assert (out / f).stat().st_size > 0, f
     assert (out / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert md == (out / "report.md").read_text()
@@ -175,17 +188,17 @@ def test_runs_lists_failed_missing_diverged_and_files_written(sweep, tmp_path, c
 
 
 def test_default_out_dir(sweep, capsys):
-    assert R.main([str(sweep)]) == 0
+    assert main([str(sweep)]) == 0
     assert (sweep / "report" / "report.md").exists()
-    assert sweep / "report" not in R._job_folders(sweep)  # a second report does not take it for a job
+    assert sweep / "report" not in job_folders(sweep)  # a second report does not take it for a job
 
 
 def test_cli_missing_or_empty_dir_exits_2(tmp_path, capsys):
-    assert R.main([str(tmp_path / "nope")]) == 2
+    assert main([str(tmp_path / "nope")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error:") and err.count("\n") == 1 and "Traceback" not in err
     (tmp_path / "empty").mkdir()
-    assert R.main([str(tmp_path / "empty")]) == 2
+    assert main([str(tmp_path / "empty")]) == 2
     assert "no job folders" in capsys.readouterr().err
 
 
@@ -204,16 +217,18 @@ def test_jobs_of_one_schedule_name_that_differ_become_separate_methods(tmp_path)
     for topology in ("6-4-2", "6-8-2"):
         for sizes in ([50, 1002], [100, 1002]):
             res = results("selective", topology, [0.1, 0.2])
-            res["config"] = {"schedule": {"name": "selective", "sizes": sizes}, "topology": {"layers": topology},
+            res["config"] = {"schedule": {"name": "selective", "sizes": sizes},
+                             "topology": {"layers": topology},
                              "optim": {"lr": 0.15}, "seed": 0, "replicas": 2}
             d = write_job(s, "selective", topology, res)
             d.rename(d.with_name(d.name + f",sizes={sizes[0]}"))
-    groups, tops, methods = R.aggregate(R.load_jobs(s))
+    groups, tops, methods = aggregate(load_jobs(s))
     assert methods == ["selective schedule.sizes=[100,1002]", "selective schedule.sizes=[50,1002]"]
     assert tops == ["6-4-2", "6-8-2"]  # topology alone never splits a method
     assert all(len(g.by_seed) == 2 for g in groups.values())  # nothing pooled across the two size lists
-    rows = R.verdict_rows(groups, tops, methods)  # only selective variants: each compared with the first
-    assert {r["comparison"] for r in rows} == {"selective schedule.sizes=[50,1002] vs selective schedule.sizes=[100,1002]"}
+    rows = verdict_rows(groups, tops, methods)  # only selective variants: each compared with the first
+    expected = "selective schedule.sizes=[50,1002] vs selective schedule.sizes=[100,1002]"
+    assert {r["comparison"] for r in rows} == {expected}
 
 
 def test_jobs_pool_by_seed_union(tmp_path):
@@ -223,11 +238,22 @@ def test_jobs_pool_by_seed_union(tmp_path):
     d.rename(d.with_name("a_" + d.name))
     d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.1, 0.2, 0.3, 0.4]))
     d.rename(d.with_name("b_" + d.name))
-    groups, _, _ = R.aggregate(R.load_jobs(s))
+    groups, _, _ = aggregate(load_jobs(s))
     g = groups[("6-4-2", "selective")]
     assert sorted(g.values("heldout").items()) == [(0, 0.1), (1, 0.2), (2, 0.3), (3, 0.4)]
     assert g.warnings == []
-    d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.9]))  # seed 0 again, other numbers
+    d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.9]))  # seed 0, other numbers
     d.rename(d.with_name("c_" + d.name))
-    g = R.aggregate(R.load_jobs(s))[0][("6-4-2", "selective")]
+    g = aggregate(load_jobs(s))[0][("6-4-2", "selective")]
     assert g.values("heldout")[0] == 0.1 and any("seed 0 disagrees" in w for w in g.warnings)
+
+
+def test_flatten_joins_nested_keys_and_keeps_leaves():
+    """The one flattening helper serves the report's method labels (".") and TensorBoard hparams ("/")."""
+    from selpres.storage import flatten
+
+    cfg = {"schedule": {"sizes": [50, 1002], "budget": None}, "optim": {"lr": 0.15, "inner": {"x": 1}},
+           "seed": 0, "empty": {}}
+    assert flatten(cfg) == {"schedule.sizes": [50, 1002], "schedule.budget": None, "optim.lr": 0.15,
+                            "optim.inner.x": 1, "seed": 0}
+    assert flatten(cfg, "/")["optim/inner/x"] == 1
