@@ -14,6 +14,7 @@ from selpres.report import aggregate, load_jobs
 from selpres.report.__main__ import main
 from selpres.report.compare import reading, time_to_target_rows, verdict_rows
 from selpres.report.jobs import job_folders
+from selpres.report.paper import paper_setting
 from selpres.report.sections.table1 import table1_rows
 from selpres.stats import t_quantile
 
@@ -257,3 +258,129 @@ def test_flatten_joins_nested_keys_and_keeps_leaves():
     assert flatten(cfg) == {"schedule.sizes": [50, 1002], "schedule.budget": None, "optim.lr": 0.15,
                             "optim.inner.x": 1, "seed": 0}
     assert flatten(cfg, "/")["optim/inner/x"] == 1
+
+
+def test_paper_setting_names_what_matched_and_random_growth_borrow(sweep):
+    """Matched and random growth are not in the paper: the row says whose setting they borrow, never "yes"."""
+    s = sweep.parent / "sw2"
+    write_job(s, "matched", "6-4-2", results("matched", "6-4-2", CON))
+    groups, tops, methods = aggregate(load_jobs(sweep) + load_jobs(s))
+    t1 = {(r["method"], r["topology"]): r for r in table1_rows(groups, tops, methods)}
+    assert t1[("conventional", "6-4-2")]["paper_setting"] == "yes"
+    assert t1[("selective", "6-4-2")]["paper_setting"] == "yes"
+    rg_setting = t1[("random_growth", "6-4-2")]["paper_setting"]
+    assert rg_setting == "not in paper (selective's stages, random order)"
+    assert t1[("matched", "6-4-2")]["paper_setting"] == "not in paper (selective's budget)"
+    other = results("matched", "6-4-2", CON)
+    other["schedule"]["presentations"] = 50_000
+    assert paper_setting("matched", other["schedule"]) == "not in paper (budget 50,000t, not selective's)"
+    rg = results("random_growth", "6-4-2", RG)["schedule"]
+    rg["sizes"] = [100, 1002]
+    assert paper_setting("random_growth", rg) == "not in paper (random order, other stages than selective's)"
+
+
+def test_timing_names_the_engine_that_ran_and_the_fallback(tmp_path, capsys):
+    """A run that asked for "fast" and fell back to torch is timed as torch, with the reason; results
+    written before the fallback was recorded carry only "engine", which then stands for both."""
+    s = tmp_path / "sw"
+    fell = results("selective", "6-4-2", SEL)
+    fell.update(engine="torch", engine_requested="fast", engine_fallback="no AVX2 on this CPU")
+    write_job(s, "selective", "6-4-2", fell)
+    native = results("conventional", "6-4-2", CON)
+    native.update(engine="native", engine_requested="fast", engine_fallback=None)
+    write_job(s, "conventional", "6-4-2", native)
+    write_job(s, "conventional", "6-8-2", results("conventional", "6-8-2", CON))  # old format: "fast" only
+    out = tmp_path / "rep"
+    assert main([str(s), "--out", str(out)]) == 0
+    md = capsys.readouterr().out
+    runs = {(r["schedule"], r["topology"]): [r[k] for k in ("engine", "engine_requested", "engine_fallback")]
+            for r in csv.DictReader((out / "runs.csv").open())}
+    assert runs[("selective", "6-4-2")] == ["torch", "fast", "no AVX2 on this CPU"]
+    assert runs[("conventional", "6-4-2")] == ["native", "fast", ""]
+    assert runs[("conventional", "6-8-2")] == ["fast", "fast", ""]
+    t1 = {(r["method"], r["topology"]): r for r in csv.DictReader((out / "table1.csv").open())}
+    assert t1[("selective", "6-4-2")]["engine"] == "torch"
+    assert t1[("selective", "6-4-2")]["engine_fallback"] == "no AVX2 on this CPU"
+    (wall,) = [line for line in md.splitlines() if line.startswith("| wall s per replica-run")]
+    assert "engine that ran" in wall
+    cells = wall.split(" | ")
+    assert cells[1].endswith(" native") and cells[2].endswith(" fast")  # conventional 6-4-2, 6-8-2
+    assert cells[3].endswith(" torch (fast requested: no AVX2 on this CPU)")  # selective 6-4-2
+    assert "engine fallback: no AVX2 on this CPU" in md  # the runs table's notes
+
+
+README_TEXT = """# A project
+
+Some text the generator must keep.
+
+<!-- table1:begin -->
+stale numbers: 0.9999
+<!-- table1:end -->
+
+## Tour
+kept too
+"""
+
+
+def test_readme_block_is_generated_from_the_report(sweep, tmp_path, capsys):
+    readme = tmp_path / "README.md"
+    readme.write_text(README_TEXT)
+    out = tmp_path / "rep"
+    assert main([str(sweep), "--out", str(out), "--readme", str(readme)]) == 0
+    text = readme.read_text()
+    before, rest = text.split("<!-- table1:begin -->\n")
+    block, after = rest.split("<!-- table1:end -->")
+    assert before == README_TEXT.split("<!-- table1:begin -->")[0]  # outside the markers: untouched
+    assert after == README_TEXT.split("<!-- table1:end -->")[1]
+    assert "0.9999" not in block
+    # the numbers table: mean [95 % interval] of the final held-out RMS, as in the report's table1.csv
+    t1 = {(r["method"], r["topology"]): r for r in csv.DictReader((out / "table1.csv").open())}
+    sel = t1[("selective", "6-4-2")]
+    assert float(sel["heldout_nm_mean"]) == pytest.approx(sum(SEL) / 5)
+    cell = (f"{float(sel['heldout_nm_mean']):.4f} [{float(sel['heldout_nm_ci_lo']):.4f}, "
+            f"{float(sel['heldout_nm_ci_hi']):.4f}]")
+    (row,) = [line for line in block.splitlines() if line.startswith("| 6-4-2 |")]
+    assert cell in row and "0.0554 / 0.0581" in row  # ours, and the paper's conv. / sel.
+    assert "| topology | conventional, 150,300 t | selective, 70,560 t |" in block
+    assert "seeds 0–4" in block
+    # the findings are the verdicts' own readings
+    verdict = {(r["topology"], r["comparison"]): r for r in csv.DictReader((out / "verdict.csv").open())}
+    reading_con = verdict[("6-4-2", "selective vs conventional")]["reading_heldout"]
+    assert reading_con.startswith("selective better by 0.0440 Nm")
+    assert f"6-4-2: {reading_con}" in block
+    assert "ratio 0.469" in block
+    # a second run with the same results leaves the file exactly as it is
+    capsys.readouterr()
+    assert main([str(sweep), "--out", str(out), "--readme", str(readme)]) == 0
+    assert readme.read_text() == text
+    assert "already up to date" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("content", [
+    "# no markers at all\n",
+    "<!-- table1:begin -->\nonly the first marker\n",
+    "<!-- table1:end -->\nreversed\n<!-- table1:begin -->\n",
+    "<!-- table1:begin -->\n<!-- table1:end -->\n<!-- table1:begin -->\n<!-- table1:end -->\n",
+])
+def test_readme_without_one_marker_pair_is_refused_untouched(sweep, tmp_path, capsys, content):
+    readme = tmp_path / "README.md"
+    readme.write_bytes(content.encode())
+    out = tmp_path / "rep"
+    assert main([str(sweep), "--out", str(out), "--readme", str(readme)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and str(readme) in err and "<!-- table1:begin -->" in err
+    assert "Traceback" not in err
+    assert readme.read_bytes() == content.encode()
+    assert not out.exists()  # refused before anything was written
+    assert main([str(sweep), "--out", str(out), "--readme", str(tmp_path / "nope.md")]) == 2
+    assert "no such file" in capsys.readouterr().err
+
+
+def test_engine_text_keeps_the_first_line_of_a_compiler_message():
+    from selpres.report.markdown import engine_text
+
+    msg = "cc: error: unrecognized option '-mavx2' " + "x" * 80 + "\nsecond line"
+    r = {"engine": "torch", "engine_requested": "fast", "engine_fallback": msg}
+    assert engine_text(r, 20) == "torch (fast requested: cc: error: unrecogni…)"
+    assert engine_text(r, 0) == "torch (fast requested)"
+    assert engine_text({"engine": "native", "engine_requested": "fast", "engine_fallback": None}) == "native"

@@ -1,6 +1,7 @@
 """Table 1 of the paper from a sweep's ``results.json`` files: tables, verdicts, time-to-target, plots.
 
     python -m selpres.report outputs/sweeps/table1 [--out DIR]     (default DIR = <sweep>/report)
+    python -m selpres.report outputs/sweeps/table1 --readme README.md   (also its Table 1 block)
 
 The package reads in the data's direction, one concern per module:
 
@@ -12,6 +13,7 @@ The package reads in the data's direction, one concern per module:
 - ``sections/`` one module per section of the report, each ``section(ctx) -> Section`` (Markdown, CSV
   rows, figures): a new section is a new module added to ``build.SECTIONS``;
 - ``build``     the report: its sections in order, written to the output folder;
+- ``readme``    the README's Table 1 block (between ``<!-- table1:begin/end -->``), from the report;
 - ``__main__``  the command line.
 
 Conventions: diverged replicas are left out of every mean and interval but counted; comparisons with

@@ -1,32 +1,51 @@
-"""``python -m selpres.report DIR [--out DIR]``: the Table 1 report of a sweep (also ``selpres-report``)."""
+"""``python -m selpres.report DIR [--out DIR] [--readme README.md]``: the Table 1 report of a sweep (also
+the ``selpres-report`` command)."""
 
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 
 from selpres.report import __doc__ as package_doc
-from selpres.report.build import write_report
+from selpres.report.build import Report
 from selpres.report.jobs import job_folders
+from selpres.report.readme import BEGIN, END, ReadmeError, read_readme, update_readme
+
+
+def _error(msg: str) -> int:
+    print(f"error: {msg}", file=sys.stderr)
+    return 2
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m selpres.report", description=package_doc.split("\n\n")[0])
     ap.add_argument("dir", type=Path, help="sweep directory, e.g. outputs/sweeps/table1")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: DIR/report)")
+    ap.add_argument("--readme", type=Path, default=None, metavar="FILE",
+                    help=f"also rewrite the block between {BEGIN} and {END} in FILE with the Table 1 section "
+                         "generated from this report (nothing is written if the markers are missing)")
     a = ap.parse_args(argv)
     if not a.dir.is_dir():
-        print(f"error: {a.dir} is not a directory (expected a sweep folder such as outputs/sweeps/table1)",
-              file=sys.stderr)
-        return 2
+        return _error(f"{a.dir} is not a directory (expected a sweep folder such as outputs/sweeps/table1)")
     if not job_folders(a.dir):
-        print(f"error: no job folders (results.json or .hydra/) under {a.dir}", file=sys.stderr)
-        return 2
+        return _error(f"no job folders (results.json or .hydra/) under {a.dir}")
+    if a.readme is not None:
+        try:
+            read_readme(a.readme)  # refuse before writing anything
+        except ReadmeError as e:
+            return _error(str(e))
     out = a.out if a.out is not None else a.dir / "report"
-    md, files = write_report(a.dir, out)
-    print(md, end="")
+    report = Report.build(a.dir)
+    files = report.write(out)
+    print(report.markdown, end="")
     print(f"report written to {out}/ ({', '.join(files)})", file=sys.stderr)
+    if a.readme is not None:
+        command = f"python -m selpres.report {shlex.quote(str(a.dir))} --readme {shlex.quote(str(a.readme))}"
+        changed = update_readme(a.readme, report, command)
+        state = "rewritten" if changed else "already up to date"
+        print(f"{a.readme}: Table 1 block {state}", file=sys.stderr)
     return 0
 
 

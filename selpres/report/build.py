@@ -6,6 +6,7 @@ A new section (sensitivity, error–cost plane, selection verdicts, ...) is a mo
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from selpres.report.context import Context, Section
@@ -16,33 +17,49 @@ from selpres.storage import atomic_write
 SECTIONS = [table1.section, verdict.section, time_to_target.section, plots.section, runs.section]
 
 
-def build(ctx: Context) -> list[Section]:
-    return [make(ctx) for make in SECTIONS]
-
-
-def render(ctx: Context, sections: list[Section]) -> str:
-    return "\n\n".join([f"# Table 1 reproduction: `{ctx.sweep}`", *(s.markdown() for s in sections)]) + "\n"
-
-
-def _write_text(path: Path, text: str) -> None:
+def write_text(path: Path, text: str) -> None:
     atomic_write(path, lambda f: f.write(text.encode()))
 
 
-def write_report(sweep: Path, out: Path) -> tuple[str, list[str]]:
-    """Write report.md, every section's CSV files and figures into ``out``; returns (the Markdown, the
-    names of the files written)."""
-    ctx = Context.load(sweep)
-    sections = build(ctx)
-    out.mkdir(parents=True, exist_ok=True)
-    files = ["report.md"]
-    for s in sections:
-        for name, rows in s.csv.items():
-            _write_text(out / name, to_csv(rows))
-            files.append(name)
-    for s in sections:
-        for name, (_, draw) in s.figures.items():
-            draw(out / name)
-            files.append(name)
-    md = render(ctx, sections)
-    _write_text(out / "report.md", md)
-    return md, files
+@dataclass
+class Report:
+    """A sweep's sections, built once: rendered to report.md, and read again by the README generator."""
+
+    ctx: Context
+    sections: list[Section]
+
+    @classmethod
+    def build(cls, sweep: Path) -> Report:
+        ctx = Context.load(sweep)
+        return cls(ctx, [make(ctx) for make in SECTIONS])
+
+    @property
+    def markdown(self) -> str:
+        return "\n\n".join([f"# Table 1 reproduction: `{self.ctx.sweep}`",
+                            *(s.markdown() for s in self.sections)]) + "\n"
+
+    def rows(self, csv_name: str) -> list[dict]:
+        """The rows behind one CSV file of the report (e.g. "verdict.csv")."""
+        return next(s.csv[csv_name] for s in self.sections if csv_name in s.csv)
+
+    def write(self, out: Path) -> list[str]:
+        """report.md, every section's CSV files and figures into ``out``; returns the names written."""
+        out.mkdir(parents=True, exist_ok=True)
+        files = ["report.md"]
+        for s in self.sections:
+            for name, rows in s.csv.items():
+                write_text(out / name, to_csv(rows))
+                files.append(name)
+        for s in self.sections:
+            for name, (_, draw) in s.figures.items():
+                draw(out / name)
+                files.append(name)
+        write_text(out / "report.md", self.markdown)
+        return files
+
+
+def write_report(sweep: Path, out: Path) -> str:
+    """Build the report of ``sweep`` and write it into ``out``; returns its Markdown."""
+    report = Report.build(sweep)
+    report.write(out)
+    return report.markdown

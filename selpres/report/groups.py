@@ -58,6 +58,13 @@ class Group:
                 out[s] = float(v)
         return out
 
+    def engines(self) -> dict:
+        """The pooled jobs' engines, joined with "+" where they differ: the timing of a group is only as
+        meaningful as the name of what produced it."""
+        recs = [j.engine for j in self.used]
+        return {k: "+".join(sorted({str(r[k]) for r in recs if r[k] is not None})) or None
+                for k in ("engine", "engine_requested", "engine_fallback")}
+
     def wall(self) -> dict:
         """Summed over the pooled jobs: train seconds, total seconds, replicas; per replica-run = train / R
         (replicas are trained together, so a replica-run has no time of its own)."""

@@ -29,6 +29,16 @@ class Job:
     def replicas(self) -> list[dict]:
         return self.results["replica_results"] if self.results else []
 
+    @property
+    def engine(self) -> dict:
+        """{"engine": what ran, "engine_requested": what was asked for, "engine_fallback": None or why the
+        native kernel was not used}. Results written before the fallback was recorded carry only
+        ``engine``, which then stands for both (an unrecorded fallback cannot be recovered)."""
+        res = self.results or {}
+        ran = res.get("engine")
+        return {"engine": ran, "engine_requested": res.get("engine_requested", ran),
+                "engine_fallback": res.get("engine_fallback")}
+
 
 def _hydra_identity(folder: Path) -> tuple[str | None, str | None]:
     """(schedule name, topology) of a job without usable results: from .hydra/config.yaml, else the

@@ -21,6 +21,17 @@ def ci(s: dict, nd: int = 4) -> str:
     return "n/a" if lo is None else f"[{fmt(lo, nd)}, {fmt(hi, nd)}]"
 
 
+def engine_text(r: dict, reason: int = 60) -> str:
+    """The engine that ran; after a fallback also what was asked for, with the first ``reason`` characters
+    of the fallback's reason (0: none). A time means little without the name of what produced it."""
+    ran, asked, why = r.get("engine"), r.get("engine_requested"), r.get("engine_fallback")
+    if not why:  # ran as asked ("fast" resolving to native is no fallback)
+        return str(ran)
+    why = why.strip().splitlines()[0] if reason and why.strip() else ""
+    why = why[:reason] + ("…" if len(why) > reason else "")
+    return f"{ran} ({asked} requested" + (f": {why})" if why else ")")
+
+
 def table(head: list[str], body: list[list[str]]) -> str:
     """A Markdown table: the header, the rule, one line per row of cells."""
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]

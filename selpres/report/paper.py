@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from selpres.report.groups import base
+
 # T_con/t = 1002·150 = 150,300 (the paper prints "1,50,000t"); its RMS units are unstated.
 PAPER = {
     "conventional": {
@@ -17,14 +19,24 @@ PAPER = {
 PAPER_UNITS_NOTE = "paper (units unstated)"
 
 
+def _stages(sched: dict, method: str) -> bool:
+    return (sched["sizes"], sched["epochs"]) == (PAPER[method]["sizes"], PAPER[method]["epochs"])
+
+
 def paper_setting(method: str, sched: dict | None) -> str:
-    """'yes' when the schedule is the paper's (conventional, selective, random_growth's stages, matched
-    budget)."""
-    ref = {"random_growth": "selective"}.get(method, method)
+    """Whether a schedule is the paper's: "yes"/"no" for the paper's two methods; matched and random growth
+    are not in the paper, so they say whose setting they borrow (selective's budget, selective's stages)."""
     if sched is None:
         return ""
-    if method == "matched":
-        return "yes" if sched["presentations"] == PAPER["selective"]["presentations"] else "no"
-    if ref not in PAPER:
+    name = base(method)  # a labelled variant ("selective schedule.sizes=[…]") is still selective
+    if name == "matched":
+        if sched["presentations"] == PAPER["selective"]["presentations"]:
+            return "not in paper (selective's budget)"
+        return f"not in paper (budget {sched['presentations']:,}t, not selective's)"
+    if name == "random_growth":
+        if _stages(sched, "selective"):
+            return "not in paper (selective's stages, random order)"
+        return "not in paper (random order, other stages than selective's)"
+    if name not in PAPER:
         return "n/a"
-    return "yes" if (sched["sizes"], sched["epochs"]) == (PAPER[ref]["sizes"], PAPER[ref]["epochs"]) else "no"
+    return "yes" if _stages(sched, name) else "no"

@@ -86,13 +86,15 @@ def plot_cost(groups, topologies, methods, path: Path) -> None:
     a1.set_title("cost in presentations")
     a1.legend(fontsize=8)
     width = 0.8 / max(1, len(methods))
+    ran = {key: g.engines()["engine"] for key, g in groups.items() if g.used}
     for i, m in enumerate(methods):
-        ys = [(groups[(t, m)].wall()["per_replica"] or 0) if (t, m) in groups and groups[(t, m)].used else 0
-              for t in topologies]
-        a2.bar([k + i * width for k in range(len(topologies))], ys, width, label=m)
+        ys = [(groups[(t, m)].wall()["per_replica"] or 0) if (t, m) in ran else 0 for t in topologies]
+        engines = sorted({e for (_, mm), e in ran.items() if mm == m})
+        label = m if len(set(ran.values())) <= 1 else f"{m} ({', '.join(engines)})"
+        a2.bar([k + i * width for k in range(len(topologies))], ys, width, label=label)
     a2.set_xticks([k + width * (len(methods) - 1) / 2 for k in range(len(topologies))], topologies)
     a2.set_ylabel("train seconds / replica (job train time ÷ replicas)")
-    a2.set_title("measured wall time per replica-run")
+    a2.set_title(f"measured wall time per replica-run, engine: {', '.join(sorted(set(ran.values())))}")
     a2.legend(fontsize=8)
     fig.tight_layout()
     _save(fig, path)

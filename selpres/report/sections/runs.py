@@ -7,7 +7,7 @@ from pathlib import Path
 from selpres.report.context import Context, Section
 from selpres.report.groups import method_rank, topology_rank
 from selpres.report.jobs import Job
-from selpres.report.markdown import fmt, table
+from selpres.report.markdown import engine_text, fmt, table
 
 
 def _diverged_epoch(rep: dict):
@@ -28,7 +28,7 @@ def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path) -> list
             row.update(replicas=f"{len(reps) - bad}/{len(reps)}" + (f" ({bad} diverged)" if bad else ""),
                        seeds=f"{min(r['seed'] for r in reps)}..{max(r['seed'] for r in reps)}" if reps
                        else "",
-                       engine=j.results.get("engine"), wall_total_s=j.results["wall_seconds"]["total"])
+                       **j.engine, wall_total_s=j.results["wall_seconds"]["total"])
             if bad:
                 row["error"] = "; ".join(f"seed {r['seed']} diverged at epoch {_diverged_epoch(r)}"
                                          for r in reps if r["status"] != "complete")
@@ -42,13 +42,14 @@ def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path) -> list
 
 
 def runs_markdown(rows: list[dict], warnings: list[str]) -> str:
-    head = ["job", "schedule", "topology", "status", "replicas complete", "seeds", "engine", "wall s",
-            "errors / notes"]
+    head = ["job", "schedule", "topology", "status", "replicas complete", "seeds", "engine that ran",
+            "wall s", "errors / notes"]
     body = []
     for r in rows:
-        err = (r.get("error") or "").replace("\n", " ").replace("|", "\\|")
+        fallback = r.get("engine_fallback") and f"engine fallback: {r['engine_fallback']}"
+        err = "; ".join(n for n in (r.get("error"), fallback) if n).replace("\n", " ").replace("|", "\\|")
         body.append([f"`{r['job']}`", str(r.get("schedule")), str(r.get("topology")), r["status"],
-                     r.get("replicas", ""), r.get("seeds", ""), str(r.get("engine") or ""),
+                     r.get("replicas", ""), r.get("seeds", ""), engine_text(r, 0) if r.get("engine") else "",
                      fmt(r.get("wall_total_s"), 1) if r.get("wall_total_s") else "",
                      err[:300] + ("…" if len(err) > 300 else "")])
     return table(head, body) + "".join(f"\n\n- warning: {w}" for w in warnings)

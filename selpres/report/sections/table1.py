@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from selpres.report.context import Context, Section
 from selpres.report.groups import SETS, UNITS, Group
-from selpres.report.markdown import ci, fmt, mean_std, table
+from selpres.report.markdown import ci, engine_text, fmt, mean_std, table
 from selpres.report.paper import PAPER, paper_setting
 from selpres.stats import summarize
 
@@ -13,7 +13,8 @@ FOOTNOTE = (
     "¹ The paper's RMS error is over 10 test patterns with units unstated; it is shown next to both of our "
     "metrics (Nm and scaled). Ours: mean ± sample std over complete seeds, and the Student-t 95 % interval "
     "of the mean. *test-10* = the paper's 10-pattern metric, *held-out* = all held-out patterns. Wall time "
-    "per replica-run = the job's training seconds ÷ its replicas (replicas are trained together, batched). "
+    "per replica-run = the job's training seconds ÷ its replicas (replicas are trained together, batched), "
+    "measured with the engine named after it (and the one requested, when the run fell back). "
     "Diverged replicas are excluded from means and counted under *replicas complete*."
 )
 
@@ -41,7 +42,7 @@ def table1_rows(groups, topologies, methods) -> list[dict]:
                 presentations=s["presentations"], paper_presentations=PAPER.get(m, {}).get("presentations"),
                 cost_ratio_vs_equal_epochs=s["cost_ratio"], paper_setting=paper_setting(g.schedule, s),
                 replicas=replicas_text(g), n_complete=len(g.complete_seeds), n_diverged=g.n_diverged,
-                wall_train_per_replica_s=w["per_replica"], wall_train_job_s=w["train"],
+                **g.engines(), wall_train_per_replica_s=w["per_replica"], wall_train_job_s=w["train"],
                 wall_total_job_s=w["total"], paper_rms=PAPER.get(m, {}).get("rms", {}).get(t),
             )
             for set_, _ in SETS:
@@ -73,7 +74,8 @@ def _epochs(r: dict) -> str:
 
 
 def _wall(r: dict) -> str:
-    return f"{r['wall_train_per_replica_s']:.3g} ({r['wall_train_job_s']:.3g} / {r['wall_total_job_s']:.3g})"
+    job = f"{r['wall_train_job_s']:.3g} / {r['wall_total_job_s']:.3g}"
+    return f"{r['wall_train_per_replica_s']:.3g} ({job}) {engine_text(r)}"
 
 
 def _rms_cells() -> list[tuple]:
@@ -92,7 +94,7 @@ def _cells() -> list[tuple]:
         ("total time T (ours)", lambda r: f"{r['presentations']:,}t"),
         ("total time T (paper)", _paper_time),
         ("paper's n_i, N_i (or budget)?", lambda r: r["paper_setting"]),
-        ("wall s per replica-run (job train / total)", _wall),
+        ("wall s per replica-run (job train / total), engine that ran", _wall),
         ("replicas complete", lambda r: r["replicas"]),
         ("rms error, paper¹", lambda r: fmt(r["paper_rms"]) if r["paper_rms"] is not None else "—"),
         *_rms_cells(),
