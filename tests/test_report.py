@@ -12,7 +12,7 @@ import pytest
 
 from selpres.report import aggregate, load_jobs
 from selpres.report.__main__ import main
-from selpres.report.compare import reading, time_to_target_rows, verdict_rows
+from selpres.report.compare import Margin, Options, reading, time_to_target_rows, verdict_rows
 from selpres.report.jobs import job_folders
 from selpres.report.paper import paper_setting
 from selpres.report.sections.table1 import table1_rows
@@ -105,19 +105,97 @@ def test_paired_difference_and_interval_by_hand(sweep):
     assert v["heldout_ci_hi"] == pytest.approx(mean + half, abs=1e-9)
     assert v["heldout_ci_hi"] < 0
     pct = 0.044 / (sum(CON) / 5) * 100
-    assert v["reading_heldout"] == f"selective better by 0.0440 Nm ({pct:.1f} %)"
+    assert v["reading_heldout"] == (f"selective better by 0.0440 Nm ({pct:.1f} %; 95 % interval "
+                                    f"[{mean - half:+.4f}, {mean + half:+.4f}])")
     assert v["cost_ratio"] == pytest.approx(70560 / 150300)
-    # CI containing 0
-    assert rows[("6-4-2", "selective vs random_growth")]["reading_heldout"] == "no detectable difference"
+    # CI containing 0 (d = −0.01 +0.01 −0.01 +0.01 −0.01: mean −0.002, sd √(480e-6 / 4)), and the 90 % TOST
+    # interval −0.002 ± t(0.95, 4)·sd/√5 = −0.002 ± 2.131847·0.0048990 pokes out of ±5 % of selective's mean
+    rg = rows[("6-4-2", "selective vs random_growth")]
+    se = math.sqrt(480e-6 / 4) / math.sqrt(5)
+    assert rg["heldout_margin"] == pytest.approx(0.05 * sum(SEL) / 5)  # 0.0055 Nm
+    assert [rg["heldout_ci90_lo"], rg["heldout_ci90_hi"]] == pytest.approx(
+        [-0.002 - 2.131847 * se, -0.002 + 2.131847 * se], abs=1e-6)
+    assert rg["reading_heldout"] == ("no detectable difference (95 % interval "
+                                     f"[{rg['heldout_ci_lo']:+.4f}, {rg['heldout_ci_hi']:+.4f}]); "
+                                     "not shown equivalent within ±0.0055 Nm")
     # failed other side
     assert rows[("6-4-2", "selective vs matched")]["reading_heldout"] == "no results for matched"
 
 
-def test_reading_wording():
-    assert reading({"n": 5, "mean": 0.01, "ci95": [-0.001, 0.02]}, 0.1) == "no detectable difference"
-    worse = reading({"n": 5, "mean": 0.02, "ci95": [0.01, 0.03]}, 0.1)
-    assert worse == "selective worse by 0.0200 Nm (20.0 %)"
-    assert reading({"n": 1, "mean": 0.02, "ci95": [None, None]}, 0.1).startswith("too few pairs (1)")
+def test_reading_wording_three_readings_never_merged():
+    base = {"n": 30, "other_mean": 0.1, "margin": 0.004, "ci90": [-0.0013, 0.0018]}
+    worse = {**base, "mean": 0.02, "ci95": [0.01, 0.03], "p": 0.001, "p_tost": 0.9}
+    assert reading(worse) == "selective worse by 0.0200 Nm (20.0 %; 95 % interval [+0.0100, +0.0300])"
+    same = {**base, "mean": 0.0003, "ci95": [-0.0016, 0.0021], "p": 0.76, "p_tost": 0.01}
+    assert reading(same) == "equivalent within ±0.0040 Nm (90 % interval [-0.0013, +0.0018])"
+    unsure = {**base, "mean": -0.0014, "ci95": [-0.0039, 0.0010], "p": 0.24, "p_tost": 0.42}
+    assert reading(unsure) == ("no detectable difference (95 % interval [-0.0039, +0.0010]); "
+                               "not shown equivalent within ±0.0040 Nm")
+    small = {**base, "mean": -0.001, "ci95": [-0.0018, -0.0002], "p": 0.02, "p_tost": 0.001}
+    assert reading(small, name="x") == ("x better by 0.0010 Nm (1.0 %; 95 % interval [-0.0018, -0.0002]); "
+                                        "yet within the margin: equivalent within ±0.0040 Nm")
+    # after Holm's correction an interval that excludes 0 no longer reads as a difference, and says why
+    held = {**base, "mean": 0.0014, "ci95": [0.0002, 0.0025], "p": 0.074, "p_tost": 0.8, "holm": True}
+    assert reading(held) == ("no detectable difference after Holm's correction (95 % interval "
+                             "[+0.0002, +0.0025]; Holm p = 0.074); not shown equivalent within ±0.0040 Nm")
+    assert reading({"n": 1, "mean": 0.02, "ci95": [None, None], "p": None}).startswith("too few pairs (1)")
+
+
+# three seeds (df = 2, where the t CDF is 1/2 + t / (2√(t² + 2))): selective − other = 0, 0.1, 0.2
+SEL3, OTHER3 = [2.0, 2.0, 2.0], [2.0, 1.9, 1.8]
+
+
+def test_equivalence_and_t_test_end_to_end_by_hand(tmp_path):
+    s = tmp_path / "sw"
+    write_job(s, "selective", "6-4-2", results("selective", "6-4-2", SEL3))
+    write_job(s, "matched", "6-4-2", results("matched", "6-4-2", OTHER3))
+    groups, tops, methods = aggregate(load_jobs(s))
+    (v,) = verdict_rows(groups, tops, methods)  # default margin: 5 % of selective's mean 2.0 = 0.1
+    assert v["heldout_margin"] == pytest.approx(0.1)
+    assert v["heldout_p"] == pytest.approx(1 - math.sqrt(3 / 5), abs=1e-9)  # t = √3
+    assert v["heldout_tost_p"] == pytest.approx(0.5, abs=1e-9)  # the mean sits on the margin: t_upper = 0
+    assert v["heldout_family_size"] == 1
+    assert v["reading_heldout"].startswith("no detectable difference (95 % interval")
+    (v,) = verdict_rows(groups, tops, methods, Options(margin=Margin(0.3, relative=False)))
+    # p_upper = F(−2√3) = 1/2 − √(3/14) = 0.0370900 > p_lower = 1/2 − √(12/50): equivalent within ±0.3
+    assert v["heldout_tost_p"] == pytest.approx(0.5 - math.sqrt(3 / 14), abs=1e-9)
+    assert v["reading_heldout"] == "equivalent within ±0.3000 Nm (90 % interval [-0.0686, +0.2686])"
+
+
+def test_holm_adjusts_within_the_family_of_one_metric(sweep):
+    groups, tops, methods = aggregate(load_jobs(sweep))
+    plain = {r["comparison"]: r for r in verdict_rows(groups, tops, methods) if r["topology"] == "6-4-2"}
+    rows = {r["comparison"]: r for r in verdict_rows(groups, tops, methods, Options(holm=True))
+            if r["topology"] == "6-4-2"}
+    con, rg = (plain[f"selective vs {m}"]["heldout_p"] for m in ("conventional", "random_growth"))
+    assert con < rg  # by hand: k = 2 tested pairs (matched failed, 6-8-2 has no conventional)
+    assert rows["selective vs conventional"]["heldout_family_size"] == 2
+    assert rows["selective vs conventional"]["heldout_p_holm"] == pytest.approx(min(1, 2 * con))
+    assert rows["selective vs random_growth"]["heldout_p_holm"] == pytest.approx(max(min(1, 2 * con), rg))
+    assert rows["selective vs conventional"]["heldout_p"] == pytest.approx(con)  # the raw p is kept
+    assert "Holm p = " in rows["selective vs conventional"]["reading_heldout"]
+    assert "heldout_p_holm" not in plain["selective vs conventional"]
+
+
+def test_cli_margin_and_holm(sweep, tmp_path, capsys):
+    out = tmp_path / "rep"
+    assert main([str(sweep), "--out", str(out)]) == 0
+    md = capsys.readouterr().out
+    assert "Margin m = 5 % of selective's mean final RMS over the paired seeds" in md
+    assert "Comparisons per family (one metric across this table): 2 held-out, 2 test-10" in md
+    assert "not adjusted for multiplicity" in md
+    assert main([str(sweep), "--out", str(out), "--margin", "0.01", "--holm"]) == 0
+    md = capsys.readouterr().out
+    assert "Margin m = 0.01 Nm (fixed with --margin)" in md and "Holm-adjusted within each family" in md
+    verdict = {r["comparison"]: r for r in csv.DictReader((out / "verdict.csv").open())
+               if r["topology"] == "6-4-2"}
+    assert float(verdict["selective vs random_growth"]["heldout_margin"]) == 0.01
+    assert verdict["selective vs random_growth"]["heldout_p_holm"] != ""
+    for bad in ("abc", "0", "-1%", "150%"):
+        assert main([str(sweep), "--out", str(tmp_path / "bad"), f"--margin={bad}"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: --margin=") and repr(bad) in err and "5%" in err
+    assert not (tmp_path / "bad").exists()
 
 
 def test_pairs_only_seeds_complete_in_both(tmp_path):

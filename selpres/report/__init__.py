@@ -2,6 +2,7 @@
 
     python -m selpres.report outputs/sweeps/table1 [--out DIR]     (default DIR = <sweep>/report)
     python -m selpres.report outputs/sweeps/table1 --readme README.md   (also its Table 1 block)
+    python -m selpres.report outputs/sweeps/table1 --margin 5% --holm   (equivalence margin, Holm)
 
 The package reads in the data's direction, one concern per module:
 
@@ -18,7 +19,8 @@ The package reads in the data's direction, one concern per module:
 
 Conventions: diverged replicas are left out of every mean and interval but counted; comparisons with
 ``selective`` are paired by seed (only seeds complete in both); intervals are Student-t 95 % intervals
-from :mod:`selpres.stats`.
+from :mod:`selpres.stats`; a verdict reads *better/worse*, *equivalent within ±m* (TOST) or *no
+detectable difference*, three different things.
 """
 
 from selpres.report.build import write_report

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from selpres.report.compare import Options
 from selpres.report.context import Context, Section
 from selpres.report.markdown import to_csv
 from selpres.report.sections import plots, runs, table1, time_to_target, verdict
@@ -29,8 +30,8 @@ class Report:
     sections: list[Section]
 
     @classmethod
-    def build(cls, sweep: Path) -> Report:
-        ctx = Context.load(sweep)
+    def build(cls, sweep: Path, options: Options | None = None) -> Report:
+        ctx = Context.load(sweep, options)
         return cls(ctx, [make(ctx) for make in SECTIONS])
 
     @property
@@ -58,8 +59,8 @@ class Report:
         return files
 
 
-def write_report(sweep: Path, out: Path) -> str:
+def write_report(sweep: Path, out: Path, options: Options | None = None) -> str:
     """Build the report of ``sweep`` and write it into ``out``; returns its Markdown."""
-    report = Report.build(sweep)
+    report = Report.build(sweep, options)
     report.write(out)
     return report.markdown

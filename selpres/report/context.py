@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from selpres.report.compare import Options
 from selpres.report.groups import Group, aggregate
 from selpres.report.jobs import Job, load_jobs
 
@@ -19,11 +20,12 @@ class Context:
     groups: dict[tuple[str, str], Group]
     topologies: list[str]
     methods: list[str]
+    options: Options = field(default_factory=Options)
 
     @classmethod
-    def load(cls, sweep: Path) -> Context:
+    def load(cls, sweep: Path, options: Options | None = None) -> Context:
         jobs = load_jobs(sweep)
-        return cls(sweep, jobs, *aggregate(jobs))
+        return cls(sweep, jobs, *aggregate(jobs), options=options or Options())
 
     @property
     def warnings(self) -> list[str]:

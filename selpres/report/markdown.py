@@ -21,6 +21,11 @@ def ci(s: dict, nd: int = 4) -> str:
     return "n/a" if lo is None else f"[{fmt(lo, nd)}, {fmt(hi, nd)}]"
 
 
+def signed_interval(lo: float | None, hi: float | None, nd: int = 4) -> str:
+    """An interval of differences, signs always shown: whether it straddles 0 is read at a glance."""
+    return "[n/a]" if lo is None else f"[{lo:+.{nd}f}, {hi:+.{nd}f}]"
+
+
 def engine_text(r: dict, reason: int = 60) -> str:
     """The engine that ran; after a fallback also what was asked for, with the first ``reason`` characters
     of the fallback's reason (0: none). A time means little without the name of what produced it."""

@@ -12,6 +12,7 @@ from selpres.report.groups import BASELINE, REFERENCE
 from selpres.report.markdown import ci, table
 from selpres.report.paper import PAPER
 from selpres.report.sections.table1 import stat_of
+from selpres.report.sections.verdict import method_note
 
 BEGIN = "<!-- table1:begin -->"
 END = "<!-- table1:end -->"
@@ -111,6 +112,7 @@ def readme_block(report: Report, command: str) -> str:
         numbers_table(report),
         "What the report's statistics say:",
         "\n".join(findings(report)),
+        method_note(report.rows("verdict.csv"), report.ctx.options),
     ])
 
 
