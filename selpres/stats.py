@@ -1,17 +1,21 @@
-"""Seed statistics: mean, standard deviation and Student-t 95 % intervals, without scipy.
+"""Seed statistics without scipy: mean, standard deviation, Student-t intervals, paired t-tests, the
+equivalence test (TOST) and Holm's correction for a family of tests.
 
 The t quantile is found by bisection on the exact Student-t CDF for whole degrees of freedom
-(closed-form finite series in θ = atan(t/√ν)), so intervals over a handful of seeds are honest.
+(closed-form finite series in θ = atan(t/√ν)), so intervals and p-values over a handful of seeds are
+honest.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from typing import Iterable, Sequence
 
 
 def t_cdf(t: float, df: int) -> float:
     """Exact CDF of Student's t with whole df (Abramowitz & Stegun 26.7.3/26.7.4)."""
+    if math.isinf(t):
+        return 1.0 if t > 0 else 0.0
     theta = math.atan(t / math.sqrt(df))
     s, c = math.sin(theta), math.cos(theta)
     if df % 2 == 1:
@@ -58,3 +62,66 @@ def summarize(values: Iterable[float | None]) -> dict:
         half = t_quantile(0.975, n - 1) * std / math.sqrt(n)
         out.update(std=std, ci95=[mean - half, mean + half])
     return out
+
+
+def _mean_se(values: Iterable[float | None]) -> tuple[int, float | None, float | None]:
+    """(n, mean, standard error of the mean) over the finite values, via :func:`summarize`."""
+    st = summarize(values)
+    se = st["std"] / math.sqrt(st["n"]) if st["std"] is not None else None
+    return st["n"], st["mean"], se
+
+
+def _upper_tail(diff: float, se: float, df: int) -> float:
+    """P(T ≥ diff / se) for T ~ t(df); a zero standard error (all values equal) makes the test exact."""
+    if se == 0:
+        return 0.0 if diff > 0 else (1.0 if diff < 0 else 0.5)
+    return t_cdf(-diff / se, df)
+
+
+def t_test(values: Iterable[float | None], mu: float = 0.0) -> dict:
+    """Two-sided one-sample t-test of mean = ``mu`` (on paired differences: the paired t-test).
+    {"n", "mean", "t", "p"}; t and p are None below two values."""
+    n, mean, se = _mean_se(values)
+    if se is None:
+        return {"n": n, "mean": mean, "t": None, "p": None}
+    diff = mean - mu
+    t = diff / se if se > 0 else (math.copysign(math.inf, diff) if diff else 0.0)
+    p = 1.0 if diff == 0 else min(1.0, 2 * _upper_tail(abs(diff), se, n - 1))
+    return {"n": n, "mean": mean, "t": t, "p": p}
+
+
+def tost(values: Iterable[float | None], margin: float, alpha: float = 0.05) -> dict:
+    """Two one-sided tests (Schuirmann 1987) of equivalence within ±``margin``: H0 mean ≤ −margin and H0
+    mean ≥ +margin, each at level ``alpha``. {"n", "mean", "p_lower", "p_upper", "p" (the larger),
+    "ci" (the 1 − 2α interval: inside ±margin exactly when p < alpha), "equivalent"}."""
+    if not margin > 0:
+        raise ValueError(f"tost needs a margin > 0, got {margin!r}")
+    if not 0 < alpha < 0.5:
+        raise ValueError(f"tost needs 0 < alpha < 0.5, got {alpha!r}")
+    n, mean, se = _mean_se(values)
+    out = {"n": n, "mean": mean, "p_lower": None, "p_upper": None, "p": None, "ci": [None, None],
+           "equivalent": None}
+    if se is None:
+        return out
+    p_lower = _upper_tail(mean + margin, se, n - 1)  # evidence against mean ≤ −margin
+    p_upper = _upper_tail(margin - mean, se, n - 1)  # evidence against mean ≥ +margin
+    half = t_quantile(1 - alpha, n - 1) * se
+    p = max(p_lower, p_upper)
+    out.update(p_lower=p_lower, p_upper=p_upper, p=p, ci=[mean - half, mean + half], equivalent=p < alpha)
+    return out
+
+
+def holm(pvalues: Sequence[float]) -> list[float]:
+    """Holm's (1979) step-down adjusted p-values, in the input order: the i-th smallest p is multiplied by
+    k − i + 1 (i from 1), made non-decreasing along that order and capped at 1. Rejecting where the
+    adjusted p < α controls the family-wise error rate at α for any dependence between the tests."""
+    k = len(pvalues)
+    for i, p in enumerate(pvalues):
+        if p is None or not 0 <= p <= 1:
+            raise ValueError(f"holm needs p-values in [0, 1], got {p!r} at position {i}")
+    adjusted = [0.0] * k
+    running = 0.0
+    for rank, i in enumerate(sorted(range(k), key=lambda j: pvalues[j])):
+        running = max(running, min(1.0, (k - rank) * pvalues[i]))
+        adjusted[i] = running
+    return adjusted

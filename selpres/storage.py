@@ -37,6 +37,16 @@ def write_json(path: Path, obj: Any) -> None:
     atomic_write(path, lambda f: f.write(json.dumps(obj, indent=1, default=str).encode()))
 
 
+def flatten(d: dict, sep: str = ".", prefix: str = "") -> dict[str, Any]:
+    """Nested dicts to one level, keys joined by ``sep`` (``{"a": {"b": 1}}`` -> ``{"a.b": 1}``): how a
+    config becomes comparable key by key (the report's method labels) or a flat list (TensorBoard hparams)."""
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        out.update(flatten(v, sep, key + sep) if isinstance(v, dict) else {key: v})
+    return out
+
+
 def stable_hash(obj: Any) -> str:
     """First 16 hex digits of the sha256 of a canonical JSON: the identity of a config or of data."""
     text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)

@@ -11,17 +11,9 @@ import math
 import shutil
 from pathlib import Path
 
+from selpres.storage import flatten
+
 METRICS = ("train_mse", "test10_rms_nm", "heldout_rms_nm")
-
-
-def _flat(d: dict, prefix: str = "") -> dict:
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}/"))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
 
 
 class Tracker:
@@ -68,7 +60,9 @@ class Tracker:
     def close(self, hparams: dict, metrics: dict) -> None:
         if self.writer is None:
             return
-        hp = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in _flat(hparams).items()}
-        mt = {k: v for k, v in _flat(metrics).items() if isinstance(v, (int, float)) and math.isfinite(v)}
+        hp = {k: (v if isinstance(v, (int, float, str, bool)) else str(v))
+              for k, v in flatten(hparams, "/").items()}
+        mt = {k: v for k, v in flatten(metrics, "/").items()
+              if isinstance(v, (int, float)) and math.isfinite(v)}
         self.writer.add_hparams(hp, mt, run_name=".")
         self.writer.close()

@@ -1,4 +1,5 @@
-"""selpres.report on synthetic sweeps with known numbers: paired verdicts, time-to-target, runs, files, CLI."""
+"""selpres.report on synthetic sweeps with known numbers: paired verdicts, time-to-target, runs, files,
+CLI."""
 
 from __future__ import annotations
 
@@ -9,7 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from selpres import report as R
+from selpres.report import aggregate, load_jobs
+from selpres.report.__main__ import main
+from selpres.report.compare import Margin, Options, reading, time_to_target_rows, verdict_rows
+from selpres.report.jobs import job_folders
+from selpres.report.paper import paper_setting
+from selpres.report.sections.table1 import table1_rows
 from selpres.stats import t_quantile
 
 SCHED = {
@@ -45,10 +51,12 @@ def results(schedule, topology, heldout, test10=None, curves=None, diverged=(), 
         "status": "diverged" if n_div == len(seeds) else "complete", "diverged_replicas": n_div,
         "config_hash": "x", "schedule": {
             "name": schedule, "order": "stratified", "p": len(sizes) - 1, "sizes": sizes, "epochs": epochs,
-            "extra_presentations": extra * len(sizes), "presentations_per_stage": [n * e for n, e in zip(sizes, epochs)],
+            "extra_presentations": extra * len(sizes),
+            "presentations_per_stage": [n * e for n, e in zip(sizes, epochs)],
             "presentations": pres, "conventional_presentations": 1002 * sum(epochs),
             "cost_ratio": pres / (1002 * sum(epochs))},
-        "topology": topology, "engine": "fast", "replicas": len(seeds), "seeds": seeds, "presentations_done": pres,
+        "topology": topology, "engine": "fast", "replicas": len(seeds), "seeds": seeds,
+        "presentations_done": pres,
         "wall_seconds": {"total": 3.0, "train": 2.0, "loop": 2.5}, "seconds_per_presentation": 1e-6,
         "summary": {}, "replica_results": reps, "curves": recs, "config": {},
     }
@@ -57,7 +65,8 @@ def results(schedule, topology, heldout, test10=None, curves=None, diverged=(), 
 def write_job(sweep: Path, schedule: str, topology: str, res: dict | None) -> Path:
     d = sweep / f"schedule={schedule},topology={topology}"
     (d / ".hydra").mkdir(parents=True)
-    (d / ".hydra" / "config.yaml").write_text(f"schedule:\n  name: {schedule}\ntopology:\n  layers: {topology}\n")
+    hydra_cfg = f"schedule:\n  name: {schedule}\ntopology:\n  layers: {topology}\n"
+    (d / ".hydra" / "config.yaml").write_text(hydra_cfg)
     if res is not None:
         (d / "results.json").write_text(json.dumps(res))
     return d
@@ -81,9 +90,9 @@ def sweep(tmp_path):
 
 
 def test_paired_difference_and_interval_by_hand(sweep):
-    groups, tops, methods = R.aggregate(R.load_jobs(sweep))
+    groups, tops, methods = aggregate(load_jobs(sweep))
     assert tops == ["6-4-2", "6-8-2"] and methods == ["conventional", "selective", "matched", "random_growth"]
-    rows = {(r["topology"], r["comparison"]): r for r in R.verdict_rows(groups, tops, methods)}
+    rows = {(r["topology"], r["comparison"]): r for r in verdict_rows(groups, tops, methods)}
     v = rows[("6-4-2", "selective vs conventional")]
     d = [a - b for a, b in zip(SEL, CON)]
     mean = sum(d) / 5
@@ -96,30 +105,109 @@ def test_paired_difference_and_interval_by_hand(sweep):
     assert v["heldout_ci_hi"] == pytest.approx(mean + half, abs=1e-9)
     assert v["heldout_ci_hi"] < 0
     pct = 0.044 / (sum(CON) / 5) * 100
-    assert v["reading_heldout"] == f"selective better by 0.0440 Nm ({pct:.1f} %)"
+    assert v["reading_heldout"] == (f"selective better by 0.0440 Nm ({pct:.1f} %; 95 % interval "
+                                    f"[{mean - half:+.4f}, {mean + half:+.4f}])")
     assert v["cost_ratio"] == pytest.approx(70560 / 150300)
-    # CI containing 0
-    assert rows[("6-4-2", "selective vs random_growth")]["reading_heldout"] == "no detectable difference"
+    # CI containing 0 (d = −0.01 +0.01 −0.01 +0.01 −0.01: mean −0.002, sd √(480e-6 / 4)), and the 90 % TOST
+    # interval −0.002 ± t(0.95, 4)·sd/√5 = −0.002 ± 2.131847·0.0048990 pokes out of ±5 % of selective's mean
+    rg = rows[("6-4-2", "selective vs random_growth")]
+    se = math.sqrt(480e-6 / 4) / math.sqrt(5)
+    assert rg["heldout_margin"] == pytest.approx(0.05 * sum(SEL) / 5)  # 0.0055 Nm
+    assert [rg["heldout_ci90_lo"], rg["heldout_ci90_hi"]] == pytest.approx(
+        [-0.002 - 2.131847 * se, -0.002 + 2.131847 * se], abs=1e-6)
+    assert rg["reading_heldout"] == ("no detectable difference (95 % interval "
+                                     f"[{rg['heldout_ci_lo']:+.4f}, {rg['heldout_ci_hi']:+.4f}]); "
+                                     "not shown equivalent within ±0.0055 Nm")
     # failed other side
     assert rows[("6-4-2", "selective vs matched")]["reading_heldout"] == "no results for matched"
 
 
-def test_reading_wording():
-    assert R.reading({"n": 5, "mean": 0.01, "ci95": [-0.001, 0.02]}, 0.1) == "no detectable difference"
-    assert R.reading({"n": 5, "mean": 0.02, "ci95": [0.01, 0.03]}, 0.1) == "selective worse by 0.0200 Nm (20.0 %)"
-    assert R.reading({"n": 1, "mean": 0.02, "ci95": [None, None]}, 0.1).startswith("too few pairs (1)")
+def test_reading_wording_three_readings_never_merged():
+    base = {"n": 30, "other_mean": 0.1, "margin": 0.004, "ci90": [-0.0013, 0.0018]}
+    worse = {**base, "mean": 0.02, "ci95": [0.01, 0.03], "p": 0.001, "p_tost": 0.9}
+    assert reading(worse) == "selective worse by 0.0200 Nm (20.0 %; 95 % interval [+0.0100, +0.0300])"
+    same = {**base, "mean": 0.0003, "ci95": [-0.0016, 0.0021], "p": 0.76, "p_tost": 0.01}
+    assert reading(same) == "equivalent within ±0.0040 Nm (90 % interval [-0.0013, +0.0018])"
+    unsure = {**base, "mean": -0.0014, "ci95": [-0.0039, 0.0010], "p": 0.24, "p_tost": 0.42}
+    assert reading(unsure) == ("no detectable difference (95 % interval [-0.0039, +0.0010]); "
+                               "not shown equivalent within ±0.0040 Nm")
+    small = {**base, "mean": -0.001, "ci95": [-0.0018, -0.0002], "p": 0.02, "p_tost": 0.001}
+    assert reading(small, name="x") == ("x better by 0.0010 Nm (1.0 %; 95 % interval [-0.0018, -0.0002]); "
+                                        "yet within the margin: equivalent within ±0.0040 Nm")
+    # after Holm's correction an interval that excludes 0 no longer reads as a difference, and says why
+    held = {**base, "mean": 0.0014, "ci95": [0.0002, 0.0025], "p": 0.074, "p_tost": 0.8, "holm": True}
+    assert reading(held) == ("no detectable difference after Holm's correction (95 % interval "
+                             "[+0.0002, +0.0025]; Holm p = 0.074); not shown equivalent within ±0.0040 Nm")
+    assert reading({"n": 1, "mean": 0.02, "ci95": [None, None], "p": None}).startswith("too few pairs (1)")
+
+
+# three seeds (df = 2, where the t CDF is 1/2 + t / (2√(t² + 2))): selective − other = 0, 0.1, 0.2
+SEL3, OTHER3 = [2.0, 2.0, 2.0], [2.0, 1.9, 1.8]
+
+
+def test_equivalence_and_t_test_end_to_end_by_hand(tmp_path):
+    s = tmp_path / "sw"
+    write_job(s, "selective", "6-4-2", results("selective", "6-4-2", SEL3))
+    write_job(s, "matched", "6-4-2", results("matched", "6-4-2", OTHER3))
+    groups, tops, methods = aggregate(load_jobs(s))
+    (v,) = verdict_rows(groups, tops, methods)  # default margin: 5 % of selective's mean 2.0 = 0.1
+    assert v["heldout_margin"] == pytest.approx(0.1)
+    assert v["heldout_p"] == pytest.approx(1 - math.sqrt(3 / 5), abs=1e-9)  # t = √3
+    assert v["heldout_tost_p"] == pytest.approx(0.5, abs=1e-9)  # the mean sits on the margin: t_upper = 0
+    assert v["heldout_family_size"] == 1
+    assert v["reading_heldout"].startswith("no detectable difference (95 % interval")
+    (v,) = verdict_rows(groups, tops, methods, Options(margin=Margin(0.3, relative=False)))
+    # p_upper = F(−2√3) = 1/2 − √(3/14) = 0.0370900 > p_lower = 1/2 − √(12/50): equivalent within ±0.3
+    assert v["heldout_tost_p"] == pytest.approx(0.5 - math.sqrt(3 / 14), abs=1e-9)
+    assert v["reading_heldout"] == "equivalent within ±0.3000 Nm (90 % interval [-0.0686, +0.2686])"
+
+
+def test_holm_adjusts_within_the_family_of_one_metric(sweep):
+    groups, tops, methods = aggregate(load_jobs(sweep))
+    plain = {r["comparison"]: r for r in verdict_rows(groups, tops, methods) if r["topology"] == "6-4-2"}
+    rows = {r["comparison"]: r for r in verdict_rows(groups, tops, methods, Options(holm=True))
+            if r["topology"] == "6-4-2"}
+    con, rg = (plain[f"selective vs {m}"]["heldout_p"] for m in ("conventional", "random_growth"))
+    assert con < rg  # by hand: k = 2 tested pairs (matched failed, 6-8-2 has no conventional)
+    assert rows["selective vs conventional"]["heldout_family_size"] == 2
+    assert rows["selective vs conventional"]["heldout_p_holm"] == pytest.approx(min(1, 2 * con))
+    assert rows["selective vs random_growth"]["heldout_p_holm"] == pytest.approx(max(min(1, 2 * con), rg))
+    assert rows["selective vs conventional"]["heldout_p"] == pytest.approx(con)  # the raw p is kept
+    assert "Holm p = " in rows["selective vs conventional"]["reading_heldout"]
+    assert "heldout_p_holm" not in plain["selective vs conventional"]
+
+
+def test_cli_margin_and_holm(sweep, tmp_path, capsys):
+    out = tmp_path / "rep"
+    assert main([str(sweep), "--out", str(out)]) == 0
+    md = capsys.readouterr().out
+    assert "Margin m = 5 % of selective's mean final RMS over the paired seeds" in md
+    assert "Comparisons per family (one metric across this table): 2 held-out, 2 test-10" in md
+    assert "not adjusted for multiplicity" in md
+    assert main([str(sweep), "--out", str(out), "--margin", "0.01", "--holm"]) == 0
+    md = capsys.readouterr().out
+    assert "Margin m = 0.01 Nm (fixed with --margin)" in md and "Holm-adjusted within each family" in md
+    verdict = {r["comparison"]: r for r in csv.DictReader((out / "verdict.csv").open())
+               if r["topology"] == "6-4-2"}
+    assert float(verdict["selective vs random_growth"]["heldout_margin"]) == 0.01
+    assert verdict["selective vs random_growth"]["heldout_p_holm"] != ""
+    for bad in ("abc", "0", "-1%", "150%"):
+        assert main([str(sweep), "--out", str(tmp_path / "bad"), f"--margin={bad}"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: --margin=") and repr(bad) in err and "5%" in err
+    assert not (tmp_path / "bad").exists()
 
 
 def test_pairs_only_seeds_complete_in_both(tmp_path):
     s = tmp_path / "sw"
     write_job(s, "selective", "6-4-2", results("selective", "6-4-2", SEL, diverged=(0, 3)))
     write_job(s, "conventional", "6-4-2", results("conventional", "6-4-2", CON[:4] + [0.2], diverged=(4,)))
-    groups, tops, methods = R.aggregate(R.load_jobs(s))
-    (v,) = R.verdict_rows(groups, tops, methods)
+    groups, tops, methods = aggregate(load_jobs(s))
+    (v,) = verdict_rows(groups, tops, methods)
     d = [SEL[i] - CON[i] for i in (1, 2)]
     assert v["heldout_pairs"] == 2
     assert v["heldout_diff_mean"] == pytest.approx(sum(d) / 2)
-    t1 = {r["method"]: r for r in R.table1_rows(groups, tops, methods)}
+    t1 = {r["method"]: r for r in table1_rows(groups, tops, methods)}
     assert t1["selective"]["replicas"] == "3/5 (2 diverged)"
     assert t1["selective"]["heldout_nm_n"] == 3
     assert t1["selective"]["heldout_nm_mean"] == pytest.approx((SEL[1] + SEL[2] + SEL[4]) / 3)
@@ -134,28 +222,32 @@ def test_time_to_target_on_known_curve(tmp_path):
     write_job(s, "conventional", "6-4-2", results("conventional", "6-4-2", [0.1, 0.12], curves=con_curve))
     write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.1, 0.11], curves=sel_curve))
     write_job(s, "random_growth", "6-4-2", results("random_growth", "6-4-2", [0.2, 0.2], curves=rg_curve))
-    groups, tops, methods = R.aggregate(R.load_jobs(s))
-    all_rows = R.time_to_target_rows(groups, tops, methods)
+    groups, tops, methods = aggregate(load_jobs(s))
+    all_rows = time_to_target_rows(groups, tops, methods)
     rows = {r["method"]: r for r in all_rows if r["target_method"] == "conventional"}
     assert rows["conventional"]["target_heldout_curve_rms_nm"] == pytest.approx(0.11)
     assert rows["conventional"]["presentations_to_target"] == 150300
     sel = rows["selective"]
-    assert (sel["reached"], sel["presentations_to_target"], sel["previous_curve_point"]) == ("yes", 70560, 40560)
+    hit = (sel["reached"], sel["presentations_to_target"], sel["previous_curve_point"])
+    assert hit == ("yes", 70560, 40560)
     assert sel["fraction_of_conventional_cost"] == pytest.approx(70560 / 150300)
     assert rows["random_growth"]["reached"] == "not reached"
-    # second target: selective's final curve value (0.105), which conventional's curve (ending at 0.11) never reaches
+    # second target: selective's final curve value (0.105), which conventional's curve (ending at 0.11)
+    # never reaches
     vs_sel = {r["method"]: r for r in all_rows if r["target_method"] == "selective"}
     assert vs_sel["conventional"]["target_heldout_curve_rms_nm"] == pytest.approx(0.105)
     assert vs_sel["conventional"]["reached"] == "not reached"
-    assert (vs_sel["selective"]["presentations_to_target"], vs_sel["selective"]["previous_curve_point"]) == (70560, 40560)
+    own = vs_sel["selective"]
+    assert (own["presentations_to_target"], own["previous_curve_point"]) == (70560, 40560)
     assert vs_sel["random_growth"]["reached"] == "not reached"
 
 
 def test_runs_lists_failed_missing_diverged_and_files_written(sweep, tmp_path, capsys):
     out = tmp_path / "rep"
-    assert R.main([str(sweep), "--out", str(out)]) == 0
+    assert main([str(sweep), "--out", str(out)]) == 0
     md = capsys.readouterr().out
-    for f in ("report.md", "table1.csv", "verdict.csv", "time_to_target.csv", "runs.csv", "curves.png", "cost.png"):
+    for f in ("report.md", "table1.csv", "verdict.csv", "time_to_target.csv", "runs.csv", "curves.png",
+              "cost.png"):
         assert (out / f).stat().st_size > 0, f
     assert (out / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert md == (out / "report.md").read_text()
@@ -175,17 +267,17 @@ def test_runs_lists_failed_missing_diverged_and_files_written(sweep, tmp_path, c
 
 
 def test_default_out_dir(sweep, capsys):
-    assert R.main([str(sweep)]) == 0
+    assert main([str(sweep)]) == 0
     assert (sweep / "report" / "report.md").exists()
-    assert sweep / "report" not in R._job_folders(sweep)  # a second report does not take it for a job
+    assert sweep / "report" not in job_folders(sweep)  # a second report does not take it for a job
 
 
 def test_cli_missing_or_empty_dir_exits_2(tmp_path, capsys):
-    assert R.main([str(tmp_path / "nope")]) == 2
+    assert main([str(tmp_path / "nope")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error:") and err.count("\n") == 1 and "Traceback" not in err
     (tmp_path / "empty").mkdir()
-    assert R.main([str(tmp_path / "empty")]) == 2
+    assert main([str(tmp_path / "empty")]) == 2
     assert "no job folders" in capsys.readouterr().err
 
 
@@ -204,16 +296,18 @@ def test_jobs_of_one_schedule_name_that_differ_become_separate_methods(tmp_path)
     for topology in ("6-4-2", "6-8-2"):
         for sizes in ([50, 1002], [100, 1002]):
             res = results("selective", topology, [0.1, 0.2])
-            res["config"] = {"schedule": {"name": "selective", "sizes": sizes}, "topology": {"layers": topology},
+            res["config"] = {"schedule": {"name": "selective", "sizes": sizes},
+                             "topology": {"layers": topology},
                              "optim": {"lr": 0.15}, "seed": 0, "replicas": 2}
             d = write_job(s, "selective", topology, res)
             d.rename(d.with_name(d.name + f",sizes={sizes[0]}"))
-    groups, tops, methods = R.aggregate(R.load_jobs(s))
+    groups, tops, methods = aggregate(load_jobs(s))
     assert methods == ["selective schedule.sizes=[100,1002]", "selective schedule.sizes=[50,1002]"]
     assert tops == ["6-4-2", "6-8-2"]  # topology alone never splits a method
     assert all(len(g.by_seed) == 2 for g in groups.values())  # nothing pooled across the two size lists
-    rows = R.verdict_rows(groups, tops, methods)  # only selective variants: each compared with the first
-    assert {r["comparison"] for r in rows} == {"selective schedule.sizes=[50,1002] vs selective schedule.sizes=[100,1002]"}
+    rows = verdict_rows(groups, tops, methods)  # only selective variants: each compared with the first
+    expected = "selective schedule.sizes=[50,1002] vs selective schedule.sizes=[100,1002]"
+    assert {r["comparison"] for r in rows} == {expected}
 
 
 def test_jobs_pool_by_seed_union(tmp_path):
@@ -223,11 +317,148 @@ def test_jobs_pool_by_seed_union(tmp_path):
     d.rename(d.with_name("a_" + d.name))
     d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.1, 0.2, 0.3, 0.4]))
     d.rename(d.with_name("b_" + d.name))
-    groups, _, _ = R.aggregate(R.load_jobs(s))
+    groups, _, _ = aggregate(load_jobs(s))
     g = groups[("6-4-2", "selective")]
     assert sorted(g.values("heldout").items()) == [(0, 0.1), (1, 0.2), (2, 0.3), (3, 0.4)]
     assert g.warnings == []
-    d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.9]))  # seed 0 again, other numbers
+    d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.9]))  # seed 0, other numbers
     d.rename(d.with_name("c_" + d.name))
-    g = R.aggregate(R.load_jobs(s))[0][("6-4-2", "selective")]
+    g = aggregate(load_jobs(s))[0][("6-4-2", "selective")]
     assert g.values("heldout")[0] == 0.1 and any("seed 0 disagrees" in w for w in g.warnings)
+
+
+def test_flatten_joins_nested_keys_and_keeps_leaves():
+    """The one flattening helper serves the report's method labels (".") and TensorBoard hparams ("/")."""
+    from selpres.storage import flatten
+
+    cfg = {"schedule": {"sizes": [50, 1002], "budget": None}, "optim": {"lr": 0.15, "inner": {"x": 1}},
+           "seed": 0, "empty": {}}
+    assert flatten(cfg) == {"schedule.sizes": [50, 1002], "schedule.budget": None, "optim.lr": 0.15,
+                            "optim.inner.x": 1, "seed": 0}
+    assert flatten(cfg, "/")["optim/inner/x"] == 1
+
+
+def test_paper_setting_names_what_matched_and_random_growth_borrow(sweep):
+    """Matched and random growth are not in the paper: the row says whose setting they borrow, never "yes"."""
+    s = sweep.parent / "sw2"
+    write_job(s, "matched", "6-4-2", results("matched", "6-4-2", CON))
+    groups, tops, methods = aggregate(load_jobs(sweep) + load_jobs(s))
+    t1 = {(r["method"], r["topology"]): r for r in table1_rows(groups, tops, methods)}
+    assert t1[("conventional", "6-4-2")]["paper_setting"] == "yes"
+    assert t1[("selective", "6-4-2")]["paper_setting"] == "yes"
+    rg_setting = t1[("random_growth", "6-4-2")]["paper_setting"]
+    assert rg_setting == "not in paper (selective's stages, random order)"
+    assert t1[("matched", "6-4-2")]["paper_setting"] == "not in paper (selective's budget)"
+    other = results("matched", "6-4-2", CON)
+    other["schedule"]["presentations"] = 50_000
+    assert paper_setting("matched", other["schedule"]) == "not in paper (budget 50,000t, not selective's)"
+    rg = results("random_growth", "6-4-2", RG)["schedule"]
+    rg["sizes"] = [100, 1002]
+    assert paper_setting("random_growth", rg) == "not in paper (random order, other stages than selective's)"
+
+
+def test_timing_names_the_engine_that_ran_and_the_fallback(tmp_path, capsys):
+    """A run that asked for "fast" and fell back to torch is timed as torch, with the reason; results
+    written before the fallback was recorded carry only "engine", which then stands for both."""
+    s = tmp_path / "sw"
+    fell = results("selective", "6-4-2", SEL)
+    fell.update(engine="torch", engine_requested="fast", engine_fallback="no AVX2 on this CPU")
+    write_job(s, "selective", "6-4-2", fell)
+    native = results("conventional", "6-4-2", CON)
+    native.update(engine="native", engine_requested="fast", engine_fallback=None)
+    write_job(s, "conventional", "6-4-2", native)
+    write_job(s, "conventional", "6-8-2", results("conventional", "6-8-2", CON))  # old format: "fast" only
+    out = tmp_path / "rep"
+    assert main([str(s), "--out", str(out)]) == 0
+    md = capsys.readouterr().out
+    runs = {(r["schedule"], r["topology"]): [r[k] for k in ("engine", "engine_requested", "engine_fallback")]
+            for r in csv.DictReader((out / "runs.csv").open())}
+    assert runs[("selective", "6-4-2")] == ["torch", "fast", "no AVX2 on this CPU"]
+    assert runs[("conventional", "6-4-2")] == ["native", "fast", ""]
+    assert runs[("conventional", "6-8-2")] == ["fast", "fast", ""]
+    t1 = {(r["method"], r["topology"]): r for r in csv.DictReader((out / "table1.csv").open())}
+    assert t1[("selective", "6-4-2")]["engine"] == "torch"
+    assert t1[("selective", "6-4-2")]["engine_fallback"] == "no AVX2 on this CPU"
+    (wall,) = [line for line in md.splitlines() if line.startswith("| wall s per replica-run")]
+    assert "engine that ran" in wall
+    cells = wall.split(" | ")
+    assert cells[1].endswith(" native") and cells[2].endswith(" fast")  # conventional 6-4-2, 6-8-2
+    assert cells[3].endswith(" torch (fast requested: no AVX2 on this CPU)")  # selective 6-4-2
+    assert "engine fallback: no AVX2 on this CPU" in md  # the runs table's notes
+
+
+README_TEXT = """# A project
+
+Some text the generator must keep.
+
+<!-- table1:begin -->
+stale numbers: 0.9999
+<!-- table1:end -->
+
+## Tour
+kept too
+"""
+
+
+def test_readme_block_is_generated_from_the_report(sweep, tmp_path, capsys):
+    readme = tmp_path / "README.md"
+    readme.write_text(README_TEXT)
+    out = tmp_path / "rep"
+    assert main([str(sweep), "--out", str(out), "--readme", str(readme)]) == 0
+    text = readme.read_text()
+    before, rest = text.split("<!-- table1:begin -->\n")
+    block, after = rest.split("<!-- table1:end -->")
+    assert before == README_TEXT.split("<!-- table1:begin -->")[0]  # outside the markers: untouched
+    assert after == README_TEXT.split("<!-- table1:end -->")[1]
+    assert "0.9999" not in block
+    # the numbers table: mean [95 % interval] of the final held-out RMS, as in the report's table1.csv
+    t1 = {(r["method"], r["topology"]): r for r in csv.DictReader((out / "table1.csv").open())}
+    sel = t1[("selective", "6-4-2")]
+    assert float(sel["heldout_nm_mean"]) == pytest.approx(sum(SEL) / 5)
+    cell = (f"{float(sel['heldout_nm_mean']):.4f} [{float(sel['heldout_nm_ci_lo']):.4f}, "
+            f"{float(sel['heldout_nm_ci_hi']):.4f}]")
+    (row,) = [line for line in block.splitlines() if line.startswith("| 6-4-2 |")]
+    assert cell in row and "0.0554 / 0.0581" in row  # ours, and the paper's conv. / sel.
+    assert "| topology | conventional, 150,300 t | selective, 70,560 t |" in block
+    assert "seeds 0–4" in block
+    # the findings are the verdicts' own readings
+    verdict = {(r["topology"], r["comparison"]): r for r in csv.DictReader((out / "verdict.csv").open())}
+    reading_con = verdict[("6-4-2", "selective vs conventional")]["reading_heldout"]
+    assert reading_con.startswith("selective better by 0.0440 Nm")
+    assert f"6-4-2: {reading_con}" in block
+    assert "ratio 0.469" in block
+    # a second run with the same results leaves the file exactly as it is
+    capsys.readouterr()
+    assert main([str(sweep), "--out", str(out), "--readme", str(readme)]) == 0
+    assert readme.read_text() == text
+    assert "already up to date" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("content", [
+    "# no markers at all\n",
+    "<!-- table1:begin -->\nonly the first marker\n",
+    "<!-- table1:end -->\nreversed\n<!-- table1:begin -->\n",
+    "<!-- table1:begin -->\n<!-- table1:end -->\n<!-- table1:begin -->\n<!-- table1:end -->\n",
+])
+def test_readme_without_one_marker_pair_is_refused_untouched(sweep, tmp_path, capsys, content):
+    readme = tmp_path / "README.md"
+    readme.write_bytes(content.encode())
+    out = tmp_path / "rep"
+    assert main([str(sweep), "--out", str(out), "--readme", str(readme)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and str(readme) in err and "<!-- table1:begin -->" in err
+    assert "Traceback" not in err
+    assert readme.read_bytes() == content.encode()
+    assert not out.exists()  # refused before anything was written
+    assert main([str(sweep), "--out", str(out), "--readme", str(tmp_path / "nope.md")]) == 2
+    assert "no such file" in capsys.readouterr().err
+
+
+def test_engine_text_keeps_the_first_line_of_a_compiler_message():
+    from selpres.report.markdown import engine_text
+
+    msg = "cc: error: unrecognized option '-mavx2' " + "x" * 80 + "\nsecond line"
+    r = {"engine": "torch", "engine_requested": "fast", "engine_fallback": msg}
+    assert engine_text(r, 20) == "torch (fast requested: cc: error: unrecogni…)"
+    assert engine_text(r, 0) == "torch (fast requested)"
+    assert engine_text({"engine": "native", "engine_requested": "fast", "engine_fallback": None}) == "native"

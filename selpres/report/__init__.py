@@ -1,0 +1,30 @@
+"""Table 1 of the paper from a sweep's ``results.json`` files: tables, verdicts, time-to-target, plots.
+
+    python -m selpres.report outputs/sweeps/table1 [--out DIR]     (default DIR = <sweep>/report)
+    python -m selpres.report outputs/sweeps/table1 --readme README.md   (also its Table 1 block)
+    python -m selpres.report outputs/sweeps/table1 --margin 5% --holm   (equivalence margin, Holm)
+
+The package reads in the data's direction, one concern per module:
+
+- ``jobs``      every job folder under the sweep (finished, diverged, failed or missing);
+- ``groups``    method labels, and the replicas of each (topology, method) pooled by seed;
+- ``paper``     the paper's Table 1 numbers, and whether a schedule is the paper's;
+- ``compare``   paired differences by seed and their readings, mean curves, time to target;
+- ``markdown``  number formats, Markdown tables and CSV text;
+- ``sections/`` one module per section of the report, each ``section(ctx) -> Section`` (Markdown, CSV
+  rows, figures): a new section is a new module added to ``build.SECTIONS``;
+- ``build``     the report: its sections in order, written to the output folder;
+- ``readme``    the README's Table 1 block (between ``<!-- table1:begin/end -->``), from the report;
+- ``__main__``  the command line.
+
+Conventions: diverged replicas are left out of every mean and interval but counted; comparisons with
+``selective`` are paired by seed (only seeds complete in both); intervals are Student-t 95 % intervals
+from :mod:`selpres.stats`; a verdict reads *better/worse*, *equivalent within ±m* (TOST) or *no
+detectable difference*, three different things.
+"""
+
+from selpres.report.build import write_report
+from selpres.report.groups import aggregate
+from selpres.report.jobs import load_jobs
+
+__all__ = ["aggregate", "load_jobs", "write_report"]

@@ -1,0 +1,68 @@
+"""``python -m selpres.report DIR [--out DIR] [--margin 5%] [--holm] [--readme README.md]``: the Table 1
+report of a sweep (also the ``selpres-report`` command)."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from selpres.report import __doc__ as package_doc
+from selpres.errors import ConfigError
+from selpres.report.build import Report
+from selpres.report.compare import Margin, Options
+from selpres.report.jobs import job_folders
+from selpres.report.readme import BEGIN, END, ReadmeError, read_readme, update_readme
+
+
+def _error(msg: str) -> int:
+    print(f"error: {msg}", file=sys.stderr)
+    return 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m selpres.report", description=package_doc.split("\n\n")[0])
+    ap.add_argument("dir", type=Path, help="sweep directory, e.g. outputs/sweeps/table1")
+    ap.add_argument("--out", type=Path, default=None, help="output folder (default: DIR/report)")
+    ap.add_argument("--readme", type=Path, default=None, metavar="FILE",
+                    help=f"also rewrite the block between {BEGIN} and {END} in FILE with the Table 1 section "
+                         "generated from this report (nothing is written if the markers are missing)")
+    ap.add_argument("--margin", default="5%",
+                    help="equivalence margin m of the verdicts: a percentage of selective's mean final RMS "
+                         "over the paired seeds (default 5%%) or a value in Nm (e.g. 0.002)")
+    ap.add_argument("--holm", action="store_true",
+                    help="Holm-adjust the paired tests' p-values within each family (one metric across the "
+                         "verdict table)")
+    a = ap.parse_args(argv)
+    try:
+        options = Options(margin=Margin.parse(a.margin), holm=a.holm)
+    except ConfigError as e:
+        return _error(str(e))
+    if not a.dir.is_dir():
+        return _error(f"{a.dir} is not a directory (expected a sweep folder such as outputs/sweeps/table1)")
+    if not job_folders(a.dir):
+        return _error(f"no job folders (results.json or .hydra/) under {a.dir}")
+    if a.readme is not None:
+        try:
+            read_readme(a.readme)  # refuse before writing anything
+        except ReadmeError as e:
+            return _error(str(e))
+    out = a.out if a.out is not None else a.dir / "report"
+    report = Report.build(a.dir, options)
+    files = report.write(out)
+    print(report.markdown, end="")
+    print(f"report written to {out}/ ({', '.join(files)})", file=sys.stderr)
+    if a.readme is not None:
+        flags = [f"--margin {shlex.quote(a.margin)}"] if a.margin != "5%" else []
+        flags += ["--holm"] if a.holm else []
+        command = " ".join(["python -m selpres.report", shlex.quote(str(a.dir)), *flags, "--readme",
+                            shlex.quote(str(a.readme))])
+        changed = update_readme(a.readme, report, command)
+        state = "rewritten" if changed else "already up to date"
+        print(f"{a.readme}: Table 1 block {state}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,66 @@
+"""The report: its sections in order, rendered to one Markdown file plus the CSV and PNG files behind it.
+
+A new section (sensitivity, error–cost plane, selection verdicts, ...) is a module in ``sections/`` with
+``section(ctx) -> Section``, added to :data:`SECTIONS` where it should appear.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from selpres.report.compare import Options
+from selpres.report.context import Context, Section
+from selpres.report.markdown import to_csv
+from selpres.report.sections import plots, runs, table1, time_to_target, verdict
+from selpres.storage import atomic_write
+
+SECTIONS = [table1.section, verdict.section, time_to_target.section, plots.section, runs.section]
+
+
+def write_text(path: Path, text: str) -> None:
+    atomic_write(path, lambda f: f.write(text.encode()))
+
+
+@dataclass
+class Report:
+    """A sweep's sections, built once: rendered to report.md, and read again by the README generator."""
+
+    ctx: Context
+    sections: list[Section]
+
+    @classmethod
+    def build(cls, sweep: Path, options: Options | None = None) -> Report:
+        ctx = Context.load(sweep, options)
+        return cls(ctx, [make(ctx) for make in SECTIONS])
+
+    @property
+    def markdown(self) -> str:
+        return "\n\n".join([f"# Table 1 reproduction: `{self.ctx.sweep}`",
+                            *(s.markdown() for s in self.sections)]) + "\n"
+
+    def rows(self, csv_name: str) -> list[dict]:
+        """The rows behind one CSV file of the report (e.g. "verdict.csv")."""
+        return next(s.csv[csv_name] for s in self.sections if csv_name in s.csv)
+
+    def write(self, out: Path) -> list[str]:
+        """report.md, every section's CSV files and figures into ``out``; returns the names written."""
+        out.mkdir(parents=True, exist_ok=True)
+        files = ["report.md"]
+        for s in self.sections:
+            for name, rows in s.csv.items():
+                write_text(out / name, to_csv(rows))
+                files.append(name)
+        for s in self.sections:
+            for name, (_, draw) in s.figures.items():
+                draw(out / name)
+                files.append(name)
+        write_text(out / "report.md", self.markdown)
+        return files
+
+
+def write_report(sweep: Path, out: Path, options: Options | None = None) -> str:
+    """Build the report of ``sweep`` and write it into ``out``; returns its Markdown."""
+    report = Report.build(sweep, options)
+    report.write(out)
+    return report.markdown

@@ -1,0 +1,210 @@
+"""Comparisons and their statistics: paired differences by seed and their readings (the verdicts), mean
+curves over seeds, and the cost at which each method first reaches a target error (time to target).
+
+A verdict has three readings that are never merged: *better/worse by …* (the paired t-test rejects a
+zero difference), *equivalent within ±m* (two one-sided tests reject a difference of m or more) and *no
+detectable difference* (neither: an interval that contains 0 cannot rule out a real effect).
+
+Rows are plain dicts, one CSV row each; the sections render them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from selpres.errors import ConfigError
+from selpres.report.groups import BASELINE, REFERENCE, SETS, Group, base
+from selpres.report.markdown import signed_interval
+from selpres.stats import holm, summarize, t_test, tost
+
+ALPHA = 0.05  # every test's level: 95 % intervals for differences, 90 % intervals for TOST
+
+
+@dataclass(frozen=True)
+class Margin:
+    """The equivalence margin m: a fraction of the reference method's (selective's) mean final error over
+    the paired seeds, or a fixed value in Nm. An equivalence verdict means nothing without it, so the
+    report prints the margin used beside every verdict."""
+
+    value: float = 0.05
+    relative: bool = True
+
+    @classmethod
+    def parse(cls, text: str) -> Margin:
+        """"5%" (of the reference's mean) or "0.002" (Nm)."""
+        t = str(text).strip()
+        rel = t.endswith("%")
+        try:
+            v = float(t[:-1] if rel else t)
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and v > 0 and (v < 100 or not rel)):
+            raise ConfigError("--margin", text, f"a percentage of {REFERENCE}'s mean such as 5% "
+                              "(0 < p < 100) or a value in Nm such as 0.002 (> 0)")
+        return cls(v / 100, True) if rel else cls(v, False)
+
+    def of(self, ref_mean: float | None) -> float | None:
+        if not self.relative:
+            return self.value
+        return None if ref_mean is None else self.value * abs(ref_mean)
+
+    def describe(self) -> str:
+        if self.relative:
+            return (f"{self.value * 100:g} % of {REFERENCE}'s mean final RMS over the paired seeds (per row "
+                    "and metric)")
+        return f"{self.value:g} Nm (fixed with --margin)"
+
+
+@dataclass(frozen=True)
+class Options:
+    """How verdicts are read: the equivalence margin, and whether p-values are Holm-adjusted per family."""
+
+    margin: Margin = field(default_factory=Margin)
+    holm: bool = False
+
+
+def reading(v: dict, name: str = REFERENCE, unit: str = "Nm") -> str:
+    """Plain words for a paired difference name − other (negative = ``name`` has the lower error).
+
+    ``v``: n, mean, ci95 and other_mean of the differences; margin, p (paired t) and p_tost, already
+    Holm-adjusted when ``holm``; ci90 (the TOST interval)."""
+    if v["n"] < 2 or v.get("p") is None:
+        return f"too few pairs ({v['n']}) for an interval"
+    d, m, holm_ = v["mean"], v.get("margin"), v.get("holm", False)
+    equivalent = v.get("p_tost") is not None and v["p_tost"] < ALPHA
+    iv95 = signed_interval(*v["ci95"])
+    adj = f"; Holm p = {v['p']:.2g}" if holm_ else ""
+    if v["p"] < ALPHA:
+        pct = f"{abs(d) / v['other_mean'] * 100:.1f} %; " if v.get("other_mean") else ""
+        within = f"; yet within the margin: equivalent within ±{m:.4f} {unit}" if equivalent else ""
+        direction = "better" if d < 0 else "worse"
+        return f"{name} {direction} by {abs(d):.4f} {unit} ({pct}95 % interval {iv95}{adj}){within}"
+    if equivalent:
+        tost_adj = f"; Holm TOST p = {v['p_tost']:.2g}" if holm_ else ""
+        return f"equivalent within ±{m:.4f} {unit} (90 % interval {signed_interval(*v['ci90'])}{tost_adj})"
+    after = " after Holm's correction" if holm_ and not v["ci95"][0] <= 0 <= v["ci95"][1] else ""
+    not_eq = f"; not shown equivalent within ±{m:.4f} {unit}" if m else ""
+    return f"no detectable difference{after} (95 % interval {iv95}{adj}){not_eq}"
+
+
+def paired(a: dict[int, float], b: dict[int, float], margin: Margin = Margin()) -> dict:
+    """a[s] − b[s] over the seeds in both: summary, paired t-test and TOST against the margin."""
+    seeds = sorted(set(a) & set(b))
+    diffs = [a[s] - b[s] for s in seeds]
+    st = summarize(diffs)
+
+    def mean(values: dict[int, float]) -> float | None:
+        return sum(values[s] for s in seeds) / len(seeds) if seeds else None
+
+    m = margin.of(mean(a))
+    eq = tost(diffs, m, ALPHA) if m else {"p": None, "ci": [None, None]}
+    return {"n": st["n"], "mean": st["mean"], "std": st["std"], "ci95": st["ci95"], "other_mean": mean(b),
+            "margin": m, "p": t_test(diffs)["p"], "p_tost": eq["p"], "ci90": eq["ci"]}
+
+
+def comparisons(methods: list[str]) -> list[tuple[str, str]]:
+    """(a, b) pairs to compare as a − b: every selective variant against every other method; a sweep of
+    selective variants alone compares each variant with the first."""
+    refs = [m for m in methods if base(m) == REFERENCE]
+    others = [m for m in methods if base(m) != REFERENCE]
+    if others:
+        return [(r, o) for r in refs for o in others]
+    return [(r, refs[0]) for r in refs[1:]]
+
+
+def verdict_rows(groups, topologies, methods, options: Options = Options()) -> list[dict]:
+    """Selective against every other method, per topology, paired by seed, held-out and test-10 (Nm).
+
+    A family is one metric across the whole table (all topologies and comparisons); its size is recorded,
+    and with ``options.holm`` the t-test and TOST p-values are Holm-adjusted within it."""
+    rows, found = [], []  # found: (row, set, paired(...)) for every comparison with results on both sides
+    for t in topologies:
+        for a, b in comparisons(methods):
+            ga, gb = groups.get((t, a)), groups.get((t, b))
+            row = {"topology": t, "comparison": f"{a} vs {b}"}
+            rows.append(row)
+            if ga is None or gb is None or ga.sched is None or gb.sched is None:
+                missing = a if ga is None or ga.sched is None else b
+                row["reading_heldout"] = f"no results for {missing}"
+                continue
+            row["cost_ratio"] = ga.sched["presentations"] / gb.sched["presentations"]
+            for set_, _ in SETS:
+                v = paired(ga.values(set_), gb.values(set_), options.margin)
+                row.update({f"{set_}_pairs": v["n"], f"{set_}_diff_mean": v["mean"],
+                            f"{set_}_diff_std": v["std"], f"{set_}_ci_lo": v["ci95"][0],
+                            f"{set_}_ci_hi": v["ci95"][1], f"{set_}_other_mean": v["other_mean"],
+                            f"{set_}_margin": v["margin"], f"{set_}_p": v["p"], f"{set_}_tost_p": v["p_tost"],
+                            f"{set_}_ci90_lo": v["ci90"][0], f"{set_}_ci90_hi": v["ci90"][1]})
+                found.append((row, set_, v, base(a)))
+    for set_, _ in SETS:
+        family = [(row, v) for row, s, v, _ in found if s == set_ and v["p"] is not None]
+        for key in ("p", "p_tost"):
+            tested = [(row, v) for row, v in family if v[key] is not None]
+            adjusted = holm([v[key] for _, v in tested]) if options.holm else [v[key] for _, v in tested]
+            for (row, v), p in zip(tested, adjusted):
+                v[key] = p
+                if options.holm:
+                    row[f"{set_}_{'p' if key == 'p' else 'tost_p'}_holm"] = p
+        for row, _ in family:
+            row[f"{set_}_family_size"] = len(family)
+    for row, set_, v, name in found:
+        row[f"reading_{set_}"] = reading({**v, "holm": options.holm}, name=name)
+    return rows
+
+
+def mean_curve(g: Group) -> list[tuple[int, float, dict]]:
+    """[(cumulative presentations, mean held-out curve RMS Nm, summarize(...))] over complete seeds, by
+    epoch."""
+    pts: dict[int, tuple[int, list[float]]] = {}
+    for s in g.complete_seeds:
+        for ep, pres, v in g.curves.get(s, []):
+            pts.setdefault(ep, (pres, []))[1].append(v)
+    out = []
+    for ep in sorted(pts):
+        pres, vals = pts[ep]
+        st = summarize(vals)
+        out.append((pres, st["mean"], st))
+    return out
+
+
+def _reach_row(curve: list, target: float, base_cost: float | None) -> dict:
+    """Where a mean curve first gets to ``target``: the curve point at or below it and the one before."""
+    hit = next((i for i, (_, v, _) in enumerate(curve) if v <= target), None)
+    if not curve:
+        return {"reached": "no curve"}
+    if hit is None:
+        return {"reached": "not reached"}
+    pres = curve[hit][0]
+    return {"reached": "yes", "presentations_to_target": pres,
+            "previous_curve_point": curve[hit - 1][0] if hit else 0,
+            "fraction_of_conventional_cost": pres / base_cost if base_cost else None}
+
+
+def time_to_target_rows(groups, topologies, methods) -> list[dict]:
+    """Presentations each method needs until its mean held-out curve first reaches a target: the
+    conventional run's final value (the issue's question), and each selective variant's final value (how
+    long the other methods take to get as far as selective presentation does: the speed-up in honest form)."""
+    rows = []
+    targets = ([BASELINE] if BASELINE in methods else []) + [m for m in methods if base(m) == REFERENCE]
+    for target_method in targets:
+        for t in topologies:
+            tgt = groups.get((t, target_method))
+            tgt_curve = mean_curve(tgt) if tgt else []
+            base_group = groups.get((t, BASELINE))
+            base_curve = mean_curve(base_group) if base_group else []
+            if not tgt_curve:
+                rows.append({"target_method": target_method, "topology": t, "method": "all",
+                             "reached": f"no {target_method} held-out curve: no target"})
+                continue
+            base_cost, target = (base_curve[-1][0] if base_curve else None), tgt_curve[-1][1]
+            for m in methods:
+                g = groups.get((t, m))
+                curve = mean_curve(g) if g else []
+                row = {"target_method": target_method, "topology": t, "method": m,
+                       "target_heldout_curve_rms_nm": target, f"{BASELINE}_presentations": base_cost,
+                       "final_curve_rms_nm": curve[-1][1] if curve else None,
+                       "method_presentations": g.sched["presentations"] if g and g.sched else None}
+                row.update(_reach_row(curve, target, base_cost))
+                rows.append(row)
+    return rows

@@ -1,0 +1,46 @@
+"""What every report section reads (:class:`Context`) and what it gives back (:class:`Section`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from selpres.report.compare import Options
+from selpres.report.groups import Group, aggregate
+from selpres.report.jobs import Job, load_jobs
+
+
+@dataclass
+class Context:
+    """A sweep, loaded and grouped once for all sections."""
+
+    sweep: Path
+    jobs: list[Job]
+    groups: dict[tuple[str, str], Group]
+    topologies: list[str]
+    methods: list[str]
+    options: Options = field(default_factory=Options)
+
+    @classmethod
+    def load(cls, sweep: Path, options: Options | None = None) -> Context:
+        jobs = load_jobs(sweep)
+        return cls(sweep, jobs, *aggregate(jobs), options=options or Options())
+
+    @property
+    def warnings(self) -> list[str]:
+        return [w for g in self.groups.values() for w in g.warnings]
+
+
+@dataclass
+class Section:
+    """One ``##`` section of report.md: its Markdown blocks, the CSV files behind them (file name -> rows)
+    and its figures (file name -> (caption, draw(path)))."""
+
+    title: str
+    blocks: list[str]
+    csv: dict[str, list[dict]] = field(default_factory=dict)
+    figures: dict[str, tuple[str, Callable[[Path], None]]] = field(default_factory=dict)
+
+    def markdown(self) -> str:
+        return "\n\n".join([f"## {self.title}", *self.blocks])

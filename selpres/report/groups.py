@@ -1,0 +1,155 @@
+"""Grouping: a method label per job, and the replicas of each (topology, method) pooled by seed.
+
+Replica r of a job with seed s is the run with seed s + r, so jobs of one method pool by seed: the union
+of their seeds, each seed once (a seed seen twice must give the same numbers, else it is a warning).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+
+from selpres.report.jobs import Job
+from selpres.storage import flatten
+
+REFERENCE = "selective"  # the method every verdict compares against the others
+BASELINE = "conventional"  # the method whose final curve value is the time-to-target target
+METHOD_ORDER = ["conventional", "selective", "matched", "random_growth"]
+SETS = (("test10", "test-10"), ("heldout", "held-out"))  # results.json key, name in the report
+UNITS = (("nm", "Nm"), ("scaled", "scaled"))
+
+# settings that never make two jobs different methods: bookkeeping, or what a group pools over
+_NOT_A_METHOD = ("seed", "replicas", "name", "threads", "overwrite", "engine", "topology.", "logging.",
+                 "checkpoint.", "eval.")
+
+
+@dataclass
+class Group:
+    """All replicas of one (topology, schedule) pooled over the jobs that ran it."""
+
+    topology: str
+    schedule: str
+    jobs: list[Job] = field(default_factory=list)
+    used: list[Job] = field(default_factory=list)  # jobs whose replicas are pooled
+    by_seed: dict[int, dict] = field(default_factory=dict)  # seed -> replica result
+    # seed -> [(epoch, presentations, held-out curve RMS Nm)]
+    curves: dict[int, list[tuple[int, int, float]]] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def sched(self) -> dict | None:
+        return self.used[0].results["schedule"] if self.used else None
+
+    @property
+    def complete_seeds(self) -> list[int]:
+        return sorted(s for s, r in self.by_seed.items() if r["status"] == "complete")
+
+    @property
+    def n_diverged(self) -> int:
+        return sum(r["status"] != "complete" for r in self.by_seed.values())
+
+    def values(self, set_: str, unit: str = "nm", joint: str = "overall") -> dict[int, float]:
+        """seed -> final metric, complete replicas with a finite value only."""
+        out = {}
+        for s in self.complete_seeds:
+            v = ((self.by_seed[s].get("final") or {}).get(set_) or {}).get(unit, {}).get(joint)
+            if v is not None and math.isfinite(v):
+                out[s] = float(v)
+        return out
+
+    def engines(self) -> dict:
+        """The pooled jobs' engines, joined with "+" where they differ: the timing of a group is only as
+        meaningful as the name of what produced it."""
+        recs = [j.engine for j in self.used]
+        return {k: "+".join(sorted({str(r[k]) for r in recs if r[k] is not None})) or None
+                for k in ("engine", "engine_requested", "engine_fallback")}
+
+    def wall(self) -> dict:
+        """Summed over the pooled jobs: train seconds, total seconds, replicas; per replica-run = train / R
+        (replicas are trained together, so a replica-run has no time of its own)."""
+        train = sum(j.results["wall_seconds"]["train"] for j in self.used)
+        total = sum(j.results["wall_seconds"]["total"] for j in self.used)
+        reps = sum(j.results["replicas"] for j in self.used)
+        return {"train": train, "total": total, "per_replica": train / reps if reps else None}
+
+
+def _sched_key(s: dict) -> tuple:
+    return (tuple(s["sizes"]), tuple(s["epochs"]), tuple(s.get("extra_presentations") or []), s.get("order"))
+
+
+def _final_heldout(rep: dict) -> float | None:
+    return ((rep.get("final") or {}).get("heldout") or {}).get("nm", {}).get("overall")
+
+
+def _same_final(a: dict, b: dict, rel: float = 1e-9) -> bool:
+    x, y = _final_heldout(a), _final_heldout(b)
+    if x is None or y is None:
+        return x is None and y is None
+    return abs(x - y) <= rel * max(abs(x), abs(y))
+
+
+def _add_job(g: Group, job: Job) -> None:
+    g.jobs.append(job)
+    if job.results is None:
+        return
+    if g.used and _sched_key(job.results["schedule"]) != _sched_key(g.sched):
+        g.warnings.append(f"{job.path.name}: a different {g.schedule} schedule than {g.used[0].path.name}; "
+                          "not pooled")
+        return
+    g.used.append(job)
+    for r, rep in enumerate(job.replicas):
+        if rep["seed"] in g.by_seed:
+            if not _same_final(g.by_seed[rep["seed"]], rep):
+                g.warnings.append(f"{job.path.name}: seed {rep['seed']} disagrees with an earlier job; "
+                                  "kept the first")
+            continue
+        g.by_seed[rep["seed"]] = rep
+        g.curves[rep["seed"]] = [
+            (c["epoch"], c["presentations"], c["heldout_rms_nm"][r])
+            for c in job.results.get("curves") or []
+            if c.get("heldout_rms_nm") is not None and c["heldout_rms_nm"][r] is not None
+        ]
+
+
+def method_rank(name: str) -> tuple:
+    return (METHOD_ORDER.index(name) if name in METHOD_ORDER else len(METHOD_ORDER), name)
+
+
+def topology_rank(t: str) -> tuple:
+    return tuple(int(x) if x.isdigit() else 0 for x in t.split("-")), t
+
+
+def base(method: str) -> str:
+    """The schedule name a method label starts with ("selective schedule.sizes=[…]" -> "selective")."""
+    return method.split(" ", 1)[0]
+
+
+def label_methods(jobs: list[Job]) -> None:
+    """A job's method is its schedule's name; when jobs of one name differ in other settings (a sweep over
+    stage sizes, epochs, lr, ...), the settings that differ are added to the name, so they are not pooled."""
+    by_name: dict[str, list[tuple[Job, dict]]] = {}
+    for j in jobs:
+        if j.results and "config" in j.results:
+            flat = {k: json.dumps(v) for k, v in flatten(j.results["config"]).items()
+                    if not k.startswith(_NOT_A_METHOD)}
+            by_name.setdefault(j.schedule, []).append((j, flat))
+    for name, members in by_name.items():
+        keys = sorted({k for _, f in members for k in f})
+        varying = [k for k in keys if len({f.get(k) for _, f in members}) > 1]
+        for j, f in members:
+            if varying:
+                j.schedule = name + " " + " ".join(f"{k}={f.get(k)}".replace('"', "").replace(" ", "")
+                                                   for k in varying)
+
+
+def aggregate(jobs: list[Job]) -> tuple[dict[tuple[str, str], Group], list[str], list[str]]:
+    """Groups keyed (topology, method), and the sorted topologies and methods seen in the sweep."""
+    label_methods(jobs)
+    groups: dict[tuple[str, str], Group] = {}
+    for job in sorted(jobs, key=lambda j: str(j.path)):
+        key = (job.topology or "?", job.schedule or "?")
+        _add_job(groups.setdefault(key, Group(*key)), job)
+    topologies = sorted({t for t, _ in groups}, key=topology_rank)
+    methods = sorted({m for _, m in groups}, key=method_rank)
+    return groups, topologies, methods

@@ -1,0 +1,88 @@
+"""Loading: every job folder under a sweep, finished or not, as a :class:`Job`.
+
+A folder counts as a job when it holds a ``results.json`` or a Hydra record (``.hydra/``), so a killed or
+still-running job is listed as missing instead of vanishing from the report.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from selpres.storage import RESULTS
+
+
+@dataclass
+class Job:
+    """One job folder of the sweep."""
+
+    path: Path  # the job folder
+    status: str  # complete | diverged | failed | missing | unreadable
+    schedule: str | None
+    topology: str | None
+    results: dict | None = None  # the full results.json of a complete/diverged job
+    error: str | None = None
+
+    @property
+    def replicas(self) -> list[dict]:
+        return self.results["replica_results"] if self.results else []
+
+    @property
+    def engine(self) -> dict:
+        """{"engine": what ran, "engine_requested": what was asked for, "engine_fallback": None or why the
+        native kernel was not used}. Results written before the fallback was recorded carry only
+        ``engine``, which then stands for both (an unrecorded fallback cannot be recovered)."""
+        res = self.results or {}
+        ran = res.get("engine")
+        return {"engine": ran, "engine_requested": res.get("engine_requested", ran),
+                "engine_fallback": res.get("engine_fallback")}
+
+
+def _hydra_identity(folder: Path) -> tuple[str | None, str | None]:
+    """(schedule name, topology) of a job without usable results: from .hydra/config.yaml, else the
+    folder name (Hydra names a job folder by its overrides)."""
+    cfg = folder / ".hydra" / "config.yaml"
+    if cfg.exists():
+        try:
+            import yaml
+
+            c = yaml.safe_load(cfg.read_text()) or {}
+            return (c.get("schedule") or {}).get("name"), (c.get("topology") or {}).get("layers")
+        except Exception:  # noqa: BLE001 - fall back to the folder name
+            pass
+    m_s = re.search(r"(?:^|,)schedule=([^,]+)", folder.name)
+    m_t = re.search(r"(?:^|,)topology=([^,]+)", folder.name)
+    return (m_s.group(1) if m_s else None), (m_t.group(1) if m_t else None)
+
+
+def job_folders(sweep: Path) -> list[Path]:
+    """Folders holding a results.json or a Hydra job record (.hydra/), anywhere under the sweep."""
+    found = {p.parent for p in sweep.rglob(RESULTS)}
+    found |= {p.parent for p in sweep.rglob(".hydra") if p.is_dir()}
+    return sorted(f for f in found if f != sweep or (f / RESULTS).exists())
+
+
+def load_job(folder: Path) -> Job:
+    path = folder / RESULTS
+    if not path.exists():
+        s, t = _hydra_identity(folder)
+        return Job(folder, "missing", s, t, error="no results.json (killed, or still running)")
+    try:
+        res = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        s, t = _hydra_identity(folder)
+        return Job(folder, "unreadable", s, t, error=f"results.json unreadable: {e}")
+    status = res.get("status")
+    if status in ("complete", "diverged"):
+        return Job(folder, status, res["schedule"]["name"], res["topology"], results=res)
+    s, t = _hydra_identity(folder)
+    err = res.get("error", "no error recorded")
+    if res.get("kind"):
+        err = f"{res['kind']}: {err}"
+    return Job(folder, "failed" if status == "failed" else f"unknown status {status!r}", s, t, error=err)
+
+
+def load_jobs(sweep: Path) -> list[Job]:
+    return [load_job(f) for f in job_folders(sweep)]

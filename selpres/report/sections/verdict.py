@@ -1,0 +1,70 @@
+"""The verdicts: selective − every other method, paired by seed, with intervals, p-values against zero
+and against the equivalence margin, and a reading in plain words."""
+
+from __future__ import annotations
+
+from selpres.report.compare import ALPHA, Options, verdict_rows
+from selpres.report.context import Context, Section
+from selpres.report.groups import REFERENCE, SETS
+from selpres.report.markdown import fmt, signed_interval, table
+
+
+def method_note(rows: list[dict], options: Options) -> str:
+    """How the readings were reached: the three readings, the margin used, the families and Holm."""
+    sizes = ", ".join(f"{max((r.get(f'{s}_family_size', 0) for r in rows), default=0)} {name}"
+                      for s, name in SETS[::-1])
+    adjusted = ("Holm-adjusted within each family (`--holm`)" if options.holm
+                else "not adjusted for multiplicity (`--holm` applies Holm's step-down correction)")
+    return (
+        f"Three readings, never merged: *better/worse by …* when the paired t-test rejects Δ = 0 "
+        f"(p < {ALPHA:g}: the 95 % t-interval excludes 0); *equivalent within ±m* when two one-sided tests "
+        f"(TOST, Schuirmann 1987) reject |Δ| ≥ m (p < {ALPHA:g}: the 90 % interval lies inside ±m); "
+        "otherwise *no detectable difference*, which does not rule out a real effect of the size its "
+        "interval allows. "
+        f"Margin m = {options.margin.describe()}. Comparisons per family (one metric across this table): "
+        f"{sizes}; p-values {adjusted}."
+    )
+
+
+NOTE = (
+    f"Δ < 0: {REFERENCE} has the lower error. Pairs = seeds complete in both jobs. The percentage is "
+    f"relative to the other method's mean over the paired seeds. Cost ratio = {REFERENCE} presentations ÷ "
+    "other's."
+)
+
+
+def _p(x) -> str:
+    return "n/a" if x is None else ("<0.0001" if x < 1e-4 else f"{x:.4f}")
+
+
+def _diff(r: dict, set_: str) -> str:
+    if r.get(f"{set_}_diff_mean") is None:
+        return "n/a"
+    return f"{r[f'{set_}_diff_mean']:+.4f} " + signed_interval(r[f"{set_}_ci_lo"], r[f"{set_}_ci_hi"])
+
+
+def _pvalues(r: dict, set_: str, holm: bool) -> str:
+    suffix = "_holm" if holm else ""
+    return f"{_p(r.get(f'{set_}_p{suffix}'))} / {_p(r.get(f'{set_}_tost_p{suffix}'))}"
+
+
+def verdict_markdown(rows: list[dict], options: Options = Options()) -> str:
+    head = ["topology", "comparison", "cost ratio", "pairs"]
+    for _, name in SETS[::-1]:  # held-out first: the paper's claim is about generalisation
+        head += [f"{name} Δ Nm, mean [95 % CI]", f"{name} ±m Nm",
+                 f"{name} p: t / TOST" + (" (Holm)" if options.holm else ""), f"{name} reading"]
+    body = []
+    for r in rows:
+        cells = [r["topology"], r["comparison"], fmt(r.get("cost_ratio"), 3), str(r.get("heldout_pairs", 0))]
+        for set_, _ in SETS[::-1]:
+            cells += [_diff(r, set_), fmt(r.get(f"{set_}_margin")), _pvalues(r, set_, options.holm),
+                      r.get(f"reading_{set_}", "")]
+        body.append(cells)
+    return table(head, body)
+
+
+def section(ctx: Context) -> Section:
+    rows = verdict_rows(ctx.groups, ctx.topologies, ctx.methods, ctx.options)
+    title = f"Verdict: {REFERENCE} − other, paired by seed (final RMS, Nm)"
+    return Section(title, [verdict_markdown(rows, ctx.options), method_note(rows, ctx.options), NOTE],
+                   csv={"verdict.csv": rows})
