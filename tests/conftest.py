@@ -70,5 +70,5 @@ def _native_reason() -> str | None:
         return str(exc).splitlines()[0]
 
 
-_NATIVE_REASON = _native_reason()
-requires_native = pytest.mark.skipif(_NATIVE_REASON is not None, reason=f"native kernel unavailable: {_NATIVE_REASON}")
+NATIVE_REASON = _native_reason()
+requires_native = pytest.mark.skipif(NATIVE_REASON is not None, reason=f"native kernel unavailable: {NATIVE_REASON}")

@@ -41,7 +41,7 @@ def _data(**over):
 
 def test_data_config_has_exactly_the_agreed_keys():
     assert set(DATA_CFG.keys()) == {
-        "theta", "dtheta", "tau1", "tau2", "accel_limit", "test_patterns", "test_from_exemplar", "heldout", "scaling",
+        "theta", "dtheta", "tau1", "tau2", "accel_limit", "test_patterns", "test_from_exemplar", "heldout", "test_seed", "scaling",
     }
     assert set(DATA_CFG.scaling.keys()) == {"mode", "margin", "lo", "hi"}
     assert set(ROBOT_CFG.keys()) == {"m1", "m2", "l1", "l2", "g"}

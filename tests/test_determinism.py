@@ -10,10 +10,11 @@ import torch
 import selpres.train as T
 from selpres.storage import RESULTS
 from selpres.train import train
-from conftest import cfg_of, numbers
+from conftest import cfg_of, numbers, requires_native
 
 
-@pytest.mark.parametrize("engine", ["reference", "torch", "native"])
+@pytest.mark.parametrize("engine", [pytest.param("reference", marks=pytest.mark.slow), "torch",
+                                    pytest.param("native", marks=requires_native)])
 def test_same_config_same_numbers(tmp_path, engine):
     a = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2", f"engine={engine}"), tmp_path / "a")
     T._exemplar.cache_clear()  # the second run rebuilds its data too, as a new process would

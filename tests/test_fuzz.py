@@ -65,6 +65,7 @@ def test_topology_strings_parse_or_are_refused(text):
     assert sizes == tuple(int(w) for w in text.strip().split("-"))  # "6-08-2" is (6, 8, 2)
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(topology=topologies, schedule=schedules, batch=st.integers(1, 3))
 def test_every_config_trains_or_is_refused_cleanly(topology, schedule, batch):

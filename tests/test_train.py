@@ -6,7 +6,7 @@ import math
 
 import pytest
 import torch
-from conftest import cfg_of
+from conftest import NATIVE_REASON, cfg_of, requires_native
 from selpres.train import train
 
 @pytest.mark.parametrize("engine", ["reference", "fast"])
@@ -24,16 +24,23 @@ def test_loss_falls_and_results_are_complete(engine):
     assert h1 < 0.7 * h0
 
 
-@pytest.mark.parametrize("engine", ["reference", "fast"])
+@pytest.mark.parametrize("engine", [pytest.param("reference", marks=pytest.mark.slow),
+                                    pytest.param("native", marks=requires_native), "torch"])
 def test_replica_r_equals_single_run_with_seed_plus_r(tmp_path, engine):
-    """Weights are bit-identical; metrics agree to rounding (evaluation batches all replicas in one GEMM)."""
+    """Weights are bit-identical (reference, native); metrics agree to rounding (evaluation batches all replicas
+    in one GEMM). The torch engine's batched matmuls may round differently for R = 3 than for R = 1, so there the
+    weights agree to rounding too."""
     many = train(cfg_of("schedule.epochs=[1,1,1,1,1]", "replicas=3", "seed=10", f"engine={engine}"), tmp_path / "many")
     one = train(cfg_of("schedule.epochs=[1,1,1,1,1]", "replicas=1", "seed=12", f"engine={engine}"), tmp_path / "one")
     w_many = torch.load(tmp_path / "many" / "weights.pt")["params"]
     w_one = torch.load(tmp_path / "one" / "weights.pt")["params"]
-    assert all(torch.equal(a[2], b[0]) for a, b in zip(w_many, w_one))
+    if engine == "torch":
+        assert max((a[2] - b[0]).abs().max().item() for a, b in zip(w_many, w_one)) <= 1e-12
+    else:
+        assert all(torch.equal(a[2], b[0]) for a, b in zip(w_many, w_one))
     a, b = many["replica_results"][2], one["replica_results"][0]
-    assert a["seed"] == b["seed"] == 12 and a["train_mse"] == b["train_mse"]
+    assert a["seed"] == b["seed"] == 12
+    assert a["train_mse"] == pytest.approx(b["train_mse"], rel=0 if engine != "torch" else 1e-12)
     for name in ("test10", "heldout"):
         for unit in ("nm", "scaled"):
             assert a["final"][name][unit] == pytest.approx(b["final"][name][unit], rel=1e-12)
@@ -45,13 +52,15 @@ def test_replica_r_equals_single_run_with_seed_plus_r(tmp_path, engine):
     ["schedule.sizes=[50,200,1002]", "schedule.epochs=[2,1,1]", "topology=6-8-8-2"],
     ["schedule.sizes=[0.1,1.0]", "schedule.epochs=[1,1]", "optim.batch_size=7", "topology=6-4-2"],
 ])
+@pytest.mark.slow
 def test_fast_engine_matches_the_reference_through_the_whole_pipeline(tmp_path, overrides):
     """Same sampler streams, same updates: final weights of the fast engines equal the reference's to 1e-9."""
     weights = {}
-    for engine in ("reference", "native", "torch"):
+    fast = ("torch",) if NATIVE_REASON else ("native", "torch")
+    for engine in ("reference", *fast):
         train(cfg_of(*overrides, "replicas=2", f"engine={engine}"), tmp_path / engine)
         weights[engine] = torch.load(tmp_path / engine / "weights.pt")["params"]
-    for engine in ("native", "torch"):
+    for engine in fast:
         diff = max((a - b).abs().max().item() for a, b in zip(weights["reference"], weights[engine]))
         assert diff <= 1e-9, (engine, diff)
 
