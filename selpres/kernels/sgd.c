@@ -1,12 +1,15 @@
 /* selpres native kernel: SGD with momentum for many replicas of a sigmoid back-propagation network.
  *
  * Built and loaded by selpres/_kernels.py, which compiles this file once per topology with
- *   cc -O3 -march=native -fPIC -shared -std=c11 -DNL=.. -DSIZES=.. -DP_TOTAL=.. -DTOT_UNITS=.. -DMAXW=.. -DNI=..
+ *   cc -O3 -march=native -fPIC -shared -std=c11 \
+ *      -DNL=.. -DSIZES=.. -DP_TOTAL=.. -DTOT_UNITS=.. -DMAXW=.. -DNI=..
  *   NL         number of weight layers (6-13-2: 2)
  *   SIZES      the layer widths, comma separated (6-13-2: 6,13,2)
  *   P_TOTAL    parameters of one replica: sum over layers of out*in + out
  *   TOT_UNITS  sum of SIZES (activations of one presentation)
  *   MAXW       the widest layer
+ * Work arrays (activations, deltas) live on the heap, one block per call, so no topology can overflow a
+ * thread's stack.
  *   NI         groups advanced together in one instruction stream (see train_groups)
  *
  * Layout: replicas in groups of 4 lanes, one AVX2 vector of float64 per parameter; a group's parameters
@@ -25,7 +28,8 @@
 #ifndef __FMA__
 #error "selpres kernel needs FMA"
 #endif
-#if !defined(NL) || !defined(SIZES) || !defined(P_TOTAL) || !defined(TOT_UNITS) || !defined(MAXW) || !defined(NI)
+#if !defined(NL) || !defined(SIZES) || !defined(P_TOTAL) || !defined(TOT_UNITS) || !defined(MAXW) \
+    || !defined(NI)
 #error "compile with -DNL -DSIZES -DP_TOTAL -DTOT_UNITS -DMAXW -DNI (see the header comment)"
 #endif
 
@@ -67,6 +71,8 @@ static inline __m256d sigmoid4(__m256d z) {
     return _mm256_div_pd(one, _mm256_add_pd(one, exp4(_mm256_xor_pd(z, _mm256_set1_pd(-0.0)))));
 }
 
+#define WORK_DOUBLES ((TOT_UNITS + 2 * MAXW) * 4)  /* one group's work arrays */
+
 /* Interleave. One presentation is a long chain of dependent operations (forward with ~90-cycle
    sigmoid chains, backward, update; the next presentation reads the updated weights), so a single
    group of 4 replicas leaves the core partly idle. train_groups() therefore advances ni independent
@@ -76,8 +82,9 @@ static inline __m256d sigmoid4(__m256d z) {
    grouped. Called with ni = NI, then ni = 1 for a leftover group. Loops are unrolled by 4 only: fully
    unrolled, the interleaved code was slower. */
 static inline __attribute__((always_inline)) void
-train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const double *X, const double *Y,
-             const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss)
+train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *work,
+             const double *X, const double *Y, const int64_t *order, int64_t m, int64_t B,
+             double lr, double mom, double *loss)
 {
     const int64_t nin = S[0], nout = S[NL];
     int64_t woff[NL], boff[NL], aoff[NL + 1];
@@ -88,8 +95,8 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
         }
         for (int l = 0; l <= NL; l++) { aoff[l] = tot; tot += S[l]; }
     }
-    double act[NI][TOT_UNITS * 4] __attribute__((aligned(32)));
-    double da[NI][MAXW * 4] __attribute__((aligned(32))), db[NI][MAXW * 4] __attribute__((aligned(32)));
+    /* per group: activations [TOT_UNITS][4] and two delta buffers [MAXW][4], in `work` */
+    double *act[NI], *da[NI], *db[NI];
     double *w[NI], *mb[NI], *G[NI];
     const int64_t *ord[NI][4];
     __m256d lsum[NI];
@@ -102,6 +109,9 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
         w[u] = W + (g + u) * P_TOTAL * 4;
         mb[u] = M + (g + u) * P_TOTAL * 4;
         G[u] = Gb + u * P_TOTAL * 4;
+        act[u] = work + u * WORK_DOUBLES;
+        da[u] = act[u] + TOT_UNITS * 4;
+        db[u] = da[u] + MAXW * 4;
         for (int k = 0; k < 4; k++) ord[u][k] = order + ((g + u) * 4 + k) * m;
         lsum[u] = _mm256_setzero_pd();
     }
@@ -139,7 +149,7 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
                 }
             }
             /* output deltas dL/dz = 2 (y - t) / (bs * nout) * y (1 - y); the loss sums (y - t)^2 */
-            double (*d)[MAXW * 4] = da, (*dn)[MAXW * 4] = db;
+            double **d = da, **dn = db;
 #pragma GCC unroll 4
             EACH {
                 const double *y = act[u] + aoff[NL] * 4;
@@ -186,7 +196,8 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
                         const double *ain = act[u] + aoff[l] * 4;
                         if (B == 1) {
                             /* buf = mom * buf + g; p -= lr * buf (torch.optim.SGD) */
-                            double *wr = w[u] + (woff[l] + o * ni_) * 4, *mr = mb[u] + (woff[l] + o * ni_) * 4;
+                            double *wr = w[u] + (woff[l] + o * ni_) * 4;
+                            double *mr = mb[u] + (woff[l] + o * ni_) * 4;
 #pragma GCC unroll 4
                             for (int64_t i = 0; i < ni_; i++) {
                                 __m256d bv = _mm256_fmadd_pd(vmom, LD(mr + i * 4),
@@ -207,7 +218,7 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const do
                         }
                     }
                 }
-                double (*tmp)[MAXW * 4] = d; d = dn; dn = tmp;
+                double **tmp = d; d = dn; dn = tmp;
             }
         }
         if (B > 1) {  /* the mini-batch's update from the summed gradient */
@@ -237,11 +248,17 @@ int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t 
 {
     if (nl != NL || P != P_TOTAL) return -3;
     for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
+    double *work = (double *)aligned_alloc(32, (size_t)NI * WORK_DOUBLES * 8);
     double *Gb = B > 1 ? (double *)aligned_alloc(32, (size_t)NI * P_TOTAL * 32) : NULL;
-    if (B > 1 && !Gb) return -1;
+    if (!work || (B > 1 && !Gb)) {
+        free(work);
+        free(Gb);
+        return -1;
+    }
     int64_t g = g0;
-    for (; g + NI <= g1; g += NI) train_groups(NI, g, W, M, Gb, X, Y, order, m, B, lr, mom, loss);
-    for (; g < g1; g++) train_groups(1, g, W, M, Gb, X, Y, order, m, B, lr, mom, loss);
+    for (; g + NI <= g1; g += NI) train_groups(NI, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss);
+    for (; g < g1; g++) train_groups(1, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss);
+    free(work);
     free(Gb);
     return 0;
 }
