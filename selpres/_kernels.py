@@ -211,7 +211,7 @@ def build(sizes) -> Path:
     if target.exists():
         if _intact(target):
             return target
-        log.warning("selpres: the cached native kernel %s fails its checksum; rebuilding it", target)
+        log.warning("the cached native kernel %s fails its checksum; rebuilding it", target)
     cmd = [*cc, *CFLAGS, *macros(sizes), "-o", "<out>", str(SOURCE), *LIBS]
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -232,7 +232,7 @@ def build(sizes) -> Path:
                                 "(machine busy?); a later run retries") from exc
     except (OSError, subprocess.SubprocessError) as exc:
         raise KernelUnavailable(f"cannot build the native kernel in {target.parent}: {exc}") from exc
-    log.info("selpres: built native kernel %s", target)
+    log.info("built native kernel %s", target)
     return target
 
 

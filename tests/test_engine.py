@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import logging
 import math
 
 import pytest
 import torch
+from conftest import requires_native
 
 from selpres import _kernels
 from selpres.engine import make_engine, native_available
@@ -134,12 +136,57 @@ def test_fast_matches_reference(name, sizes, B, R):
         assert p.shape == q.shape and p.dtype == torch.float64
 
 
-def test_fast_engine_falls_back_to_torch(monkeypatch):
+def _fallback_warnings(caplog):
+    return [r for r in caplog.records if r.name == "selpres" and r.levelno == logging.WARNING]
+
+
+@pytest.mark.parametrize("name", ["reference", "torch"])
+def test_engines_name_what_runs(name):
+    sizes = (6, 4, 2)
+    eng = make_engine(name, sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    assert eng.name == name and eng.fallback_reason is None
+
+
+@requires_native
+def test_fast_engine_is_native_where_the_kernel_runs(caplog):
+    sizes = (6, 4, 2)
+    with caplog.at_level(logging.WARNING, logger="selpres"):
+        eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    assert eng.name == "native" and eng.fallback_reason is None and not _fallback_warnings(caplog)
+
+
+def test_fast_engine_falls_back_to_torch_and_says_why(monkeypatch, caplog):
     monkeypatch.setenv("SELPRES_NO_NATIVE", "1")
     sizes = (6, 4, 2)
-    eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    with caplog.at_level(logging.WARNING, logger="selpres"):
+        eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    assert eng.name == "torch" and eng.fallback_reason == "disabled by SELPRES_NO_NATIVE"
+    (warning,) = _fallback_warnings(caplog)
+    assert "\n" not in warning.getMessage() and warning.getMessage().endswith("disabled by SELPRES_NO_NATIVE")
+    with pytest.raises(_kernels.KernelUnavailable, match="disabled by SELPRES_NO_NATIVE"):
+        make_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+
+
+def test_fast_engine_reports_the_compilers_message(tmp_path, monkeypatch, caplog):
+    """A failing compiler (here a script printing an error) is named in fallback_reason, in one log line."""
+    cc = tmp_path / "broken-cc"
+    cc.write_text('#!/bin/sh\ncase "$1" in --version) echo broken-cc 1.0;;\n'
+                  '*) echo "sgd.c:1: error: boom" >&2; echo "second line" >&2; exit 3;; esac\n')
+    cc.chmod(0o755)
+    monkeypatch.setenv("CC", str(cc))
+    monkeypatch.delenv("SELPRES_NO_NATIVE", raising=False)
+    monkeypatch.setenv("SELPRES_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(_kernels, "_kernels", {})
+    monkeypatch.setattr(_kernels, "cpu_flags", lambda: frozenset({"avx2", "fma"}))  # reach the compiler
+    sizes = (6, 3, 2)
+    with caplog.at_level(logging.WARNING, logger="selpres"):
+        eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
     assert eng.name == "torch"
-    with pytest.raises(_kernels.KernelUnavailable):
+    assert "exited with 3" in eng.fallback_reason
+    assert "sgd.c:1: error: boom\nsecond line" in eng.fallback_reason
+    (warning,) = _fallback_warnings(caplog)
+    assert "\n" not in warning.getMessage() and "sgd.c:1: error: boom second line" in warning.getMessage()
+    with pytest.raises(_kernels.KernelUnavailable, match="boom"):
         make_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
 
 
@@ -207,7 +254,8 @@ def test_nan_replica_leaves_others_untouched(name):
     poisoned[0][1, 0, 0] = float("nan")
     poisoned[2][4, 1, 1] = float("inf")
     orders = _orders(R, n, [n, n])
-    clean, dirty = make_engine(name, sizes, params, LR, MOM, 2), make_engine(name, sizes, poisoned, LR, MOM, 2)
+    clean = make_engine(name, sizes, params, LR, MOM, 2)
+    dirty = make_engine(name, sizes, poisoned, LR, MOM, 2)
     for o in orders:
         clean_loss, dirty_loss = clean.train_epoch(X, Y, o), dirty.train_epoch(X, Y, o)
     keep = [0, 2, 3, 5]
