@@ -1,20 +1,23 @@
-"""The native SGD kernel behind ``make_engine("native"/"fast")``: C source, build-at-first-use, ctypes binding.
+"""The native SGD kernel behind ``make_engine("native"/"fast")``: build at first use, cache, ctypes binding.
 
-Layout: replicas are packed in groups of 4 (one AVX2 vector of float64 per parameter), a group's
+The kernel itself is the C file ``selpres/kernels/sgd.c`` (read its header for the layout and the
+arithmetic). Replicas are packed in groups of 4 (one AVX2 vector of float64 per parameter), a group's
 parameters contiguous as ``[P, 4]`` in the replica list's order (W1 row-major, b1, W2, b2, ...).
-``INTERLEAVE`` (2) groups are trained together, their instructions interleaved so the CPU overlaps
-their dependency chains, through the whole epoch before the next ones, so their weights, momentum
-buffers and activations (~11 KB a group at 6-13-2) stay in L1; a leftover group runs alone. The
-topology is compiled in (one small shared library per topology; loops unrolled by 4, not fully:
-fully unrolled, the interleaved code was slower). The sigmoid's ``exp`` is an inline AVX2 polynomial
-(Cody-Waite reduction + degree-13 Taylor, relative error ~1e-16; argument clamped to +-708, NaN kept),
-so there is no -ffast-math and no vector-math library: only a C compiler is needed.
+``INTERLEAVE`` (2) groups are trained together in one instruction stream. The topology is compiled in
+as macros (``-DNL=2 -DSIZES=6,13,2 ...``, see :func:`macros`): one small shared library per topology.
+The sigmoid's ``exp`` is an inline AVX2 polynomial, so there is no -ffast-math and no vector-math
+library: only a C compiler is needed.
 
-Build: ``$CC`` (default ``cc``/``gcc``) ``-O3 -march=native -fPIC -shared``, once per (source,
-topology, flags, compiler, CPU) into ``$SELPRES_CACHE_DIR`` (default ``~/.cache/selpres``), written to
-a temporary file and renamed, so parallel processes may race safely. Any failure (no compiler, no
-AVX2/FMA) raises :class:`KernelUnavailable` and ``make_engine("fast")`` falls back to pure torch.
-``SELPRES_NO_NATIVE=1`` forces that fallback.
+Build: ``$CC`` (default ``cc``/``gcc``) ``-O3 -march=native -fPIC -shared`` on the real source path (so
+compiler messages name its lines), once per (source, topology, flags, compiler version, CPU) into
+``$SELPRES_CACHE_DIR`` (default ``~/.cache/selpres``), written to a temporary file and renamed, so
+parallel processes may race safely; a ``.sha256`` sidecar written after the library marks it complete.
+Before any library is opened the CPU must list AVX2 and FMA (a cache shared between machines ends in a
+fallback, never in SIGILL); a cached library that fails its checksum (truncated, corrupt, unfinished) is
+rebuilt. Anything missing (no compiler, a failed or timed-out build, no AVX2/FMA, ``SELPRES_NO_NATIVE=1``)
+raises :class:`KernelUnavailable` with the reason, and ``make_engine("fast")`` falls back to pure torch.
+Only successes are remembered in the process: a later :func:`load` retries a failed build. Work arrays
+live on the heap, so layer widths are bounded by memory only (not by a thread's stack).
 
 Threads: :meth:`Kernel.train` splits the groups into ``threads`` contiguous chunks and runs them on a
 thread pool; ctypes releases the GIL during the call, so the chunks run in parallel.
@@ -24,8 +27,10 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import logging
 import os
 import platform
+import shlex
 import shutil
 import subprocess
 import tempfile
@@ -38,228 +43,13 @@ import torch
 LANES = 4
 INTERLEAVE = 2  # groups of 4 replicas advanced together in one instruction stream (see the C comment)
 
-C_TEMPLATE = r"""#include <immintrin.h>
-#include <stdint.h>
-#include <stdlib.h>
-#include <string.h>
-
-#ifndef __AVX2__
-#error "selpres kernel needs AVX2"
-#endif
-#ifndef __FMA__
-#error "selpres kernel needs FMA"
-#endif
-
-#define NL @NL@
-static const int64_t S[NL + 1] = {@SIZES@};
-#define P_TOTAL @P@
-#define TOT_UNITS @TOT@
-#define MAXW @MAXW@
-
-#define LD(p) _mm256_loadu_pd(p)
-#define ST(p, v) _mm256_storeu_pd((p), (v))
-
-/* exp(x) for 4 doubles, |rel err| ~1e-16 (Cody-Waite reduction + degree-13 Taylor); x clamped to
-   [-708, 708] (NaN passes through). Only used inside the sigmoid, where the clamp is invisible. */
-static inline __m256d exp4(__m256d x) {
-    x = _mm256_min_pd(_mm256_set1_pd(708.0), x);   /* operand order keeps NaN */
-    x = _mm256_max_pd(_mm256_set1_pd(-708.0), x);
-    __m256d n = _mm256_round_pd(_mm256_mul_pd(x, _mm256_set1_pd(1.4426950408889634)),
-                                _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-    __m256d r = _mm256_fnmadd_pd(n, _mm256_set1_pd(6.93147180369123816490e-01), x);
-    r = _mm256_fnmadd_pd(n, _mm256_set1_pd(1.90821492927058770002e-10), r);
-    __m256d p = _mm256_set1_pd(1.0 / 6227020800.0);
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 479001600.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 39916800.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 3628800.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 362880.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 40320.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 5040.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 720.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 120.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 24.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 6.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(0.5));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0));
-    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0));
-    __m256d t = _mm256_add_pd(n, _mm256_set1_pd(6755399441055744.0));   /* 1.5 * 2^52: n in the low bits */
-    __m256i e = _mm256_slli_epi64(_mm256_add_epi64(_mm256_castpd_si256(t), _mm256_set1_epi64x(1023)), 52);
-    return _mm256_mul_pd(p, _mm256_castsi256_pd(e));
-}
-
-static inline __m256d sigmoid4(__m256d z) {
-    const __m256d one = _mm256_set1_pd(1.0);
-    return _mm256_div_pd(one, _mm256_add_pd(one, exp4(_mm256_xor_pd(z, _mm256_set1_pd(-0.0)))));
-}
-
-/* Interleave. One presentation is a long chain of dependent operations (forward with ~90-cycle
-   sigmoid chains, backward, update; the next presentation reads the updated weights), so a single
-   group of 4 replicas leaves the core partly idle. train_groups() therefore advances ni independent
-   groups in one instruction stream (every value is an array of ni vectors, one per group) and the CPU
-   overlaps their chains (~1.3x at 6-13-2; the update's loads/stores then bound it). Each replica still
-   sees exactly the same sequence of IEEE operations, so results do not depend on how replicas are
-   grouped. Called with ni = NI, then ni = 1 for a leftover group. Loops are unrolled by 4 only: fully
-   unrolled, the interleaved code was slower. */
-#define NI @NI@
-
-static inline __attribute__((always_inline)) void
-train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, const double *X, const double *Y,
-             const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss)
-{
-    const int64_t nin = S[0], nout = S[NL];
-    int64_t woff[NL], boff[NL], aoff[NL + 1];
-    {
-        int64_t off = 0, tot = 0;
-        for (int l = 0; l < NL; l++) { woff[l] = off; off += S[l + 1] * S[l]; boff[l] = off; off += S[l + 1]; }
-        for (int l = 0; l <= NL; l++) { aoff[l] = tot; tot += S[l]; }
-    }
-    double act[NI][TOT_UNITS * 4] __attribute__((aligned(32)));
-    double da[NI][MAXW * 4] __attribute__((aligned(32))), db[NI][MAXW * 4] __attribute__((aligned(32)));
-    double *w[NI], *mb[NI], *G[NI];
-    const int64_t *ord[NI][4];
-    __m256d lsum[NI];
-    const __m256d one = _mm256_set1_pd(1.0);
-    const __m256d vmom = _mm256_set1_pd(mom), vlr = _mm256_set1_pd(lr);
-
-#define EACH for (int u = 0; u < ni; u++)
-#pragma GCC unroll 4
-    EACH {
-        w[u] = W + (g + u) * P_TOTAL * 4;
-        mb[u] = M + (g + u) * P_TOTAL * 4;
-        G[u] = Gb + u * P_TOTAL * 4;
-        for (int k = 0; k < 4; k++) ord[u][k] = order + ((g + u) * 4 + k) * m;
-        lsum[u] = _mm256_setzero_pd();
-    }
-    for (int64_t s = 0; s < m; s += B) {
-        const int64_t bs = (m - s < B) ? (m - s) : B;
-        const __m256d scale = _mm256_set1_pd(2.0 / (double)(bs * nout));
-        if (B > 1) memset(Gb, 0, (size_t)ni * P_TOTAL * 32);
-        for (int64_t k = 0; k < bs; k++) {
-            const int64_t j = s + k;
-#pragma GCC unroll 4
-            EACH {
-                const double *x0 = X + ord[u][0][j] * nin, *x1 = X + ord[u][1][j] * nin;
-                const double *x2 = X + ord[u][2][j] * nin, *x3 = X + ord[u][3][j] * nin;
-#pragma GCC unroll 4
-                for (int64_t i = 0; i < nin; i++) ST(act[u] + i * 4, _mm256_set_pd(x3[i], x2[i], x1[i], x0[i]));
-            }
-#pragma GCC unroll 8
-            for (int l = 0; l < NL; l++) {
-                const int64_t ni_ = S[l], no = S[l + 1];
-#pragma GCC unroll 4
-                for (int64_t o = 0; o < no; o++) {
-                    __m256d z[NI];
-#pragma GCC unroll 4
-                    EACH z[u] = LD(w[u] + (boff[l] + o) * 4);
-#pragma GCC unroll 4
-                    for (int64_t i = 0; i < ni_; i++) {
-#pragma GCC unroll 4
-                        EACH z[u] = _mm256_fmadd_pd(LD(w[u] + (woff[l] + o * ni_ + i) * 4), LD(act[u] + (aoff[l] + i) * 4), z[u]);
-                    }
-#pragma GCC unroll 4
-                    EACH ST(act[u] + (aoff[l + 1] + o) * 4, sigmoid4(z[u]));
-                }
-            }
-            double (*d)[MAXW * 4] = da, (*dn)[MAXW * 4] = db;
-#pragma GCC unroll 4
-            EACH {
-                const double *y = act[u] + aoff[NL] * 4;
-                const double *t0 = Y + ord[u][0][j] * nout, *t1 = Y + ord[u][1][j] * nout;
-                const double *t2 = Y + ord[u][2][j] * nout, *t3 = Y + ord[u][3][j] * nout;
-#pragma GCC unroll 4
-                for (int64_t o = 0; o < nout; o++) {
-                    __m256d yv = LD(y + o * 4);
-                    __m256d diff = _mm256_sub_pd(yv, _mm256_set_pd(t3[o], t2[o], t1[o], t0[o]));
-                    lsum[u] = _mm256_fmadd_pd(diff, diff, lsum[u]);
-                    ST(d[u] + o * 4, _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(diff, scale), yv), _mm256_sub_pd(one, yv)));
-                }
-            }
-#pragma GCC unroll 8
-            for (int l = NL - 1; l >= 0; l--) {
-                const int64_t ni_ = S[l], no = S[l + 1];
-                if (l > 0) {
-#pragma GCC unroll 4
-                    for (int64_t i = 0; i < ni_; i++) {
-                        __m256d acc[NI];
-#pragma GCC unroll 4
-                        EACH acc[u] = _mm256_setzero_pd();
-#pragma GCC unroll 4
-                        for (int64_t o = 0; o < no; o++) {
-#pragma GCC unroll 4
-                            EACH acc[u] = _mm256_fmadd_pd(LD(w[u] + (woff[l] + o * ni_ + i) * 4), LD(d[u] + o * 4), acc[u]);
-                        }
-#pragma GCC unroll 4
-                        EACH {
-                            __m256d a = LD(act[u] + (aoff[l] + i) * 4);
-                            ST(dn[u] + i * 4, _mm256_mul_pd(_mm256_mul_pd(acc[u], a), _mm256_sub_pd(one, a)));
-                        }
-                    }
-                }
-#pragma GCC unroll 4
-                for (int64_t o = 0; o < no; o++) {
-#pragma GCC unroll 4
-                    EACH {
-                        const __m256d dv = LD(d[u] + o * 4);
-                        const double *ain = act[u] + aoff[l] * 4;
-                        if (B == 1) {
-                            double *wr = w[u] + (woff[l] + o * ni_) * 4, *mr = mb[u] + (woff[l] + o * ni_) * 4;
-#pragma GCC unroll 4
-                            for (int64_t i = 0; i < ni_; i++) {
-                                __m256d bv = _mm256_fmadd_pd(vmom, LD(mr + i * 4), _mm256_mul_pd(dv, LD(ain + i * 4)));
-                                ST(mr + i * 4, bv);
-                                ST(wr + i * 4, _mm256_fnmadd_pd(vlr, bv, LD(wr + i * 4)));
-                            }
-                            double *pb = w[u] + (boff[l] + o) * 4, *pm = mb[u] + (boff[l] + o) * 4;
-                            __m256d bv = _mm256_fmadd_pd(vmom, LD(pm), dv);
-                            ST(pm, bv);
-                            ST(pb, _mm256_fnmadd_pd(vlr, bv, LD(pb)));
-                        } else {
-                            double *gr = G[u] + (woff[l] + o * ni_) * 4, *pgb = G[u] + (boff[l] + o) * 4;
-#pragma GCC unroll 4
-                            for (int64_t i = 0; i < ni_; i++) ST(gr + i * 4, _mm256_fmadd_pd(dv, LD(ain + i * 4), LD(gr + i * 4)));
-                            ST(pgb, _mm256_add_pd(LD(pgb), dv));
-                        }
-                    }
-                }
-                double (*tmp)[MAXW * 4] = d; d = dn; dn = tmp;
-            }
-        }
-        if (B > 1) {
-#pragma GCC unroll 4
-            EACH for (int64_t p = 0; p < P_TOTAL; p++) {
-                __m256d bv = _mm256_fmadd_pd(vmom, LD(mb[u] + p * 4), LD(G[u] + p * 4));
-                ST(mb[u] + p * 4, bv);
-                ST(w[u] + p * 4, _mm256_fnmadd_pd(vlr, bv, LD(w[u] + p * 4)));
-            }
-        }
-    }
-#pragma GCC unroll 4
-    EACH {
-        double ls[4];
-        _mm256_storeu_pd(ls, lsum[u]);
-        for (int k = 0; k < 4; k++) loss[(g + u) * 4 + k] = ls[k] / (double)nout;
-    }
-#undef EACH
-}
-
-int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t P,
-                  double *W, double *M, const double *X, const double *Y,
-                  const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss)
-{
-    if (nl != NL || P != P_TOTAL) return -3;
-    for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
-    double *Gb = B > 1 ? (double *)aligned_alloc(32, (size_t)NI * P_TOTAL * 32) : NULL;
-    if (B > 1 && !Gb) return -1;
-    int64_t g = g0;
-    for (; g + NI <= g1; g += NI) train_groups(NI, g, W, M, Gb, X, Y, order, m, B, lr, mom, loss);
-    for (; g < g1; g++) train_groups(1, g, W, M, Gb, X, Y, order, m, B, lr, mom, loss);
-    free(Gb);
-    return 0;
-}
-"""
+SOURCE = Path(__file__).resolve().parent / "kernels" / "sgd.c"  # compiled in place: errors name its lines
 
 CFLAGS = ["-O3", "-march=native", "-fPIC", "-shared", "-std=c11"]
 LIBS = ["-lm"]
+COMPILE_TIMEOUT = 300  # seconds; a time-out (a busy machine) is reported and retried by a later load()
+
+log = logging.getLogger(__name__)
 
 
 class KernelUnavailable(RuntimeError):
@@ -274,20 +64,53 @@ def cache_dir() -> Path:
     return Path(base) / "selpres"
 
 
-def _compiler() -> str:
+REQUIRED_CPU_FEATURES = ("avx2", "fma")  # what the kernel's intrinsics need (sgd.c stops without them)
+
+
+def _compiler() -> list[str]:
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if not cc:
         raise KernelUnavailable("no C compiler (set CC or install gcc)")
-    return cc
+    return shlex.split(cc)
 
 
-def _cpu_id() -> str:
+def _compiler_version(cc: list[str]) -> str:
+    """``cc --version``: part of the cache key, so a changed compiler never reuses an old library."""
+    try:
+        proc = subprocess.run([*cc, "--version"], capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise KernelUnavailable(f"C compiler {shlex.join(cc)!r} does not run: {exc}") from exc
+    if proc.returncode != 0:
+        raise KernelUnavailable(f"C compiler {shlex.join(cc)!r} does not run: `--version` exited with "
+                                f"{proc.returncode}: {proc.stderr.strip()[:500] or '(no message)'}")
+    return proc.stdout
+
+
+def cpu_flags() -> frozenset[str]:
+    """Feature flags that every core lists in /proc/cpuinfo (empty where it cannot be read)."""
     try:
         with open("/proc/cpuinfo") as f:
-            lines = [ln for ln in f if ln.startswith(("flags", "model name"))]
-        return "".join(sorted(set(lines)))
+            sets = [frozenset(ln.split(":", 1)[1].split()) for ln in f if ln.startswith("flags")]
+    except OSError:
+        return frozenset()
+    return frozenset.intersection(*sets) if sets else frozenset()
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            return "".join(sorted({ln for ln in f if ln.startswith("model name")}))
     except OSError:
         return platform.processor()
+
+
+def check_cpu(flags: frozenset[str]) -> None:
+    """Refuse a CPU without AVX2/FMA before any library is opened: a cache shared between machines
+    must end in a fallback, never in SIGILL."""
+    missing = [f for f in REQUIRED_CPU_FEATURES if f not in flags]
+    if missing:
+        seen = "" if flags else " (no CPU flags readable from /proc/cpuinfo)"
+        raise KernelUnavailable(f"no AVX2/FMA: this CPU lacks {', '.join(missing)}{seen}")
 
 
 class Kernel:
@@ -314,7 +137,8 @@ class Kernel:
     def train(self, sizes, w: torch.Tensor, buf: torch.Tensor, X: torch.Tensor, Y: torch.Tensor,
               order: torch.Tensor, batch_size: int, lr: float, mom: float, loss: torch.Tensor,
               threads: int) -> None:
-        """One epoch for all groups of ``w``/``buf`` ([G, P, 4], updated in place); ``loss`` [G*4] gets sums."""
+        """One epoch for all groups of ``w``/``buf`` ([G, P, 4], updated in place); ``loss`` [G*4] gets
+        per-lane sums."""
         G, P, lanes = w.shape
         assert lanes == LANES and buf.shape == w.shape and w.is_contiguous() and buf.is_contiguous()
         assert w.dtype == buf.dtype == X.dtype == Y.dtype == loss.dtype == torch.float64
@@ -341,54 +165,80 @@ class Kernel:
             fut.result()
 
 
-def source(sizes) -> str:
-    """C source of the kernel specialised for topology ``sizes``."""
+def macros(sizes) -> list[str]:
+    """The ``-D`` flags that specialise ``kernels/sgd.c`` for topology ``sizes`` (see the file's header)."""
     sizes = tuple(int(s) for s in sizes)
-    nl = len(sizes) - 1
     P = sum(o * i + o for i, o in zip(sizes[:-1], sizes[1:]))
-    return (C_TEMPLATE.replace("@NL@", str(nl)).replace("@SIZES@", ", ".join(map(str, sizes)))
-            .replace("@NI@", str(INTERLEAVE)).replace("@P@", str(P)).replace("@TOT@", str(sum(sizes)))
-            .replace("@MAXW@", str(max(sizes))))
+    return [f"-DNL={len(sizes) - 1}", f"-DSIZES={','.join(map(str, sizes))}", f"-DP_TOTAL={P}",
+            f"-DTOT_UNITS={sum(sizes)}", f"-DMAXW={max(sizes)}", f"-DNI={INTERLEAVE}"]
 
 
 _lock = threading.Lock()
-_kernels: dict[tuple[int, ...], Kernel] = {}
-_errors: dict[tuple[int, ...], str] = {}
+_kernels: dict[tuple[int, ...], Kernel] = {}  # loaded libraries; failures are not remembered (see load)
 
 
-def build(sizes, verbose: bool = False) -> Path:
-    """Compile the kernel for ``sizes`` into the cache (if not already there); return the library's path."""
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _sidecar(library: Path) -> Path:
+    """``<library>.sha256``: written after the library, so a library without a matching one is damaged
+    (truncated by a full disk, killed mid-copy, ...) or not finished."""
+    return library.with_name(library.name + ".sha256")
+
+
+def _intact(library: Path) -> bool:
+    try:
+        return _sidecar(library).read_text().strip() == _digest(library)
+    except OSError:
+        return False
+
+
+def library_path(sizes, cc: list[str] | None = None) -> Path:
+    """Where the cache keeps the library for ``sizes``: keyed by source, macros, flags, compiler and CPU."""
+    cc = cc or _compiler()
+    key_text = "\0".join([SOURCE.read_text(), shlex.join([*cc, *macros(sizes), *CFLAGS, *LIBS]),
+                          _compiler_version(cc), " ".join(sorted(cpu_flags())), _cpu_model()])
+    key = hashlib.sha256(key_text.encode()).hexdigest()[:16]
+    return cache_dir() / f"selpres_{'-'.join(map(str, sizes))}_{key}.so"
+
+
+def build(sizes) -> Path:
+    """The cached library for ``sizes``, compiled first if it is missing or fails its checksum."""
+    sizes = tuple(int(s) for s in sizes)
     cc = _compiler()
-    code = source(sizes)
-    try:
-        version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout
-    except (OSError, subprocess.SubprocessError) as exc:
-        raise KernelUnavailable(f"C compiler {cc!r} does not run: {exc}") from exc
-    key = hashlib.sha256("\0".join([code, " ".join(CFLAGS + LIBS), version, _cpu_id()]).encode()).hexdigest()[:16]
-    out_dir = cache_dir()
-    target = out_dir / f"selpres_{'-'.join(map(str, sizes))}_{key}.so"
+    target = library_path(sizes, cc)
     if target.exists():
-        return target
+        if _intact(target):
+            return target
+        log.warning("the cached native kernel %s fails its checksum; rebuilding it", target)
+    cmd = [*cc, *CFLAGS, *macros(sizes), "-o", "<out>", str(SOURCE), *LIBS]
     try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
-            src = Path(tmp) / "kernel.c"
-            src.write_text(code)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
             so = Path(tmp) / "kernel.so"
-            proc = subprocess.run([cc, *CFLAGS, "-o", str(so), str(src), *LIBS],
-                                  capture_output=True, text=True, timeout=300)
+            cmd[cmd.index("<out>")] = str(so)
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=COMPILE_TIMEOUT)
             if proc.returncode != 0:
-                raise KernelUnavailable(f"compiling the native kernel failed:\n{proc.stderr.strip()[:2000]}")
+                msg = (proc.stderr or proc.stdout).strip()[:2000] or "(no message)"
+                raise KernelUnavailable(f"compiling the native kernel failed ({shlex.join(cc)} exited with "
+                                        f"{proc.returncode}):\n{msg}")
+            digest = _digest(so)
             os.replace(so, target)  # atomic: concurrent builders each install a complete file
+            (Path(tmp) / "sum").write_text(digest + "\n")
+            os.replace(Path(tmp) / "sum", _sidecar(target))  # after the library: marks it complete
+    except subprocess.TimeoutExpired as exc:
+        raise KernelUnavailable(f"compiling the native kernel timed out after {COMPILE_TIMEOUT} s "
+                                "(machine busy?); a later run retries") from exc
     except (OSError, subprocess.SubprocessError) as exc:
-        raise KernelUnavailable(f"cannot build the native kernel in {out_dir}: {exc}") from exc
-    if verbose:
-        print(f"selpres: built native kernel {target}")
+        raise KernelUnavailable(f"cannot build the native kernel in {target.parent}: {exc}") from exc
+    log.info("built native kernel %s", target)
     return target
 
 
 def load(sizes) -> Kernel:
-    """The kernel for topology ``sizes`` (built on first use); raises :class:`KernelUnavailable` if it cannot be had."""
+    """The kernel for topology ``sizes``, built on first use; raises :class:`KernelUnavailable` if it cannot
+    be had. Only successes are remembered: after a failed or timed-out build a later call tries again."""
     sizes = tuple(int(s) for s in sizes)
     if os.environ.get("SELPRES_NO_NATIVE", "") not in ("", "0"):
         raise KernelUnavailable("disabled by SELPRES_NO_NATIVE")
@@ -397,15 +247,10 @@ def load(sizes) -> Kernel:
     with _lock:
         if sizes in _kernels:
             return _kernels[sizes]
-        if sizes in _errors:
-            raise KernelUnavailable(_errors[sizes])
+        check_cpu(cpu_flags())  # before any cached library is opened
+        path = build(sizes)
         try:
-            path = build(sizes)
-            try:
-                _kernels[sizes] = Kernel(path)
-            except OSError as exc:
-                raise KernelUnavailable(f"cannot load {path}: {exc}") from exc
-        except KernelUnavailable as exc:
-            _errors[sizes] = str(exc)
-            raise
+            _kernels[sizes] = Kernel(path)
+        except OSError as exc:
+            raise KernelUnavailable(f"cannot load {path}: {exc}") from exc
         return _kernels[sizes]

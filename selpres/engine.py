@@ -9,12 +9,17 @@ Every engine does the same thing, defined by :class:`ReferenceEngine` (plain PyT
 * ``"native"``    -- :class:`NativeEngine`: an AVX2 C kernel (4 float64 replicas per vector, inline
   vector ``exp``, topology compiled in), built with the system C compiler at first use and cached
   (see :mod:`selpres._kernels`).
-* ``"fast"``      -- the best available of ``native`` then ``torch``.
+* ``"fast"``      -- ``native`` if the kernel can be had here, else ``torch``. Not a class: the returned
+  engine's ``name`` says which one runs, and its ``fallback_reason`` why it is not native (the
+  compiler's message, "no AVX2/FMA ...", "disabled by SELPRES_NO_NATIVE"); one warning line goes to the
+  ``selpres`` logger. ``make_engine("native")`` raises :class:`selpres._kernels.KernelUnavailable` instead.
 
 Interface (all engines)::
 
-    eng = make_engine(name, sizes, params, lr, momentum, batch_size)   # params: [W1, b1, W2, b2, ...], leading dim R
-    losses = eng.train_epoch(X, Y, order)   # order [R, m] int64; returns [R] mean pre-update per-pattern loss
+    eng = make_engine(name, sizes, params, lr, momentum, batch_size)   # params [W1, b1, ...], leading dim R
+    eng.name              # the engine that actually runs: "reference", "torch" or "native"
+    eng.fallback_reason   # None, or (engine "fast" only) why native could not run
+    losses = eng.train_epoch(X, Y, order)   # order [R, m] int64; returns [R] mean pre-update pattern loss
     eng.params(); eng.state_dict(); eng.load_state_dict(state)
 
 Semantics: replica r presents ``X[order[r, j]]`` for j = 0..m-1 in consecutive mini-batches of
@@ -30,6 +35,7 @@ sweep already runs one process per core). Environment variable ``SELPRES_THREADS
 
 from __future__ import annotations
 
+import logging
 import os
 from typing import Protocol
 
@@ -41,9 +47,12 @@ from selpres.model import BPN, load_into
 
 ENGINE_NAMES = ("reference", "torch", "native", "fast")
 
+log = logging.getLogger("selpres")
+
 
 class Engine(Protocol):
     name: str
+    fallback_reason: str | None
 
     def train_epoch(self, X: torch.Tensor, Y: torch.Tensor, order: torch.Tensor) -> torch.Tensor: ...
 
@@ -80,6 +89,7 @@ class ReferenceEngine:
     """One ``BPN`` + one ``torch.optim.SGD`` per replica, trained pattern by pattern with autograd."""
 
     name = "reference"
+    fallback_reason: str | None = None
 
     def __init__(self, sizes, params, lr, momentum, batch_size):
         self.sizes = tuple(sizes)
@@ -134,6 +144,7 @@ class TorchEngine:
     """Replica-batched eager PyTorch with a hand-written backward. Same updates as the reference."""
 
     name = "torch"
+    fallback_reason: str | None = None
 
     def __init__(self, sizes, params, lr, momentum, batch_size):
         self.sizes = tuple(sizes)
@@ -190,6 +201,7 @@ class NativeEngine:
     """AVX2 C kernel over groups of 4 replicas (replica index innermost), threads over groups."""
 
     name = "native"
+    fallback_reason: str | None = None
     LANES = 4
 
     def __init__(self, sizes, params, lr, momentum, batch_size, threads: int | None = None):
@@ -261,14 +273,16 @@ def native_available(sizes=(6, 13, 2)) -> bool:
 
 def make_engine(name: str, sizes, params, lr: float, momentum: float, batch_size: int,
                 threads: int | None = None) -> Engine:
-    """``name``: ``"reference"``, ``"torch"``, ``"native"`` or ``"fast"`` (native if it can be built, else torch).
+    """``name``: ``"reference"``, ``"torch"``, ``"native"`` or ``"fast"`` (native if it can be had, else
+    torch, with ``fallback_reason`` set and one warning logged); ``"native"`` raises ``KernelUnavailable``.
 
     ``threads`` (native only): OS threads over replica groups; default ``$SELPRES_THREADS`` or
     ``torch.get_num_threads()``.
     """
     sizes = tuple(int(s) for s in sizes)
     if len(params) != 2 * (len(sizes) - 1):
-        raise ValueError(f"{len(params)} parameter tensors for topology {sizes}: expected {2 * (len(sizes) - 1)}")
+        raise ValueError(f"{len(params)} parameter tensors for topology {sizes}: "
+                         f"expected {2 * (len(sizes) - 1)}")
     if int(batch_size) < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size}")
     if name == "reference":
@@ -282,6 +296,11 @@ def make_engine(name: str, sizes, params, lr: float, momentum: float, batch_size
 
         try:
             return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
-        except _kernels.KernelUnavailable:
-            return TorchEngine(sizes, params, lr, momentum, batch_size)
+        except _kernels.KernelUnavailable as exc:
+            engine = TorchEngine(sizes, params, lr, momentum, batch_size)
+            engine.fallback_reason = str(exc)
+            line = " ".join(str(exc).split())  # one line, however long the compiler's message
+            log.warning("engine 'fast' runs the torch engine: native kernel unavailable: %s",
+                        line if len(line) <= 400 else line[:400] + " ...")
+            return engine
     raise ValueError(f"unknown engine {name!r}: choose one of {ENGINE_NAMES}")

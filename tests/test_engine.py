@@ -2,22 +2,20 @@
 
 from __future__ import annotations
 
+import logging
 import math
 
 import pytest
 import torch
+from conftest import requires_native
 
 from selpres import _kernels
-from selpres.engine import make_engine, native_available
+from selpres.engine import make_engine
 from selpres.model import forward_replicas, init_replica_params
 
 LR, MOM = 0.15, 0.9
-FAST_NAMES = ["torch", "native", "fast"]
-
-
-def _needs(name):
-    if name == "native" and not native_available():
-        pytest.skip("native kernel unavailable here (no C compiler / AVX2 / libmvec)")
+NATIVE = pytest.param("native", marks=requires_native)
+ALL_NAMES = ["reference", "torch", NATIVE, "fast"]  # "fast": native here, or torch where native cannot run
 
 
 def _data(n, sizes, seed=0):
@@ -108,38 +106,128 @@ def test_reference_matches_torch_func_and_returns_pre_update_loss():
 
 
 # ---------------------------------------------------------------- fast engines vs reference
-def _run(name, sizes, params, B, X, Y, orders):
-    eng = make_engine(name, sizes, params, LR, MOM, B)
+# Where the fast engines are used: every shipped topology, R = 1 (a lone lane), 8 (two groups: one
+# interleaved pair), 13 (an interleaved pair + a leftover group, padded lanes), 30 (Table 1: four pairs,
+# padded lanes), online and mini-batch (B = 7 divides none of the epoch lengths), through selective
+# presentation's stage changes (permutations of growing prefixes 50 -> 120 -> n of U) and a partial
+# (budget) epoch. Default tier: 4 cases on a 200-pattern slice of the exemplar set that still cover
+# every topology, every R and B = 7 with interleaving; the whole grid on all n = 1002 is marked slow.
+TOPOLOGIES = [(6, 4, 2), (6, 8, 2), (6, 13, 2), (6, 8, 8, 2)]
+DEFAULT_CASES = [((6, 4, 2), 1, 1), ((6, 8, 2), 8, 7), ((6, 13, 2), 30, 1), ((6, 8, 8, 2), 13, 7)]
+EQUIVALENCE_CASES = (
+    [pytest.param(sizes, R, B, 200, id=f"{'-'.join(map(str, sizes))}-R{R}-B{B}-n200")
+     for sizes, R, B in DEFAULT_CASES]
+    + [pytest.param(sizes, R, B, 1002, id=f"{'-'.join(map(str, sizes))}-R{R}-B{B}-n1002",
+                    marks=pytest.mark.slow)
+       for sizes in TOPOLOGIES for R in (1, 8, 13, 30) for B in (1, 7)])
+TOL = 1e-12
+
+
+@pytest.fixture(scope="module")
+def scaled_exemplar(exemplar):
+    """The exemplar set as the network sees it (inputs and targets in [0.1, 0.9])."""
+    from conftest import load_group
+
+    from selpres.data import Scaler
+
+    scaler = Scaler.fit(exemplar, load_group("data", "paper"))
+    return scaler.transform_x(exemplar.X), scaler.transform_y(exemplar.Y)
+
+
+def _stage_orders(R, n, seed=2):
+    """Each replica its own permutation of the first 50, 120, then all n patterns, then a budget epoch
+    that stops after a third of a permutation of U."""
+    g = torch.Generator().manual_seed(seed)
+    widths = [(50, 50), (120, 120), (n, n), (n, n // 3)]
+    return [torch.stack([torch.randperm(m, generator=g)[:k] for _ in range(R)]) for m, k in widths]
+
+
+_reference_runs: dict = {}
+
+
+def _trained(name, sizes, params, B, X, Y, orders):
+    # threads=1: native then runs each chunk of groups in interleaved pairs (R = 8 is one pair); other
+    # splits over threads give bitwise the same numbers (test_native_threads_give_identical_results)
+    eng = make_engine(name, sizes, params, LR, MOM, B, threads=1)
+    assert eng.name == name
     losses = [eng.train_epoch(X, Y, o) for o in orders]
-    return eng, losses
+    return eng.state_dict(), losses
 
 
-@pytest.mark.parametrize("name", FAST_NAMES)
-@pytest.mark.parametrize("sizes", [(6, 4, 2), (6, 13, 2), (6, 8, 8, 2)], ids=lambda s: "-".join(map(str, s)))
-@pytest.mark.parametrize("B", [1, 7])
-@pytest.mark.parametrize("R", [1, 3])
-def test_fast_matches_reference(name, sizes, B, R):
-    _needs(name)
-    n = 200
-    X, Y = _data(n, sizes)
+@pytest.mark.parametrize("name", ["torch", NATIVE])
+@pytest.mark.parametrize("sizes, R, B, n", EQUIVALENCE_CASES)
+def test_fast_matches_reference(scaled_exemplar, name, sizes, R, B, n):
+    X, Y = scaled_exemplar
+    keep = torch.randperm(X.shape[0], generator=torch.Generator().manual_seed(3))[:n]
+    X, Y = X[keep].contiguous(), Y[keep].contiguous()
     params = init_replica_params(sizes, list(range(10, 10 + R)))
-    orders = _orders(R, n, [20, 50, 200, 200])  # selective growth, then a conventional epoch; 7 divides none
-    ref, ref_losses = _run("reference", sizes, params, B, X, Y, orders)
-    fast, fast_losses = _run(name, sizes, params, B, X, Y, orders)
-    assert _maxdiff(ref.params(), fast.params()) <= 1e-9
-    assert _maxdiff(ref.state_dict()["momentum"], fast.state_dict()["momentum"]) <= 1e-9
-    for a, b in zip(ref_losses, fast_losses):
-        assert a.shape == b.shape == (R,) and (a - b).abs().max().item() <= 1e-9
-    for p, q in zip(ref.params(), params):
+    orders = _stage_orders(R, n)
+    key = (sizes, R, B, n)
+    if key not in _reference_runs:  # shared by both engines
+        _reference_runs[key] = _trained("reference", sizes, params, B, X, Y, orders)
+    ref_state, ref_losses = _reference_runs[key]
+    state, losses = _trained(name, sizes, params, B, X, Y, orders)
+    assert _maxdiff(ref_state["params"], state["params"]) <= TOL
+    assert _maxdiff(ref_state["momentum"], state["momentum"]) <= TOL
+    assert len(losses) == len(orders)
+    for a, b in zip(ref_losses, losses):
+        assert a.shape == b.shape == (R,) and (a - b).abs().max().item() <= TOL
+    for p, q in zip(state["params"] + state["momentum"], params + params):
         assert p.shape == q.shape and p.dtype == torch.float64
+    assert _maxdiff(state["params"], params) > 1e-3  # it trained
 
 
-def test_fast_engine_falls_back_to_torch(monkeypatch):
+def _fallback_warnings(caplog):
+    return [r for r in caplog.records if r.name == "selpres" and r.levelno == logging.WARNING]
+
+
+@pytest.mark.parametrize("name", ["reference", "torch"])
+def test_engines_name_what_runs(name):
+    sizes = (6, 4, 2)
+    eng = make_engine(name, sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    assert eng.name == name and eng.fallback_reason is None
+
+
+@requires_native
+def test_fast_engine_is_native_where_the_kernel_runs(caplog):
+    sizes = (6, 4, 2)
+    with caplog.at_level(logging.WARNING, logger="selpres"):
+        eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    assert eng.name == "native" and eng.fallback_reason is None and not _fallback_warnings(caplog)
+
+
+def test_fast_engine_falls_back_to_torch_and_says_why(monkeypatch, caplog):
     monkeypatch.setenv("SELPRES_NO_NATIVE", "1")
     sizes = (6, 4, 2)
-    eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    with caplog.at_level(logging.WARNING, logger="selpres"):
+        eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    assert eng.name == "torch" and eng.fallback_reason == "disabled by SELPRES_NO_NATIVE"
+    (warning,) = _fallback_warnings(caplog)
+    assert "\n" not in warning.getMessage() and warning.getMessage().endswith("disabled by SELPRES_NO_NATIVE")
+    with pytest.raises(_kernels.KernelUnavailable, match="disabled by SELPRES_NO_NATIVE"):
+        make_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+
+
+def test_fast_engine_reports_the_compilers_message(tmp_path, monkeypatch, caplog):
+    """A failing compiler (here a script printing an error) is named in fallback_reason, in one log line."""
+    cc = tmp_path / "broken-cc"
+    cc.write_text('#!/bin/sh\ncase "$1" in --version) echo broken-cc 1.0;;\n'
+                  '*) echo "sgd.c:1: error: boom" >&2; echo "second line" >&2; exit 3;; esac\n')
+    cc.chmod(0o755)
+    monkeypatch.setenv("CC", str(cc))
+    monkeypatch.delenv("SELPRES_NO_NATIVE", raising=False)
+    monkeypatch.setenv("SELPRES_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(_kernels, "_kernels", {})
+    monkeypatch.setattr(_kernels, "cpu_flags", lambda: frozenset({"avx2", "fma"}))  # reach the compiler
+    sizes = (6, 3, 2)
+    with caplog.at_level(logging.WARNING, logger="selpres"):
+        eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
     assert eng.name == "torch"
-    with pytest.raises(_kernels.KernelUnavailable):
+    assert "exited with 3" in eng.fallback_reason
+    assert "sgd.c:1: error: boom\nsecond line" in eng.fallback_reason
+    (warning,) = _fallback_warnings(caplog)
+    assert "\n" not in warning.getMessage() and "sgd.c:1: error: boom second line" in warning.getMessage()
+    with pytest.raises(_kernels.KernelUnavailable, match="boom"):
         make_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
 
 
@@ -148,17 +236,14 @@ def test_does_not_modify_callers_params():
     params = init_replica_params(sizes, [0, 1])
     before = [t.clone() for t in params]
     X, Y = _data(50, sizes)
-    for name in ["reference", *FAST_NAMES]:
-        if name == "native" and not native_available():
-            continue
+    for name in ["reference", "torch", "fast"]:  # "fast" is native wherever the kernel runs
         make_engine(name, sizes, params, LR, MOM, 1).train_epoch(X, Y, _orders(2, 50, [50])[0])
         assert all(torch.equal(a, b) for a, b in zip(params, before))
 
 
 # ---------------------------------------------------------------- checkpoint / resume
-@pytest.mark.parametrize("name", ["reference", *FAST_NAMES])
+@pytest.mark.parametrize("name", ALL_NAMES)
 def test_state_dict_round_trip_is_exact(name):
-    _needs(name)
     sizes, R, n = (6, 5, 2), 3, 60
     X, Y = _data(n, sizes)
     params = init_replica_params(sizes, [1, 2, 3])
@@ -181,8 +266,8 @@ def test_state_dict_round_trip_is_exact(name):
         assert torch.equal(a, b)
 
 
+@requires_native
 def test_state_dicts_are_interchangeable_between_engines():
-    _needs("native")
     sizes, n = (6, 4, 2), 40
     X, Y = _data(n, sizes)
     params = init_replica_params(sizes, [1, 2])
@@ -197,9 +282,8 @@ def test_state_dicts_are_interchangeable_between_engines():
 
 
 # ---------------------------------------------------------------- divergence / independence
-@pytest.mark.parametrize("name", ["reference", *FAST_NAMES])
+@pytest.mark.parametrize("name", ALL_NAMES)
 def test_nan_replica_leaves_others_untouched(name):
-    _needs(name)
     sizes, R, n = (6, 4, 2), 6, 50  # R=6: the NaN replica shares a 4-lane vector with others
     X, Y = _data(n, sizes)
     params = init_replica_params(sizes, list(range(R)))
@@ -207,7 +291,8 @@ def test_nan_replica_leaves_others_untouched(name):
     poisoned[0][1, 0, 0] = float("nan")
     poisoned[2][4, 1, 1] = float("inf")
     orders = _orders(R, n, [n, n])
-    clean, dirty = make_engine(name, sizes, params, LR, MOM, 2), make_engine(name, sizes, poisoned, LR, MOM, 2)
+    clean = make_engine(name, sizes, params, LR, MOM, 2)
+    dirty = make_engine(name, sizes, poisoned, LR, MOM, 2)
     for o in orders:
         clean_loss, dirty_loss = clean.train_epoch(X, Y, o), dirty.train_epoch(X, Y, o)
     keep = [0, 2, 3, 5]
@@ -218,8 +303,8 @@ def test_nan_replica_leaves_others_untouched(name):
     assert not torch.isfinite(dirty.params()[0][1]).all()
 
 
+@requires_native
 def test_native_threads_give_identical_results():
-    _needs("native")
     sizes, R, n = (6, 13, 2), 13, 100
     X, Y = _data(n, sizes)
     params = init_replica_params(sizes, list(range(R)))

@@ -1,0 +1,264 @@
+/* selpres native kernel: SGD with momentum for many replicas of a sigmoid back-propagation network.
+ *
+ * Built and loaded by selpres/_kernels.py, which compiles this file once per topology with
+ *   cc -O3 -march=native -fPIC -shared -std=c11 \
+ *      -DNL=.. -DSIZES=.. -DP_TOTAL=.. -DTOT_UNITS=.. -DMAXW=.. -DNI=..
+ *   NL         number of weight layers (6-13-2: 2)
+ *   SIZES      the layer widths, comma separated (6-13-2: 6,13,2)
+ *   P_TOTAL    parameters of one replica: sum over layers of out*in + out
+ *   TOT_UNITS  sum of SIZES (activations of one presentation)
+ *   MAXW       the widest layer
+ * Work arrays (activations, deltas) live on the heap, one block per call, so no topology can overflow a
+ * thread's stack.
+ *   NI         groups advanced together in one instruction stream (see train_groups)
+ *
+ * Layout: replicas in groups of 4 lanes, one AVX2 vector of float64 per parameter; a group's parameters
+ * are contiguous as [P_TOTAL][4] in the order W1 (row-major [out][in]), b1, W2, b2, ...
+ * Every replica sees exactly the operations of torch.optim.SGD(lr, momentum) on mse_loss, in a fixed
+ * order, so results do not depend on how replicas are grouped or threaded.
+ */
+#include <immintrin.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef __AVX2__
+#error "selpres kernel needs AVX2"
+#endif
+#ifndef __FMA__
+#error "selpres kernel needs FMA"
+#endif
+#if !defined(NL) || !defined(SIZES) || !defined(P_TOTAL) || !defined(TOT_UNITS) || !defined(MAXW) \
+    || !defined(NI)
+#error "compile with -DNL -DSIZES -DP_TOTAL -DTOT_UNITS -DMAXW -DNI (see the header comment)"
+#endif
+
+static const int64_t S[NL + 1] = {SIZES};
+
+#define LD(p) _mm256_loadu_pd(p)
+#define ST(p, v) _mm256_storeu_pd((p), (v))
+
+/* exp(x) for 4 doubles, |rel err| ~1e-16 (Cody-Waite reduction + degree-13 Taylor); x clamped to
+   [-708, 708] (NaN passes through). Only used inside the sigmoid, where the clamp is invisible. */
+static inline __m256d exp4(__m256d x) {
+    x = _mm256_min_pd(_mm256_set1_pd(708.0), x);   /* operand order keeps NaN */
+    x = _mm256_max_pd(_mm256_set1_pd(-708.0), x);
+    __m256d n = _mm256_round_pd(_mm256_mul_pd(x, _mm256_set1_pd(1.4426950408889634)),
+                                _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+    __m256d r = _mm256_fnmadd_pd(n, _mm256_set1_pd(6.93147180369123816490e-01), x);
+    r = _mm256_fnmadd_pd(n, _mm256_set1_pd(1.90821492927058770002e-10), r);
+    __m256d p = _mm256_set1_pd(1.0 / 6227020800.0);
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 479001600.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 39916800.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 3628800.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 362880.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 40320.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 5040.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 720.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 120.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 24.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0 / 6.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(0.5));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0));
+    p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(1.0));
+    __m256d t = _mm256_add_pd(n, _mm256_set1_pd(6755399441055744.0));   /* 1.5 * 2^52: n in the low bits */
+    __m256i e = _mm256_slli_epi64(_mm256_add_epi64(_mm256_castpd_si256(t), _mm256_set1_epi64x(1023)), 52);
+    return _mm256_mul_pd(p, _mm256_castsi256_pd(e));
+}
+
+static inline __m256d sigmoid4(__m256d z) {
+    const __m256d one = _mm256_set1_pd(1.0);
+    return _mm256_div_pd(one, _mm256_add_pd(one, exp4(_mm256_xor_pd(z, _mm256_set1_pd(-0.0)))));
+}
+
+#define WORK_DOUBLES ((TOT_UNITS + 2 * MAXW) * 4)  /* one group's work arrays */
+
+/* Interleave. One presentation is a long chain of dependent operations (forward with ~90-cycle
+   sigmoid chains, backward, update; the next presentation reads the updated weights), so a single
+   group of 4 replicas leaves the core partly idle. train_groups() therefore advances ni independent
+   groups in one instruction stream (every value is an array of ni vectors, one per group) and the CPU
+   overlaps their chains (~1.3x at 6-13-2; the update's loads/stores then bound it). Each replica still
+   sees exactly the same sequence of IEEE operations, so results do not depend on how replicas are
+   grouped. Called with ni = NI, then ni = 1 for a leftover group. Loops are unrolled by 4 only: fully
+   unrolled, the interleaved code was slower. */
+static inline __attribute__((always_inline)) void
+train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *work,
+             const double *X, const double *Y, const int64_t *order, int64_t m, int64_t B,
+             double lr, double mom, double *loss)
+{
+    const int64_t nin = S[0], nout = S[NL];
+    int64_t woff[NL], boff[NL], aoff[NL + 1];
+    {
+        int64_t off = 0, tot = 0;
+        for (int l = 0; l < NL; l++) {
+            woff[l] = off; off += S[l + 1] * S[l]; boff[l] = off; off += S[l + 1];
+        }
+        for (int l = 0; l <= NL; l++) { aoff[l] = tot; tot += S[l]; }
+    }
+    /* per group: activations [TOT_UNITS][4] and two delta buffers [MAXW][4], in `work` */
+    double *act[NI], *da[NI], *db[NI];
+    double *w[NI], *mb[NI], *G[NI];
+    const int64_t *ord[NI][4];
+    __m256d lsum[NI];
+    const __m256d one = _mm256_set1_pd(1.0);
+    const __m256d vmom = _mm256_set1_pd(mom), vlr = _mm256_set1_pd(lr);
+
+#define EACH for (int u = 0; u < ni; u++)
+#pragma GCC unroll 4
+    EACH {
+        w[u] = W + (g + u) * P_TOTAL * 4;
+        mb[u] = M + (g + u) * P_TOTAL * 4;
+        G[u] = Gb + u * P_TOTAL * 4;
+        act[u] = work + u * WORK_DOUBLES;
+        da[u] = act[u] + TOT_UNITS * 4;
+        db[u] = da[u] + MAXW * 4;
+        for (int k = 0; k < 4; k++) ord[u][k] = order + ((g + u) * 4 + k) * m;
+        lsum[u] = _mm256_setzero_pd();
+    }
+    for (int64_t s = 0; s < m; s += B) {
+        const int64_t bs = (m - s < B) ? (m - s) : B;
+        const __m256d scale = _mm256_set1_pd(2.0 / (double)(bs * nout));
+        if (B > 1) memset(Gb, 0, (size_t)ni * P_TOTAL * 32);
+        for (int64_t k = 0; k < bs; k++) {
+            const int64_t j = s + k;
+            /* forward: inputs of the 4 lanes' patterns, then each layer's sigmoid units */
+#pragma GCC unroll 4
+            EACH {
+                const double *x0 = X + ord[u][0][j] * nin, *x1 = X + ord[u][1][j] * nin;
+                const double *x2 = X + ord[u][2][j] * nin, *x3 = X + ord[u][3][j] * nin;
+#pragma GCC unroll 4
+                for (int64_t i = 0; i < nin; i++)
+                    ST(act[u] + i * 4, _mm256_set_pd(x3[i], x2[i], x1[i], x0[i]));
+            }
+#pragma GCC unroll 8
+            for (int l = 0; l < NL; l++) {
+                const int64_t ni_ = S[l], no = S[l + 1];
+#pragma GCC unroll 4
+                for (int64_t o = 0; o < no; o++) {
+                    __m256d z[NI];
+#pragma GCC unroll 4
+                    EACH z[u] = LD(w[u] + (boff[l] + o) * 4);
+#pragma GCC unroll 4
+                    for (int64_t i = 0; i < ni_; i++) {
+#pragma GCC unroll 4
+                        EACH z[u] = _mm256_fmadd_pd(LD(w[u] + (woff[l] + o * ni_ + i) * 4),
+                                                    LD(act[u] + (aoff[l] + i) * 4), z[u]);
+                    }
+#pragma GCC unroll 4
+                    EACH ST(act[u] + (aoff[l + 1] + o) * 4, sigmoid4(z[u]));
+                }
+            }
+            /* output deltas dL/dz = 2 (y - t) / (bs * nout) * y (1 - y); the loss sums (y - t)^2 */
+            double **d = da, **dn = db;
+#pragma GCC unroll 4
+            EACH {
+                const double *y = act[u] + aoff[NL] * 4;
+                const double *t0 = Y + ord[u][0][j] * nout, *t1 = Y + ord[u][1][j] * nout;
+                const double *t2 = Y + ord[u][2][j] * nout, *t3 = Y + ord[u][3][j] * nout;
+#pragma GCC unroll 4
+                for (int64_t o = 0; o < nout; o++) {
+                    __m256d yv = LD(y + o * 4);
+                    __m256d diff = _mm256_sub_pd(yv, _mm256_set_pd(t3[o], t2[o], t1[o], t0[o]));
+                    lsum[u] = _mm256_fmadd_pd(diff, diff, lsum[u]);
+                    ST(d[u] + o * 4, _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(diff, scale), yv),
+                                                   _mm256_sub_pd(one, yv)));
+                }
+            }
+            /* backward, layer by layer: deltas of the layer below (from the weights before their
+               update), then the layer's update (B = 1) or gradient accumulation (B > 1) */
+#pragma GCC unroll 8
+            for (int l = NL - 1; l >= 0; l--) {
+                const int64_t ni_ = S[l], no = S[l + 1];
+                if (l > 0) {
+#pragma GCC unroll 4
+                    for (int64_t i = 0; i < ni_; i++) {
+                        __m256d acc[NI];
+#pragma GCC unroll 4
+                        EACH acc[u] = _mm256_setzero_pd();
+#pragma GCC unroll 4
+                        for (int64_t o = 0; o < no; o++) {
+#pragma GCC unroll 4
+                            EACH acc[u] = _mm256_fmadd_pd(LD(w[u] + (woff[l] + o * ni_ + i) * 4),
+                                                          LD(d[u] + o * 4), acc[u]);
+                        }
+#pragma GCC unroll 4
+                        EACH {
+                            __m256d a = LD(act[u] + (aoff[l] + i) * 4);
+                            ST(dn[u] + i * 4, _mm256_mul_pd(_mm256_mul_pd(acc[u], a), _mm256_sub_pd(one, a)));
+                        }
+                    }
+                }
+#pragma GCC unroll 4
+                for (int64_t o = 0; o < no; o++) {
+#pragma GCC unroll 4
+                    EACH {
+                        const __m256d dv = LD(d[u] + o * 4);
+                        const double *ain = act[u] + aoff[l] * 4;
+                        if (B == 1) {
+                            /* buf = mom * buf + g; p -= lr * buf (torch.optim.SGD) */
+                            double *wr = w[u] + (woff[l] + o * ni_) * 4;
+                            double *mr = mb[u] + (woff[l] + o * ni_) * 4;
+#pragma GCC unroll 4
+                            for (int64_t i = 0; i < ni_; i++) {
+                                __m256d bv = _mm256_fmadd_pd(vmom, LD(mr + i * 4),
+                                                             _mm256_mul_pd(dv, LD(ain + i * 4)));
+                                ST(mr + i * 4, bv);
+                                ST(wr + i * 4, _mm256_fnmadd_pd(vlr, bv, LD(wr + i * 4)));
+                            }
+                            double *pb = w[u] + (boff[l] + o) * 4, *pm = mb[u] + (boff[l] + o) * 4;
+                            __m256d bv = _mm256_fmadd_pd(vmom, LD(pm), dv);
+                            ST(pm, bv);
+                            ST(pb, _mm256_fnmadd_pd(vlr, bv, LD(pb)));
+                        } else {
+                            double *gr = G[u] + (woff[l] + o * ni_) * 4, *pgb = G[u] + (boff[l] + o) * 4;
+#pragma GCC unroll 4
+                            for (int64_t i = 0; i < ni_; i++)
+                                ST(gr + i * 4, _mm256_fmadd_pd(dv, LD(ain + i * 4), LD(gr + i * 4)));
+                            ST(pgb, _mm256_add_pd(LD(pgb), dv));
+                        }
+                    }
+                }
+                double **tmp = d; d = dn; dn = tmp;
+            }
+        }
+        if (B > 1) {  /* the mini-batch's update from the summed gradient */
+#pragma GCC unroll 4
+            EACH for (int64_t p = 0; p < P_TOTAL; p++) {
+                __m256d bv = _mm256_fmadd_pd(vmom, LD(mb[u] + p * 4), LD(G[u] + p * 4));
+                ST(mb[u] + p * 4, bv);
+                ST(w[u] + p * 4, _mm256_fnmadd_pd(vlr, bv, LD(w[u] + p * 4)));
+            }
+        }
+    }
+#pragma GCC unroll 4
+    EACH {
+        double ls[4];
+        _mm256_storeu_pd(ls, lsum[u]);
+        for (int k = 0; k < 4; k++) loss[(g + u) * 4 + k] = ls[k] / (double)nout;
+    }
+#undef EACH
+}
+
+/* One epoch for groups [g0, g1): W, M [G][P_TOTAL][4] updated in place; order [G*4][m] pattern indices;
+   loss[g*4 + k] gets lane k's summed per-pattern loss. Returns 0, -1 (out of memory) or -3 (the caller's
+   topology is not the one compiled in). */
+int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t P,
+                  double *W, double *M, const double *X, const double *Y,
+                  const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss)
+{
+    if (nl != NL || P != P_TOTAL) return -3;
+    for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
+    double *work = (double *)aligned_alloc(32, (size_t)NI * WORK_DOUBLES * 8);
+    double *Gb = B > 1 ? (double *)aligned_alloc(32, (size_t)NI * P_TOTAL * 32) : NULL;
+    if (!work || (B > 1 && !Gb)) {
+        free(work);
+        free(Gb);
+        return -1;
+    }
+    int64_t g = g0;
+    for (; g + NI <= g1; g += NI) train_groups(NI, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss);
+    for (; g < g1; g++) train_groups(1, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss);
+    free(work);
+    free(Gb);
+    return 0;
+}

@@ -1,0 +1,161 @@
+"""The native kernel's build, cache and loading: a real C file, and no crash or silent loss on bad caches."""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import re
+import resource
+import subprocess
+import sys
+import textwrap
+
+import pytest
+from conftest import REPO, requires_native
+
+from selpres import _kernels
+
+SIZES = (5, 3, 2)  # a topology no other test loads: its library is mapped only by the tests below
+
+
+@pytest.fixture
+def fresh_cache(tmp_path, monkeypatch):
+    """An empty kernel cache and an empty in-process memo, so each test builds and loads for itself."""
+    monkeypatch.setenv("SELPRES_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(_kernels, "_kernels", {})
+    return tmp_path / "cache"
+
+
+def test_kernel_source_is_a_c_file_shipped_with_the_package():
+    assert _kernels.SOURCE.name == "sgd.c" and _kernels.SOURCE.parent.name == "kernels"
+    text = _kernels.SOURCE.read_text()
+    assert "int selpres_train(" in text and "@" not in text  # no text-substitution placeholders left
+    # P = (13*6 + 13) + (2*13 + 2), units 6 + 13 + 2
+    assert _kernels.macros((6, 13, 2)) == ["-DNL=2", "-DSIZES=6,13,2", "-DP_TOTAL=119", "-DTOT_UNITS=21",
+                                           "-DMAXW=13", f"-DNI={_kernels.INTERLEAVE}"]
+
+
+@requires_native
+def test_compiler_errors_point_at_real_lines_of_the_source(fresh_cache, monkeypatch):
+    """Without its macros the file stops at its own #error; the message names sgd.c and that line."""
+    monkeypatch.setattr(_kernels, "macros", lambda sizes: ["-DNL=1"])
+    line = next(i for i, ln in enumerate(_kernels.SOURCE.read_text().splitlines(), 1)
+                if ln.startswith("#error") and "-DNL" in ln)
+    with pytest.raises(_kernels.KernelUnavailable) as info:
+        _kernels.build(SIZES)
+    assert re.search(rf"sgd\.c:{line}:", str(info.value)), str(info.value)
+
+
+# ---------------------------------------------------------------- a bad cache never crashes; failures retried
+@requires_native
+@pytest.mark.parametrize("damage", ["truncate", "flip"])
+def test_damaged_cached_library_is_rebuilt_not_loaded(fresh_cache, damage, caplog):
+    path = _kernels.build(SIZES)
+    good = path.read_bytes()
+    if damage == "truncate":  # e.g. a full disk, or a copy killed half way
+        path.write_bytes(good[: len(good) // 2])
+    else:  # same length, one byte changed in the middle of the code
+        bad = bytearray(good)
+        bad[len(bad) // 2] ^= 0xFF
+        path.write_bytes(bytes(bad))
+    with caplog.at_level(logging.WARNING, logger="selpres"):
+        kernel = _kernels.load(SIZES)
+    assert kernel.path == path and path.read_bytes() == good
+    assert any("fails its checksum" in r.getMessage() for r in caplog.records)
+
+
+@requires_native
+def test_library_without_checksum_is_rebuilt(fresh_cache):
+    """A library whose sidecar is missing was not finished (or predates the checksum): rebuilt."""
+    path = _kernels.build(SIZES)
+    assert _kernels._sidecar(path).read_text().strip() == hashlib.sha256(path.read_bytes()).hexdigest()
+    _kernels._sidecar(path).unlink()
+    path.write_bytes(b"\x7fELF not a library")
+    assert _kernels.load(SIZES).path == path and _kernels._sidecar(path).exists()
+
+
+@requires_native
+def test_cpu_without_avx2_never_opens_a_cached_library(fresh_cache, monkeypatch):
+    _kernels.build(SIZES)  # a library is in the cache (as if built by another machine of a cluster)
+    opened = []
+    monkeypatch.setattr(_kernels.ctypes, "CDLL", lambda *a, **k: opened.append(a) or pytest.fail("opened"))
+    monkeypatch.setattr(_kernels, "cpu_flags", lambda: frozenset({"sse2", "avx", "fma"}))
+    with pytest.raises(_kernels.KernelUnavailable, match="no AVX2/FMA: this CPU lacks avx2"):
+        _kernels.load(SIZES)
+    assert opened == []
+
+
+def test_cpu_check_names_what_is_missing():
+    _kernels.check_cpu(frozenset({"avx2", "fma", "sse2"}))  # passes
+    with pytest.raises(_kernels.KernelUnavailable, match=r"lacks avx2, fma \(no CPU flags readable"):
+        _kernels.check_cpu(frozenset())
+    with pytest.raises(_kernels.KernelUnavailable, match=r"lacks fma$"):
+        _kernels.check_cpu(frozenset({"avx2"}))
+
+
+def test_cpu_flags_are_those_every_core_lists(monkeypatch, tmp_path):
+    cpuinfo = tmp_path / "cpuinfo"
+    cpuinfo.write_text("processor\t: 0\nflags\t\t: fpu sse2 avx2 fma\n\n"
+                       "processor\t: 1\nflags\t\t: fpu sse2 fma\n")
+    real_open = open
+
+    def fake_open(f, *a, **k):
+        return real_open(cpuinfo if f == "/proc/cpuinfo" else f, *a, **k)
+
+    monkeypatch.setattr("builtins.open", fake_open)
+    assert _kernels.cpu_flags() == frozenset({"fpu", "sse2", "fma"})
+
+
+@requires_native
+def test_failed_build_is_reported_then_retried(fresh_cache, monkeypatch):
+    """A compiler failure or a time-out is not remembered for the process: the next load() builds."""
+    cc = os.environ.get("CC")
+    monkeypatch.setenv("CC", "false")
+    with pytest.raises(_kernels.KernelUnavailable, match="'false' does not run|false exited with 1"):
+        _kernels.load(SIZES)
+    monkeypatch.setenv("CC", cc) if cc else monkeypatch.delenv("CC")
+    monkeypatch.setattr(_kernels, "COMPILE_TIMEOUT", 1e-4)
+    with pytest.raises(_kernels.KernelUnavailable, match="timed out after 0.0001 s"):
+        _kernels.load(SIZES)
+    assert not list(fresh_cache.glob("*.so"))  # nothing half-built left behind
+    monkeypatch.setattr(_kernels, "COMPILE_TIMEOUT", 300)
+    assert _kernels.load(SIZES).path.exists()
+
+
+# ---------------------------------------------------------------- large topologies
+@pytest.mark.slow
+@requires_native
+def test_wide_layer_does_not_overflow_the_stack(tmp_path):
+    """6-40000-2: ~7.7 MB of activations and deltas (the old kernel kept them on the stack), more than a
+    2 MB stack holds. Run in a child process with that stack limit (what a small thread stack would be),
+    so a crash fails this test instead of killing pytest."""
+    code = textwrap.dedent("""
+        import torch
+        from selpres.engine import make_engine
+        from selpres.model import init_replica_params
+        sizes = (6, 40000, 2)
+        g = torch.Generator().manual_seed(0)
+        X = torch.rand(5, 6, generator=g, dtype=torch.float64)
+        Y = 0.1 + 0.8 * torch.rand(5, 2, generator=g, dtype=torch.float64)
+        params = init_replica_params(sizes, [0])
+        order = torch.tensor([[3, 1, 4, 0, 2]])
+        out = []
+        for name in ("native", "reference"):
+            eng = make_engine(name, sizes, params, 0.15, 0.9, 1, threads=1)
+            out.append((eng.train_epoch(X, Y, order), eng.params()))
+        (la, pa), (lb, pb) = out
+        assert (la - lb).abs().max() <= 1e-12, (la, lb)
+        assert max((a - b).abs().max().item() for a, b in zip(pa, pb)) <= 1e-12
+        print("ok")
+    """)
+    env = dict(os.environ, SELPRES_CACHE_DIR=str(tmp_path), PYTHONPATH=str(REPO))
+
+    def two_mb_stack():
+        hard = resource.getrlimit(resource.RLIMIT_STACK)[1]
+        soft = 2 << 20 if hard == resource.RLIM_INFINITY else min(hard, 2 << 20)
+        resource.setrlimit(resource.RLIMIT_STACK, (soft, hard))
+
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600,
+                          preexec_fn=two_mb_stack)
+    assert proc.returncode == 0 and proc.stdout.strip() == "ok", (proc.returncode, proc.stderr[-2000:])
