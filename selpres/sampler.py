@@ -67,14 +67,18 @@ _BLOCK_HASHES = 2**15  # per block of replicas: 256 KB stays in L2, and torch.ga
 _NARROW_MAX_BITS = 11  # sizes up to 2**11 sort 32-bit keys (>= 21 hash bits; ~1 tied pair per row at most)
 
 
+_MIX_STEPS = tuple((np.uint64(s), None if m is None else np.uint64(m))
+                   for s, m in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB), (31, None)))
+
+
 def _mix64_(z: np.ndarray, tmp: np.ndarray | None = None) -> np.ndarray:
     """splitmix64's finaliser, in place on ``z`` (uint64; arithmetic wraps): a bijective 64-bit hash."""
     tmp = np.empty_like(z) if tmp is None else tmp
-    for shift, mult in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB), (31, None)):
-        np.right_shift(z, np.uint64(shift), out=tmp)
+    for shift, mult in _MIX_STEPS:
+        np.right_shift(z, shift, out=tmp)
         z ^= tmp
         if mult is not None:
-            z *= np.uint64(mult)
+            z *= mult
     return z
 
 
