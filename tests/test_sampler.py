@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 import torch
@@ -10,10 +9,11 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from torch.utils.data import DataLoader, TensorDataset
 
+from selpres import sampler as S
 from selpres.errors import ConfigError
-from selpres.sampler import SelectivePresentationSampler, priority_order
+from selpres.sampler import SelectivePresentationSampler, epoch_orders, priority_order
 from selpres.schedule import Schedule, Stage, build_schedule
-from selpres.seeding import generator
+from selpres.seeding import derive_seed, generator
 
 PAPER_SIZES, PAPER_EPOCHS = [50, 100, 400, 800, 1002], [30] * 5
 KINDS = ("stratified", "random")
@@ -232,7 +232,10 @@ def schedule_inputs(draw):
     seed = draw(st.integers(0, 2**31))
     if draw(st.booleans()):
         k = draw(st.integers(1, min(5, n)))
-        sizes = sorted(draw(st.lists(st.integers(1, n - 1), min_size=k - 1, max_size=k - 1, unique=True))) + [n] if n > 1 else [n]
+        sizes = [n]
+        if n > 1:
+            inner = st.lists(st.integers(1, n - 1), min_size=k - 1, max_size=k - 1, unique=True)
+            sizes = sorted(draw(inner)) + sizes
         as_fraction = draw(st.lists(st.booleans(), min_size=len(sizes), max_size=len(sizes)))
         sizes = [s / n if f else s for s, f in zip(sizes, as_fraction)]
         epochs, budget = draw(st.lists(st.integers(1, 3), min_size=len(sizes), max_size=len(sizes))), None
@@ -256,7 +259,10 @@ def schedule_inputs(draw):
 def _valid_int_schedule(n, sizes, epochs, budget):
     """Independent validity rule for all-integer sizes (no fractions to round)."""
     ok_sizes = (
-        len(sizes) > 0 and all(s > 0 for s in sizes) and all(b > a for a, b in zip(sizes, sizes[1:])) and sizes[-1] == n
+        len(sizes) > 0
+        and all(s > 0 for s in sizes)
+        and all(b > a for a, b in zip(sizes, sizes[1:]))
+        and sizes[-1] == n
     )
     if budget is not None:
         return ok_sizes and len(sizes) == 1 and budget > 0 and epochs is None
@@ -301,3 +307,111 @@ def test_any_schedule_builds_or_raises_config_error_and_presents_exactly_its_pla
     assert total == sum(p.presentations for p in plan) == sch.presentations == expected_total
     with pytest.raises(IndexError):
         sampler.set_epoch(len(plan))
+
+
+# -------------------------------------------------------------- shuffles: the definition, written plainly
+
+_MASK64 = 2**64 - 1
+_GOLDEN = 0x9E3779B97F4A7C15
+
+
+def _mix_int(z: int) -> int:
+    """splitmix64's finaliser on a Python int (arbitrary precision, reduced mod 2**64 by hand)."""
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
+    return z ^ (z >> 31)
+
+
+def _plain_hashes(seed: int, epoch: int, size: int) -> list[int]:
+    key = derive_seed(seed, "shuffle")
+    base = _mix_int(key ^ _mix_int((epoch + _GOLDEN) & _MASK64))
+    return [_mix_int((base + i * _GOLDEN) & _MASK64) for i in range(size)]
+
+
+def _plain_epoch_order(order: list[int], seed: int, epoch: int, size: int, count: int) -> list[int]:
+    """The shuffle's definition: positions of the current set sorted by hash(key, epoch, position)."""
+    h = _plain_hashes(seed, epoch, size)
+    return [order[i] for i in sorted(range(size), key=h.__getitem__)[:count]]
+
+
+@pytest.mark.parametrize(
+    "n, sizes, epochs, budget, R",
+    [
+        (1002, [50, 100, 400, 800, 1002], [1, 2, 1, 1, 2], None, 40),  # paper sets, > 1 block of replicas
+        (1, [1], [3], None, 2),
+        (2, [1, 2], [2, 2], None, 3),
+        (2048, [1, 2047, 2048], [1, 1, 1], None, 3),  # the largest sets sorted on 32-bit keys ...
+        (5000, [2049, 5000], [1, 1], None, 2),  # ... and the smallest on 64-bit keys
+        (1002, [1.0], None, 3 * 1002 + 420, 5),  # a partial last epoch
+        (300, [1.0], None, 299, 4),  # a single, partial epoch
+    ],
+)
+def test_epoch_orders_equal_the_plain_definition(n, sizes, epochs, budget, R):
+    """Bit-identical to the definition for every replica, epoch, set size and partial count; each replica's
+    row equals its solo run (the sampler of seed s + r alone): resume and 'replica r = seed s + r' rely on
+    both."""
+    sch = build_schedule(sizes, epochs, n, budget)
+    g = torch.Generator().manual_seed(n + R)
+    seeds = [1000 * n + 17 * r for r in range(R)]
+    samplers = [SelectivePresentationSampler(torch.randperm(n, generator=g), sch, s) for s in seeds]
+    for p in sch.plan():
+        for s in samplers:
+            s.set_epoch(p.index)
+        got = epoch_orders(samplers)
+        assert got.dtype == torch.int64 and got.shape == (R, p.presentations) and got.is_contiguous()
+        for r, s in enumerate(samplers):
+            want = _plain_epoch_order(s.order.tolist(), seeds[r], p.index, p.size, p.presentations)
+            assert got[r].tolist() == want, (p, r)
+        assert torch.equal(epoch_orders(samplers[1:2])[0], got[1])
+
+
+def test_natural_ties_of_the_truncated_keys_occur_and_are_settled():
+    """At n = 1002 the 32-bit sort keys keep 22 hash bits, so some rows hold two hashes that agree on all
+    of them (about one row in eight); the full order must still follow the full 64-bit hashes."""
+    n, R = 1002, 64
+    seeds = list(range(R))
+    tied_rows = 0
+    for s in seeds:
+        high = [h >> 42 for h in _plain_hashes(s, 5, n)]
+        tied_rows += len(set(high)) < n
+    assert tied_rows >= 2  # the pair-settling path runs in this very test (worked out: 8 of 64 expected)
+    sch = build_schedule([n], [6], n)
+    samplers = [SelectivePresentationSampler(torch.arange(n), sch, s) for s in seeds]
+    for s in samplers:
+        s.set_epoch(5)
+    got = epoch_orders(samplers)
+    for r, s in enumerate(seeds):
+        assert got[r].tolist() == _plain_epoch_order(list(range(n)), s, 5, n, n)
+
+
+def _crafted_hashes(n: int, shared_bits: int, runs: list[list[int]], seed: int) -> np.ndarray:
+    """One row of n distinct uint64 hashes in which each run of positions agrees on the top ``shared_bits``
+    bits (and differs below them), placed in a random order."""
+    rng = np.random.default_rng(seed)
+    h = rng.integers(0, 2**63, n, dtype=np.uint64) * np.uint64(2) + rng.integers(0, 2, n, dtype=np.uint64)
+    low_bits = 64 - shared_bits
+    for run in runs:
+        top = int(h[run[0]]) >> low_bits
+        lows = rng.choice(2**min(low_bits, 62), len(run), replace=False).astype(np.uint64)
+        h[run] = (np.uint64(top) << np.uint64(low_bits)) | lows
+    assert len(np.unique(h)) == n
+    return h
+
+
+@pytest.mark.parametrize("n, shared_bits", [(1002, 22), (1002, 32), (3000, 52)])
+def test_forced_ties_in_the_truncated_keys_are_settled_exactly(n, shared_bits, monkeypatch):
+    """Rows crafted so that pairs, triples and long runs of hashes agree on every bit the packed sort key
+    keeps (32-bit keys keep 22 bits at n = 1002, 64-bit keys 52 at n = 3000): the result is still
+    np.argsort of the full hashes, and without the settling step it would not be."""
+    rows = [
+        _crafted_hashes(n, shared_bits, [[3, 700]], 0),  # one pair, positions far apart
+        _crafted_hashes(n, shared_bits, [[5, 4], [10, 11, 12], [900, 1, 800, 2, 600]], 1),  # pair, 3, 5
+        _crafted_hashes(n, shared_bits, [list(range(0, n, 2))], 2),  # half the row shares its key
+        _crafted_hashes(n, shared_bits, [], 3),  # no forced tie
+    ]
+    h = np.stack(rows)
+    want = np.argsort(h, axis=1, kind="stable")
+    assert np.array_equal(S._argsort_distinct_rows(h), want)
+    monkeypatch.setattr(S, "_settle_ties", lambda h, pos, tie: None)
+    unsettled = S._argsort_distinct_rows(h)
+    assert not np.array_equal(unsettled[:3], want[:3])  # the crafted ties were real, and settling fixed them

@@ -1,0 +1,377 @@
+"""Benchmark selpres on this machine, every row measured side by side in one run.
+
+    selpres-bench               # full (several minutes)
+    selpres-bench --quick       # short version (about a minute: fewer epochs and repeats)
+    python -m selpres.bench     # the same, without the console entry point
+
+Sections: the training engines alone; the whole job (``selpres.train.train`` end to end at R = 1, 30, 1000
+beside the engine alone at the same R); the per-epoch shuffles (the packed-key sort against an argsort
+of the same hashes); the priority orders' selection cost; the native kernel's build; exemplar-set
+generation. A "replica-run" is one conventional run of the paper: 150 epochs x 1002 single-pattern
+updates of a 6-13-2 sigmoid net (SGD lr 0.15, momentum 0.9). Slow configurations are timed over a few
+epochs and extrapolated to 150 (the ``ep`` column says how many were timed); times are medians. Engine
+rows use random data in the real shapes (6 inputs, 2 outputs); job rows use the real configs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+SIZES = (6, 13, 2)
+N, EPOCHS, LR, MOM = 1002, 150, 0.15, 0.9
+PACKAGE_PARENT = Path(__file__).resolve().parents[1]  # on PYTHONPATH of the child processes
+DEFAULT_CONFIGS = PACKAGE_PARENT / "configs"  # the repository's Hydra configs (a source checkout)
+JOB_PARTS = ("train", "eval", "shuffle", "log", "checkpoint", "prepare", "loop")  # results.json wall_seconds
+
+
+def data(n: int = N, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+    g = torch.Generator().manual_seed(seed)
+    return (torch.rand(n, SIZES[0], generator=g, dtype=torch.float64),
+            0.1 + 0.8 * torch.rand(n, SIZES[-1], generator=g, dtype=torch.float64))
+
+
+def median_seconds(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
+class EngineTable:
+    """Engine rows: ms per replica-run and the ratio to the first row (the idiomatic loop)."""
+
+    def __init__(self) -> None:
+        self.rows: list[dict] = []
+
+    def record(self, label, R, threads, epochs, seconds, note="") -> float:
+        """``seconds``: median wall time of ``epochs`` epochs of all R replicas; returns ms per replica-run"""
+        per_run = seconds * EPOCHS / epochs / R
+        self.rows.append(dict(label=label, R=R, per_run=per_run))
+        base = self.rows[0]["per_run"]
+        if epochs < EPOCHS:
+            note = (note + f" extrapolated from {epochs} epochs").strip()
+        print(f"{label:<22} R={R:<5} thr={threads!s:<3} ep={epochs:<4} {per_run * 1e3:>10.2f} ms/replica-run "
+              f"{R * N * epochs / seconds:>12.3g} pres/s  x{base / per_run:>8.1f}  {note}", flush=True)
+        return per_run * 1e3
+
+
+def bench_idiomatic(table: EngineTable, epochs: int, repeats: int) -> None:
+    from torch import nn
+    from torch.utils.data import DataLoader, TensorDataset
+
+    X, Y = data()
+    times = []
+    for rep in range(repeats):
+        torch.manual_seed(rep)
+        model = nn.Sequential(nn.Linear(6, 13), nn.Sigmoid(), nn.Linear(13, 2), nn.Sigmoid()).double()
+        opt = torch.optim.SGD(model.parameters(), lr=LR, momentum=MOM)
+        loader = DataLoader(TensorDataset(X, Y), batch_size=1, shuffle=True)
+        t = time.perf_counter()
+        for _ in range(epochs):
+            for xb, yb in loader:
+                loss = nn.functional.mse_loss(model(xb), yb)
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+        times.append(time.perf_counter() - t)
+    table.record("idiomatic DataLoader", 1, 1, epochs, statistics.median(times))
+
+
+def bench_engine(table: EngineTable, name: str, R: int, epochs: int, repeats: int, threads=None,
+                 note: str = "") -> float:
+    """One engine's updates alone (no shuffles, scoring or logging); returns ms per replica-run."""
+    from selpres.engine import make_engine
+    from selpres.model import init_replica_params
+
+    X, Y = data()
+    g = torch.Generator().manual_seed(1)
+    orders = [torch.argsort(torch.rand(R, N, generator=g), dim=1) for _ in range(epochs)]
+    params = init_replica_params(SIZES, list(range(R)))
+    times = []
+    for _ in range(repeats):
+        eng = make_engine(name, SIZES, params, LR, MOM, 1, threads=threads)
+        t = time.perf_counter()
+        for o in orders:
+            eng.train_epoch(X, Y, o)
+        times.append(time.perf_counter() - t)
+    label = f"{name} engine" if name != "fast" else f"fast engine ({type(eng).__name__})"
+    return table.record(label, R, getattr(eng, "threads", 1), epochs, statistics.median(times), note)
+
+
+def bench_engines(table: EngineTable, quick: bool, native: bool) -> None:
+    q = quick
+    bench_idiomatic(table, epochs=2 if q else 3, repeats=1 if q else 2)
+    bench_engine(table, "reference", 1, epochs=2 if q else 3, repeats=1 if q else 2)
+    # the reference trains replicas one after another, so its cost per replica-run does not fall with R
+    bench_engine(table, "reference", 10, epochs=1, repeats=1, note="(R=100, 1000: the same per replica-run)")
+    for R, ep in [(1, 3), (10, 3), (100, 2), (1000, 1)]:
+        ep, rep = (1 if q and R == 1000 else ep), (1 if q or R >= 100 else 2)
+        bench_engine(table, "torch", R, epochs=ep, repeats=rep)
+    if native:
+        for R, ep, rep in [(1, 150, 5), (10, 150, 3), (100, 150, 3), (1000, 30, 3)]:
+            if q:
+                ep, rep = min(ep, 30 if R < 1000 else 5), min(rep, 3 if R < 100 else 1)
+            bench_engine(table, "native", R, ep, rep, threads=1)
+            if R > 1:
+                bench_engine(table, "native", R, ep, rep)
+
+
+# ------------------------------------------------------------------------------------------- the whole job
+
+
+def train_job(configs: str, overrides: list[str], out_dir: str) -> dict:
+    """Compose ``train`` with ``overrides`` and run ``selpres.train.train`` into ``out_dir`` (checkpoints and
+    TensorBoard included), its progress lines swallowed; returns the results dict. Runs in a child process."""
+    import contextlib
+    import io
+
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    import selpres.config  # noqa: F401  registers the typed schema and resolvers
+    from selpres.train import train
+
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=configs, version_base="1.3"):
+        cfg = compose("train", overrides=overrides)
+    with contextlib.redirect_stdout(io.StringIO()):
+        return train(cfg, out_dir)
+
+
+_CHILD = (
+    "import json, sys; from selpres.bench import train_job; "
+    "r = train_job(sys.argv[1], json.loads(sys.argv[2]), sys.argv[3]); "
+    "print(json.dumps({'wall_seconds': r['wall_seconds'], 'engine': r['engine'], 'status': r['status']}))"
+)
+
+
+def run_job_process(configs: Path, overrides: list[str], out_dir: Path) -> dict:
+    """One job in a fresh Python process, as ``python train.py`` runs it (cold caches, its own threads)."""
+    path = os.pathsep.join(p for p in (str(PACKAGE_PARENT), os.environ.get("PYTHONPATH")) if p)
+    env = dict(os.environ, PYTHONPATH=path)
+    t = time.perf_counter()
+    p = subprocess.run([sys.executable, "-c", _CHILD, str(configs), json.dumps(overrides), str(out_dir)],
+                       env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t
+    if p.returncode != 0:
+        raise RuntimeError(f"job {overrides} failed (exit {p.returncode}):\n{p.stderr[-2000:]}")
+    res = json.loads(p.stdout.strip().splitlines()[-1])
+    res["process_seconds"] = wall
+    return res
+
+
+def bench_jobs(table: EngineTable, quick: bool, configs: Path) -> bool:
+    """train() end to end at R = 1, 30, 1000 (conventional 6-13-2, default settings) beside the engine alone.
+
+    Prints ms per replica-run of the whole job and of the engine alone (random data, same R and engine,
+    extrapolated to 150 epochs), the share of each part that results.json's ``wall_seconds`` reports (the
+    keys present: ``train`` is the updates alone), and whole job / updates. Returns False if a job failed.
+    """
+    print("\njob level: train() end to end, conventional 6-13-2, default settings (eval, TensorBoard, "
+          "checkpoints), one fresh process per job")
+    ok = True
+    with tempfile.TemporaryDirectory(prefix="selpres-bench-") as tmp:
+        for R in (1, 30, 1000):
+            epochs = 30 if quick and R == 1000 else EPOCHS
+            overrides = ["schedule=conventional", "topology=6-13-2", f"replicas={R}"]
+            if epochs != EPOCHS:
+                overrides.append(f"schedule.epochs=[{epochs}]")
+            try:
+                res = run_job_process(configs, overrides, Path(tmp) / f"R{R}")
+            except (RuntimeError, ValueError, json.JSONDecodeError) as exc:
+                print(f"R={R}: {exc}")
+                ok = False
+                continue
+            ws = res["wall_seconds"]
+            total, updates = ws["total"], ws.get("train")
+            per_run = total / R * 1e3
+            line = (f"job         R={R:<5} ep={epochs:<4} {per_run:>10.2f} ms/replica-run (whole job, "
+                    f"{total:.2f} s; process {res['process_seconds']:.2f} s with imports)")
+            if updates:
+                line += f"   whole job / updates x{total / updates:.2f}"
+            print(line, flush=True)
+            parts = "  ".join(f"{k} {ws[k]:.3f} s ({ws[k] / total:.0%})" for k in JOB_PARTS if k in ws)
+            missing = [k for k in JOB_PARTS if k not in ws]
+            absent = f"   (not in this results.json: {', '.join(missing)})" if missing else ""
+            print(f"   parts: {parts}{absent}")
+            eng_epochs, reps = (EPOCHS, 3) if R == 1 else (30, 3) if R == 30 else (5 if quick else 30, 1)
+            bench_engine(table, "fast", R, eng_epochs, reps, note=f"engine alone beside the R={R} job")
+    if quick:
+        print("(--quick: the R=1000 job runs 30 of its 150 epochs, so its fixed costs weigh 5x more)")
+    return ok
+
+
+# --------------------------------------------------------------------------------- shuffles and orders
+
+
+def _epoch_orders_by_argsort(samplers) -> torch.Tensor:
+    """The shuffle as computed before the packed-key sort: one argsort of all replicas' hashes."""
+    from selpres import sampler as S
+
+    plan = samplers[0]._plan[samplers[0].epoch]
+    size, count, R = plan.size, plan.presentations, len(samplers)
+    keys = np.array([s._key for s in samplers], dtype=np.uint64)
+    epochs = np.array([s.epoch for s in samplers], dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        h = np.empty((R, size), dtype=np.uint64)
+        S._row_hashes(S._shuffle_bases(keys, epochs), h, np.empty_like(h))
+    perm = torch.from_numpy(np.argsort(h, axis=1)[:, :count])
+    return torch.gather(torch.stack([s.order[:size] for s in samplers]), 1, perm)
+
+
+def bench_shuffles(quick: bool) -> None:
+    """Per-epoch shuffles of R replicas at n = 1002, old (argsort) and new (epoch_orders) alternating."""
+    from selpres.sampler import SelectivePresentationSampler, epoch_orders
+    from selpres.schedule import build_schedule
+
+    print("\nshuffles: one epoch's orders of all replicas, n = 1002 (argsort of the hashes vs epoch_orders)")
+    sch = build_schedule([1.0], [EPOCHS], N)
+    for R in (1, 30, 1000):
+        g = torch.Generator().manual_seed(R)
+        samplers = [SelectivePresentationSampler(torch.randperm(N, generator=g), sch, s) for s in range(R)]
+        for s in samplers:
+            s.set_epoch(7)
+        if not torch.equal(_epoch_orders_by_argsort(samplers), epoch_orders(samplers)):
+            raise AssertionError("epoch_orders differs from the argsort of its hashes")
+        old, new = [], []
+        for _ in range(max(3, (20 if quick else 60) // max(1, R // 100))):
+            old.append(median_seconds(lambda: _epoch_orders_by_argsort(samplers), 1))
+            new.append(median_seconds(lambda: epoch_orders(samplers), 1))
+        o, w = statistics.median(old), statistics.median(new)
+        print(f"shuffle     R={R:<5} argsort {o * 1e3:8.3f} ms/epoch  epoch_orders {w * 1e3:8.3f} ms/epoch "
+              f"({w * EPOCHS / R * 1e3:.3f} ms per replica-run)  x{o / w:.2f}", flush=True)
+
+
+def bench_orders(quick: bool) -> None:
+    """Selection cost: one priority order of n patterns (random 6-D inputs), each kind, n = 1002 and 1e5."""
+    from selpres.sampler import ORDERS, priority_order
+    from selpres.seeding import generator
+
+    print("\npriority orders: one order of U (selection cost, once per replica and job)")
+    for n in (N, 100_000):
+        X, _ = data(n, seed=3)
+        for kind in ORDERS:
+            reps = 3 if n == N else 1
+            sec = median_seconds(lambda: priority_order(X, kind, generator(0, "subset"), 2), reps)
+            print(f"order       {kind:<11} n={n:<7} {sec * 1e3:10.2f} ms  (median of {reps})", flush=True)
+
+
+# --------------------------------------------------------------------------------- build and data
+
+
+def bench_compile() -> None:
+    """First-use build time of the native kernel: cold (empty cache) and cached (a new process's load)."""
+    code = ("import time,torch;from selpres import _kernels;t=time.perf_counter();"
+            "_kernels.load((6,13,2));print(time.perf_counter()-t)")
+    env = dict(os.environ, PYTHONPATH=str(PACKAGE_PARENT))
+    with tempfile.TemporaryDirectory() as tmp:
+        env["SELPRES_CACHE_DIR"] = tmp
+        out = []
+        for _ in range(2):
+            p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+            out.append(float(p.stdout.strip()) if p.returncode == 0 else float("nan"))
+    print(f"\nnative kernel build (6-13-2): cold {out[0]:.2f} s, cached {out[1] * 1e3:.1f} ms "
+          "(load of the .so)")
+
+
+def bench_exemplar_generation(quick: bool, configs: Path) -> None:
+    """The exemplar set (1,050,625 candidates, one batched forward-dynamics call) against a per-row
+    Python loop over the same grid (math module, the closed-form 2x2 solve), extrapolated from a slice."""
+    from omegaconf import OmegaConf
+
+    from selpres.data import build_exemplar_set, grid_axis
+    from selpres.robot import TwoLinkArm
+
+    rcfg, dcfg = OmegaConf.load(configs / "robot/two_link.yaml"), OmegaConf.load(configs / "data/paper.yaml")
+    arm = TwoLinkArm.from_config(rcfg)
+    reps = 3 if quick else 7
+    ex = build_exemplar_set(arm, dcfg)
+    batched = median_seconds(lambda: build_exemplar_set(arm, dcfg), reps)
+
+    m1, m2, l1, l2, g, a = rcfg.m1, rcfg.m2, rcfg.l1, rcfg.l2, rcfg.g, dcfg.accel_limit
+    axes = {k: grid_axis(dcfg[k].lo, dcfg[k].hi, dcfg[k].step).tolist()
+            for k in ("theta", "dtheta", "tau1", "tau2")}
+    states = [(q1, w1, q2, w2) for q1 in axes["theta"] for w1 in axes["dtheta"]
+              for q2 in axes["theta"] for w2 in axes["dtheta"]]
+    torques = [(t1, t2) for t1 in axes["tau1"] for t2 in axes["tau2"]]
+    total = len(states) * len(torques)
+    limit = 40 if quick else 120  # states timed; the rest extrapolated
+    kept, t0 = 0, time.perf_counter()
+    for q1, w1, q2, w2 in states[:limit]:
+        for t1, t2 in torques:
+            c2, s2 = math.cos(q2), math.sin(q2)
+            h11 = l2 * l2 * m2 + 2 * l1 * l2 * m2 * c2 + l1 * l1 * (m1 + m2)
+            h12 = l2 * l2 * m2 + l1 * l2 * m2 * c2
+            h22 = l2 * l2 * m2
+            b1 = (-m2 * l1 * l2 * s2 * w2 * w2 - 2 * m2 * l1 * l2 * s2 * w1 * w2
+                  + m2 * l2 * g * math.cos(q1 + q2) + (m1 + m2) * l1 * g * math.cos(q1))
+            b2 = m2 * l1 * l2 * s2 * w1 * w1 + m2 * l2 * g * math.cos(q1 + q2)
+            det = h11 * h22 - h12 * h12
+            a1 = (h22 * (t1 - b1) - h12 * (t2 - b2)) / det
+            a2 = (h11 * (t2 - b2) - h12 * (t1 - b1)) / det
+            kept += abs(a1) <= a and abs(a2) <= a
+    loop = (time.perf_counter() - t0) * len(states) / limit
+    print(f"\nexemplar set: {total:,} candidates -> {len(ex.X)} patterns")
+    print(f"  batched torch (build_exemplar_set)  {batched * 1e3:9.1f} ms  (median of {reps})")
+    print(f"  per-row Python loop                 {loop * 1e3:9.1f} ms  (extrapolated from {limit} of "
+          f"{len(states)} states)  ratio x {loop / batched:.0f}")
+
+
+# ------------------------------------------------------------------------------------------------ main
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="selpres-bench", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="fewer epochs and repeats (about a minute)")
+    ap.add_argument("--configs", type=Path, default=DEFAULT_CONFIGS,
+                    help=f"the Hydra config directory the job rows compose (default: {DEFAULT_CONFIGS})")
+    args = ap.parse_args(argv)
+    if not (args.configs / "train.yaml").is_file():
+        ap.error(f"--configs={args.configs}: no train.yaml there; expected the repository's configs/ "
+                 "directory")
+    q = args.quick
+    from selpres import _kernels
+
+    print(f"python {platform.python_version()}, torch {torch.__version__}, numpy {np.__version__}, "
+          f"{os.cpu_count()} CPUs, torch threads {torch.get_num_threads()}, "
+          f"load average at start {os.getloadavg()[0]:.2f}")
+    print(f"replica-run = {EPOCHS} epochs x {N} patterns, 6-13-2, batch 1; times are medians; "
+          f"ratio = idiomatic / this\n")
+    try:
+        _kernels.load(SIZES)
+        native = True
+    except _kernels.KernelUnavailable as exc:
+        print(f"native kernel unavailable: {exc} (native rows skipped; the fast engine is torch)")
+        native = False
+
+    table = EngineTable()
+    bench_engines(table, q, native)
+    jobs_ok = bench_jobs(table, q, args.configs.resolve())
+    bench_shuffles(q)
+    bench_orders(q)
+    if native:
+        bench_compile()
+    bench_exemplar_generation(q, args.configs)
+    print(f"\nload average at end {os.getloadavg()[0]:.2f} "
+          "(other processes on the machine slow every number)")
+    return 0 if jobs_ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
