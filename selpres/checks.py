@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import math
 
+import torch
 from omegaconf import DictConfig
 
+from selpres.batch_engine import check_batch_options
 from selpres.config import to_container
 from selpres.data import grid_points
 from selpres.errors import ConfigError
 from selpres.model import TopologyError, parse_topology
+from selpres.optim import HPARAM_KEYS, make_optimizer
 
 MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
 MAX_LAYER_WIDTH = 4096  # wider layers are refused: a guard against typos such as 6-13000-2
@@ -31,18 +34,31 @@ def _walk(node, prefix=""):
         yield prefix, node
 
 
+def batch_mode(o: DictConfig) -> bool:
+    """One optimizer step per epoch (selpres.batch_engine) rather than online/mini-batch SGD."""
+    return o.name.value != "sgd" or o.batch_size == 0
+
+
+def optim_hparams(o: DictConfig) -> dict:
+    """The optimizer keys of ``cfg.optim`` (None = not set), as ``make_optimizer`` takes them."""
+    return {k: o[k] for k in HPARAM_KEYS}
+
+
 def validate(cfg: DictConfig) -> tuple[int, ...]:
     """Checks that need more than a type; returns the parsed topology. Raises ConfigError."""
     for key, value in _walk(to_container(cfg)):
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
     o = cfg.optim
-    if not o.lr > 0:
-        raise ConfigError("optim.lr", o.lr, "a learning rate > 0 (the paper uses 0.15)")
-    if not 0 <= o.momentum < 1:
-        raise ConfigError("optim.momentum", o.momentum, "a momentum in [0, 1) (the paper uses 0.9)")
-    if o.batch_size < 1:
-        raise ConfigError("optim.batch_size", o.batch_size, "a whole number >= 1 (1 = online, as in the paper)")
+    make_optimizer(o.name.value, [torch.zeros(1)], optim_hparams(o))  # ConfigError naming optim.<key>
+    check_batch_options(o.sigmoid_prime_offset, o.reduction.value)
+    if o.batch_size < 0 or (o.name.value != "sgd" and o.batch_size != 0):
+        allowed = ("0 (the whole epoch): a batch method" if o.name.value != "sgd"
+                   else "0 (the whole epoch) or a whole number >= 1 (1 = online, as in the paper)")
+        raise ConfigError("optim.batch_size", o.batch_size, allowed)
+    if batch_mode(o) and cfg.engine.value not in ("fast", "torch"):
+        raise ConfigError("engine", cfg.engine.value, f"fast or torch with optim.name={o.name.value} and "
+                          f"optim.batch_size={o.batch_size}: batch mode runs replica-batched in torch")
     if cfg.replicas < 1:
         raise ConfigError("replicas", cfg.replicas, "a whole number >= 1")
     if cfg.threads < 0:

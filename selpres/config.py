@@ -27,6 +27,19 @@ class EngineName(Enum):
     torch = "torch"  # replica-batched eager PyTorch: the pure-torch fallback
 
 
+class OptimName(Enum):
+    sgd = "sgd"  # SGD + momentum (Rumelhart et al.): online/mini-batch engines; batch_size 0 = batch mode
+    quickprop = "quickprop"  # the batch methods run in selpres.batch_engine.BatchEngine
+    delta_bar_delta = "delta_bar_delta"
+    rprop = "rprop"
+    adam = "adam"
+
+
+class Reduction(Enum):
+    sum = "sum"  # the epoch's error E = ½Σe², as Fahlman and Jacobs published their rules
+    mean = "mean"  # mse_loss over the epoch, the online engines' per-pattern loss
+
+
 class Order(Enum):
     stratified = "stratified"
     random = "random"
@@ -93,9 +106,27 @@ class TopologyConfig:
 
 @dataclass
 class OptimConfig:
+    """One schema for every optimizer: a group file sets ``name`` and its own keys; the rest stay None
+    (an optimizer refuses a key it does not use, naming it)."""
+
+    name: OptimName = MISSING
     lr: float = MISSING
-    momentum: float = MISSING
-    batch_size: int = MISSING
+    batch_size: int = MISSING  # 1 = online (the paper); 0 = the whole epoch (batch mode)
+    momentum: Optional[float] = None  # sgd, delta_bar_delta
+    mu: Optional[float] = None  # quickprop
+    weight_decay: Optional[float] = None  # quickprop, adam
+    kappa: Optional[float] = None  # delta_bar_delta
+    phi: Optional[float] = None
+    theta: Optional[float] = None
+    eta_minus: Optional[float] = None  # rprop
+    eta_plus: Optional[float] = None
+    step_min: Optional[float] = None
+    step_max: Optional[float] = None
+    beta1: Optional[float] = None  # adam
+    beta2: Optional[float] = None
+    eps: Optional[float] = None
+    sigmoid_prime_offset: float = 0.0  # batch mode: added to σ' in the backward pass (Fahlman: 0.1)
+    reduction: Reduction = Reduction.sum  # batch mode: the epoch's error, summed or mean
 
 
 @dataclass

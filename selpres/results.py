@@ -67,7 +67,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "topology": cfg.topology.layers,
         "engine": engine.name,  # what ran
         "engine_requested": cfg.engine.value,
-        "engine_fallback": getattr(engine, "fallback_reason", None),  # why "fast" did not run natively (None if it did)
+        "engine_fallback": engine.fallback_reason,  # why "fast" did not run natively (None if it did)
         "replicas": R,
         "seeds": prob.seeds,
         "presentations_done": progress.presentations,

@@ -26,7 +26,8 @@ from omegaconf import DictConfig, OmegaConf
 from selpres import data as D
 from selpres import results as results_json
 from selpres.checkpoint import Checkpoints, Progress
-from selpres.checks import validate
+from selpres.batch_engine import BatchEngine
+from selpres.checks import batch_mode, optim_hparams, validate
 from selpres.config import to_container
 from selpres.engine import make_engine
 from selpres.errors import ConfigError
@@ -116,12 +117,17 @@ def prepare(cfg: DictConfig) -> Problem:
 
 
 def job_engine(cfg: DictConfig, prob: Problem):
-    """The engine the config asks for; ``engine=native`` where the kernel cannot run is a user error."""
+    """The engine the config asks for; ``engine=native`` where the kernel cannot run is a user error.
+    Batch methods (QuickProp, Delta-Bar-Delta, Rprop, Adam, batch SGD) step once per epoch in torch."""
     from selpres._kernels import KernelUnavailable
 
+    o = cfg.optim
+    if batch_mode(o):
+        return BatchEngine(prob.sizes, prob.init_params, o.name.value, optim_hparams(o),
+                           sigmoid_prime_offset=o.sigmoid_prime_offset, reduction=o.reduction.value)
     try:
-        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, cfg.optim.lr, cfg.optim.momentum,
-                           cfg.optim.batch_size)
+        momentum = 0.0 if o.momentum is None else o.momentum
+        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, o.lr, momentum, o.batch_size)
     except KernelUnavailable as exc:
         raise ConfigError("engine", cfg.engine.value,
                           f"fast, torch or reference: the native kernel cannot run here ({exc})") from None
@@ -299,7 +305,7 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
     atomic_write(job.out / WEIGHTS, lambda f: torch.save(trained, f))
     write_json(job.out / RESULTS, results)
     hp = {"schedule": cfg.schedule.name, "topology": cfg.topology.layers, "seed": cfg.seed,
-          "replicas": len(prob.seeds), "lr": cfg.optim.lr, "momentum": cfg.optim.momentum,
+          "replicas": len(prob.seeds), "optim": cfg.optim.name.value, "lr": cfg.optim.lr, "momentum": cfg.optim.momentum,
           "batch_size": cfg.optim.batch_size, "sizes": str(prob.schedule.sizes),
           "epochs": str(prob.schedule.epochs), "order": cfg.schedule.order.value,
           "engine": results["engine"], "engine_requested": results["engine_requested"]}

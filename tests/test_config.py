@@ -165,7 +165,12 @@ def _config_error(compose_cfg, *ov) -> ConfigError:
         (["optim.lr=-0.5"], "optim.lr", "-0.5"),
         (["optim.momentum=1.0"], "optim.momentum", "1.0"),
         (["optim.momentum=-0.1"], "optim.momentum", "-0.1"),
-        (["optim.batch_size=0"], "optim.batch_size", "0"),
+        (["optim.batch_size=-1"], "optim.batch_size", "-1"),
+        (["optim=quickprop", "optim.batch_size=1"], "optim.batch_size", "1"),  # a batch method steps per epoch
+        (["optim=quickprop", "optim.mu=-1"], "optim.mu", "-1"),
+        (["optim=quickprop", "optim.momentum=0.9"], "optim.momentum", "0.9"),  # a key quickprop does not use
+        (["optim=adam", "engine=native"], "engine", "native"),  # batch mode runs in torch
+        (["optim=delta_bar_delta", "optim.phi=1.5"], "optim.phi", "1.5"),
         (["replicas=0"], "replicas", "0"),
         (["optim.lr=nan"], "optim.lr", "nan"),
         (["robot.m1=inf"], "robot.m1", "inf"),
