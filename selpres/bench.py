@@ -343,6 +343,7 @@ def bench_exemplar_generation(quick: bool, configs: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The ``selpres-bench`` command: every section in turn; 0, or 1 if a job-level run failed."""
     ap = argparse.ArgumentParser(prog="selpres-bench", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="fewer epochs and repeats (about a minute)")
