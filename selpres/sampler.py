@@ -71,7 +71,7 @@ def _row_hashes(base: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> np.ndarra
 
 
 def _argsort_distinct_rows(h: np.ndarray) -> np.ndarray:
-    """The positions of ``np.argsort(h, axis=1)`` for rows of distinct uint64 values, about 3x faster.
+    """The positions of ``np.argsort(h, axis=1)`` for rows of distinct uint64 values, ~2.5x faster.
 
     Each hash's high bits are packed with its position (the low b bits) into one integer and the packed
     keys are sorted by value, which numpy 2.x does with SIMD; positions then come out in hash order,
