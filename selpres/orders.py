@@ -16,8 +16,10 @@
 Every order is a deterministic function of (U, the generator's seed). Distances for ``coverage`` are
 Euclidean in U's unit cube (each input column mapped onto [0, 1] by U's own range, as for the strata):
 with the default ``exemplar`` scaling that is the network's scaled input space up to one common factor,
-which leaves a farthest-point order unchanged, and it gives the same order whether the caller passes raw
-or scaled inputs.
+which leaves a farthest-point order unchanged. Raw and scaled inputs thus define the same order up to
+rounding, but on the paper's grid many distances tie exactly, and rounding can break such ties
+differently (measured: the orders differ from the 10th pattern on), so one config should always pass
+the same X (``train.prepare`` passes the raw exemplar inputs).
 """
 
 from __future__ import annotations
