@@ -16,7 +16,7 @@ from selpres.schedule import Schedule, Stage, build_schedule
 from selpres.seeding import derive_seed, generator
 
 PAPER_SIZES, PAPER_EPOCHS = [50, 100, 400, 800, 1002], [30] * 5
-KINDS = ("stratified", "random")
+KINDS = ("stratified", "random", "coverage")
 
 
 def _order(X, kind, seed=0, bins=2):
