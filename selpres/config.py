@@ -41,8 +41,9 @@ class Reduction(Enum):
 
 
 class Order(Enum):
-    stratified = "stratified"
-    random = "random"
+    stratified = "stratified"  # the paper's uniform sampling: every prefix a proportional stratified sample
+    random = "random"  # random growth (Wu, Dyer & Neyshabur 2021)
+    coverage = "coverage"  # greedy farthest-point: every prefix a near-minimal-radius cover of U
 
 
 class ScalingMode(Enum):

@@ -33,7 +33,8 @@ from selpres.engine import make_engine
 from selpres.errors import ConfigError
 from selpres.model import forward_replicas, init_replica_params
 from selpres.robot import TwoLinkArm
-from selpres.sampler import SelectivePresentationSampler, epoch_orders, priority_order
+from selpres.orders import priority_orders
+from selpres.sampler import SelectivePresentationSampler, epoch_orders
 from selpres.schedule import EpochPlan, Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
 from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
@@ -103,10 +104,8 @@ def prepare(cfg: DictConfig) -> Problem:
     schedule = build_schedule(sch["sizes"], sch["epochs"], n, sch["budget"])
     seeds = [cfg.seed + r for r in range(cfg.replicas)]
     kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
-    samplers = [
-        SelectivePresentationSampler(priority_order(exemplar.X, kind, generator(s, "subset"), bins), schedule, s)
-        for s in seeds
-    ]
+    orders = priority_orders(exemplar.X, kind, [generator(s, "subset") for s in seeds], bins)
+    samplers = [SelectivePresentationSampler(order, schedule, s) for order, s in zip(orders, seeds)]
     return Problem(
         sizes=sizes, schedule=schedule, seeds=seeds, scaler=scaler,
         X=scaler.transform_x(exemplar.X), Y=scaler.transform_y(exemplar.Y),
