@@ -38,7 +38,7 @@ class Progress:
     stale_checkpoint: str | None = None  # where a checkpoint of another config was moved
 
     @classmethod
-    def fresh(cls, replicas: int) -> "Progress":
+    def fresh(cls, replicas: int) -> Progress:
         return cls([], [None] * replicas)
 
     @property

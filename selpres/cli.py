@@ -45,7 +45,7 @@ class Before:
     log_size: int | None = None  # train.log's size (Hydra appends to it)
 
     @classmethod
-    def look(cls, folder: Path) -> "Before":
+    def look(cls, folder: Path) -> Before:
         if not folder.exists():
             created = folder
             while not created.parent.exists():

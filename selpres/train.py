@@ -10,34 +10,33 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import logging
 import math
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import torch
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from selpres import data as D
 from selpres import results as results_json
-from selpres.checkpoint import Checkpoints, Progress
 from selpres.batch_engine import BatchEngine
+from selpres.checkpoint import Checkpoints, Progress
 from selpres.checks import batch_mode, optim_hparams, validate
 from selpres.config import to_container
 from selpres.engine import make_engine
 from selpres.errors import ConfigError
 from selpres.model import forward_replicas, init_replica_params
-from selpres.robot import TwoLinkArm
 from selpres.orders import priority_orders
 from selpres.sampler import SelectivePresentationSampler, epoch_orders
 from selpres.schedule import EpochPlan, Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
 from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
+from selpres.task import load_task
 from selpres.tracking import Tracker
 
 log = logging.getLogger("selpres")
@@ -66,51 +65,20 @@ class Problem:
         return frozenset(self.schedule.stage_ends())
 
 
-@functools.lru_cache(maxsize=4)
-def _exemplar(robot_json: str, data_json: str) -> D.ExemplarSet:
-    """Cached per robot/data config, so the jobs of an in-process sweep (Hydra's basic launcher) build
-    the data once. Cached tensors are never modified in place."""
-    arm = TwoLinkArm.from_config(json.loads(robot_json))
-    return D.build_exemplar_set(arm, OmegaConf.create(json.loads(data_json)))
-
-
-@functools.lru_cache(maxsize=4)
-def _tests_and_scaler(robot_json: str, data_json: str) -> tuple[D.TestSets, D.Scaler]:
-    arm, data_cfg = TwoLinkArm.from_config(json.loads(robot_json)), OmegaConf.create(json.loads(data_json))
-    exemplar = _exemplar(robot_json, data_json)
-    return D.make_test_sets(arm, data_cfg, exemplar, seed=data_cfg.test_seed), D.Scaler.fit(exemplar, data_cfg)
-
-
 def prepare(cfg: DictConfig) -> Problem:
     """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
     sizes = validate(cfg)
-    keys = json.dumps(to_container(cfg.robot), sort_keys=True), json.dumps(to_container(cfg.data), sort_keys=True)
-    exemplar = _exemplar(*keys)
-    n = exemplar.X.shape[0]
-    if n == 0:
-        raise ConfigError(
-            "data.accel_limit", cfg.data.accel_limit,
-            f"a filter that keeps at least one of the {exemplar.n_candidates:,} grid candidates of "
-            "data.theta/dtheta/tau1/tau2 (none has both |θ̈| within it: widen the limit or move the ranges)",
-        )
-    if cfg.data.test_from_exemplar > n:
-        raise ConfigError("data.test_from_exemplar", cfg.data.test_from_exemplar,
-                          f"at most the exemplar set's size n = {n}")
-    try:
-        tests, scaler = _tests_and_scaler(*keys)
-    except ValueError as e:  # the continuous ranges leave nothing to draw test patterns from
-        raise ConfigError("data", "theta/dtheta/tau1/tau2 ranges", str(e)) from None
+    task = load_task(cfg.robot, cfg.data)
     sch = to_container(cfg.schedule)
-    schedule = build_schedule(sch["sizes"], sch["epochs"], n, sch["budget"])
+    schedule = build_schedule(sch["sizes"], sch["epochs"], task.n, sch["budget"])
     seeds = [cfg.seed + r for r in range(cfg.replicas)]
     kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
-    orders = priority_orders(exemplar.X, kind, [generator(s, "subset") for s in seeds], bins)
-    samplers = [SelectivePresentationSampler(order, schedule, s) for order, s in zip(orders, seeds)]
+    orders = priority_orders(task.exemplar.X, kind, [generator(s, "subset") for s in seeds], bins)
     return Problem(
-        sizes=sizes, schedule=schedule, seeds=seeds, scaler=scaler,
-        X=scaler.transform_x(exemplar.X), Y=scaler.transform_y(exemplar.Y),
-        tests={name: (scaler.transform_x(p.X), p.Y) for name, p in (("test10", tests.test10), ("heldout", tests.heldout))},
-        samplers=samplers,
+        sizes=sizes, schedule=schedule, seeds=seeds, scaler=task.scaler,
+        X=task.scaler.transform_x(task.exemplar.X), Y=task.scaler.transform_y(task.exemplar.Y),
+        tests=task.scaled_tests(),
+        samplers=[SelectivePresentationSampler(order, schedule, s) for order, s in zip(orders, seeds)],
         init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
     )
 

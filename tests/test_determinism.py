@@ -7,9 +7,10 @@ import json
 import pytest
 import torch
 
-import selpres.train as T
+import selpres.task as task
 from selpres.storage import RESULTS
 from selpres.train import train
+
 from conftest import cfg_of, numbers, requires_native
 
 
@@ -17,8 +18,7 @@ from conftest import cfg_of, numbers, requires_native
                                     pytest.param("native", marks=requires_native)])
 def test_same_config_same_numbers(tmp_path, engine):
     a = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2", f"engine={engine}"), tmp_path / "a")
-    T._exemplar.cache_clear()  # the second run rebuilds its data too, as a new process would
-    T._tests_and_scaler.cache_clear()
+    task._task.cache_clear()  # the second run rebuilds its data too, as a new process would
     b = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2", f"engine={engine}"), tmp_path / "b")
     assert numbers(a) == numbers(b)
     wa = torch.load(tmp_path / "a" / "weights.pt")["params"]
