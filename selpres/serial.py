@@ -105,7 +105,8 @@ def matrix_rpy(m: Mat3) -> Vec3:
     pitch = math.atan2(-m[2][0], cp)
     if cp < 1e-9:  # gimbal lock: only yaw ∓ roll is defined
         return (0.0, pitch + 0.0, math.atan2(-m[0][1], m[1][1]) + 0.0)
-    return tuple(a + 0.0 for a in (math.atan2(m[2][1], m[2][2]), pitch, math.atan2(m[1][0], m[0][0])))  # no -0.0
+    angles = (math.atan2(m[2][1], m[2][2]), pitch, math.atan2(m[1][0], m[0][0]))
+    return tuple(a + 0.0 for a in angles)  # + 0.0: no -0.0 in exported files
 
 
 # -------------------------------------------------------------------------------------------------- links
@@ -151,21 +152,26 @@ def _about_origin(link: Link) -> Mat3:
 
 
 def _finite(values: Sequence[float]) -> bool:
-    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)
+    return all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
+
+
+def _is_matrix(m: Any) -> bool:
+    return isinstance(m, Sequence) and len(m) == 3 and all(isinstance(r, Sequence) and len(r) == 3 for r in m)
 
 
 def check_link(link: Link, where: str) -> Link:
-    """Physical sanity of one link; raises ConfigError naming ``where`` + the field. Returns the link with
-    its axis normalised (URDF semantics: only the direction counts)."""
+    """Physical sanity of one link; raises ConfigError naming ``where`` + the field. Returns the link as
+    plain floats with its axis normalised (URDF semantics: only the direction counts)."""
     if not (_finite([link.mass]) and link.mass >= 0):
         raise ConfigError(f"{where}.mass", link.mass, "a finite mass >= 0 kg")
-    if not _finite(link.com):
-        raise ConfigError(f"{where}.com", link.com, "three finite numbers (m)")
-    if not _finite(link.xyz):
-        raise ConfigError(f"{where}.joint.xyz", link.xyz, "three finite numbers (m)")
+    for field, value, unit in (("com", link.com, " (m)"), ("joint.xyz", link.xyz, " (m)"),
+                               ("joint.axis", link.axis, "")):
+        if not (isinstance(value, Sequence) and len(value) == 3 and _finite(value)):
+            raise ConfigError(f"{where}.{field}", value, f"three finite floats{unit}")
+    for field, value in (("inertia", link.inertia), ("joint.rotation", link.rotation)):
+        if not (_is_matrix(value) and _finite([v for row in value for v in row])):
+            raise ConfigError(f"{where}.{field}", value, "a 3x3 of finite floats")
     flat = [v for row in link.inertia for v in row]
-    if not _finite(flat):
-        raise ConfigError(f"{where}.inertia", link.inertia, "finite numbers (kg m^2)")
     scale = max(1.0, max(abs(v) for v in flat))
     if any(abs(link.inertia[i][j] - link.inertia[j][i]) > 1e-12 * scale for i in range(3) for j in range(i)):
         raise ConfigError(f"{where}.inertia", link.inertia, "a symmetric 3x3 tensor")
@@ -175,17 +181,20 @@ def check_link(link: Link, where: str) -> Link:
         raise ConfigError(f"{where}.inertia", link.inertia,
                           f"a positive semi-definite tensor (eigenvalues {eigs})")
     rot = torch.tensor(link.rotation, dtype=torch.float64)
-    if not (_finite(rot.flatten().tolist()) and torch.allclose(rot @ rot.T, torch.eye(3, dtype=torch.float64),
-                                                                 atol=1e-12) and float(torch.det(rot)) > 0):
+    if not (torch.allclose(rot @ rot.T, torch.eye(3, dtype=rot.dtype), atol=1e-12) and torch.det(rot) > 0):
         raise ConfigError(f"{where}.joint.rotation", link.rotation, "a proper rotation matrix")
-    norm = math.sqrt(sum(a * a for a in link.axis)) if _finite(link.axis) else 0.0
+    norm = math.sqrt(sum(a * a for a in link.axis))
     if not norm > 0:
         raise ConfigError(f"{where}.joint.axis", link.axis, "a non-zero finite 3-vector")
-    if link.limits is not None and not (_finite(link.limits) and len(link.limits) == 2
-                                        and link.limits[0] < link.limits[1]):
+    if link.limits is not None and not (isinstance(link.limits, Sequence) and len(link.limits) == 2
+                                        and _finite(link.limits) and link.limits[0] < link.limits[1]):
         raise ConfigError(f"{where}.joint.limits", link.limits, "[lower, upper] in rad with lower < upper")
-    axis = tuple(a / norm for a in link.axis)
-    return link if axis == tuple(link.axis) else replace(link, axis=axis)
+    floats = lambda v: tuple(float(x) for x in v)  # noqa: E731
+    return replace(link, mass=float(link.mass), com=floats(link.com), xyz=floats(link.xyz),
+                   inertia=tuple(floats(r) for r in link.inertia),
+                   rotation=tuple(floats(r) for r in link.rotation),
+                   axis=tuple(float(a) / norm for a in link.axis),
+                   limits=None if link.limits is None else floats(link.limits))
 
 
 # ------------------------------------------------------------------------------------------------- the arm
