@@ -144,7 +144,8 @@ class _Reader:
         except ValueError:
             values = ()
         if len(values) != n or not all(math.isfinite(v) for v in values):
-            raise UrdfError(self.path, where, f"{text!r} is not {n} finite numbers")
+            raise UrdfError(self.path, where, f"{text!r} is not " + ("a finite number" if n == 1 else
+                                                                    f"{n} finite numbers"))
         return values
 
     def origin(self, el: ET.Element, where: str) -> _Pose:
@@ -189,19 +190,18 @@ def _moving_below(reader: _Reader, joint: str) -> list[str]:
     return out
 
 
-def _body(reader: _Reader, top: str, skip: str | None) -> list[tuple[str, _Pose]]:
-    """Links rigidly attached to ``top`` through fixed joints (``top`` first), with their poses in top's
-    frame; the moving joint ``skip`` (the chain's next) and fixed subtrees holding moving joints stay out."""
+def _body(reader: _Reader, top: str) -> list[tuple[str, _Pose]]:
+    """Links rigidly attached to ``top`` through fixed joints (``top`` first; the chain's fixed links and
+    fixed side branches alike), with their poses in top's frame. Moving joints end a body."""
     out, stack = [], [(top, _Pose())]
     while stack:
         link, pose = stack.pop()
         out.append((link, pose))
         for j in reader.children[link]:
             el = reader.joints[j]
-            if j == skip or el.get("type") != "fixed" or _moving_below(reader, j):
-                continue
-            child = el.find("child").get("link")
-            stack.append((child, pose.then(reader.origin(el, f'<joint name="{j}">'))))
+            if el.get("type") == "fixed":
+                child = el.find("child").get("link")
+                stack.append((child, pose.then(reader.origin(el, f'<joint name="{j}">'))))
     return out
 
 
@@ -286,8 +286,7 @@ def load_urdf(path: str | Path, *, g: float = 9.81, tip: str | None = None) -> S
         if dyn is not None and any(float(dyn.get(k, "0") or 0) != 0.0 for k in ("damping", "friction")):
             log.warning("%s: %s <dynamics %s> ignored: selpres simulates the rigid-body eq. (4) only",
                         reader.path, where, " ".join(f'{k}="{v}"' for k, v in dyn.attrib.items()))
-        nxt = chain[i + 1] if i + 1 < len(chain) else None
-        mass, com, inertia = _merge(reader, _body(reader, body, nxt), j)
+        mass, com, inertia = _merge(reader, _body(reader, body), j)
         try:
             links.append(check_link(Link(body, mass, com, inertia, joint=j, xyz=poses[i].xyz,
                                          rotation=poses[i].rot, axis=axis, limits=limits), "link"))
@@ -300,7 +299,7 @@ def load_urdf(path: str | Path, *, g: float = 9.81, tip: str | None = None) -> S
 
 def _tip(reader: _Reader, last: str, tip: str | None) -> tuple[Vec3, str]:
     """(end point in the last body's frame, tip link name)."""
-    attached = dict(_body(reader, last, None))
+    attached = dict(_body(reader, last))
     if tip is not None:
         if tip not in attached:
             raise UrdfError(reader.path, f'tip="{tip}"', f"is not a link fixed to the last moving link "
