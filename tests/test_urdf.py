@@ -3,27 +3,21 @@ file selpres cannot simulate is refused with an error naming the file and the el
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import pickle
-from pathlib import Path
 
 import pytest
+import test_serial as serial_tests  # tests/ is on sys.path (pytest's rootdir-relative import)
 import torch
-from omegaconf import OmegaConf
+from test_serial import states
 
 from selpres.errors import ConfigError
 from selpres.serial import Link, SerialArm, rot_z, rpy_matrix
 from selpres.urdf import UrdfError, load_urdf, to_urdf
 
 D = torch.float64
-CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "robot"
-
-
-def states(n: int, dof: int, seed: int) -> tuple[torch.Tensor, ...]:
-    g = torch.Generator().manual_seed(seed)
-    return tuple((torch.rand(n, d, dtype=D, generator=g) * 2 - 1) * s for d, s in
-                 ((dof, math.pi), (dof, 3.0), (dof, 5.0), (6, 10.0)))
 
 
 def same_dynamics(a: SerialArm, b: SerialArm, tol: float = 1e-12) -> None:
@@ -36,25 +30,17 @@ def same_dynamics(a: SerialArm, b: SerialArm, tol: float = 1e-12) -> None:
 
 
 def random_arm(seed: int) -> SerialArm:
-    """Six joints with arbitrary origins, axes, limits on some, rigid-body inertias, tilted gravity."""
-    g = torch.Generator().manual_seed(seed)
-    u = lambda *s: (torch.rand(*s, dtype=D, generator=g) * 2 - 1)  # noqa: E731
-    links = []
-    for i in range(6):
-        r = 0.1 * u(3, 3)
-        inertia = sum(r_.dot(r_) * torch.eye(3, dtype=D) - torch.outer(r_, r_) for r_ in r)
-        links.append(Link(f"link{i}", 0.5 + float(u(())) * 0.4, tuple((0.2 * u(3)).tolist()),
-                          tuple(map(tuple, inertia.tolist())), joint=f"j{i}",
-                          xyz=tuple((0.3 * u(3)).tolist()),
-                          rotation=rpy_matrix(u(3).tolist()), axis=tuple(u(3).tolist()),
-                          limits=(-2.0, 2.5) if i % 2 else None))
-    return SerialArm(links, (1.0, -2.0, -9.0), (0.01, 0.02, 0.15), name="random6", base="mount", tip="tool")
+    """test_serial's random chain of six rigid bodies, with limits on every other joint and its own frame
+    names, so that everything a URDF can carry is exercised."""
+    arm = serial_tests.random_arm(6, seed)
+    links = [dataclasses.replace(lk, limits=(-2.0, 2.5) if i % 2 else None) for i, lk in enumerate(arm.links)]
+    return SerialArm(links, arm.gravity, arm.end_point, name="random6", base="mount", tip="tool")
 
 
 ARMS = {
     "two_link": lambda: SerialArm.two_link(0.42, 3.0, 0.2, 0.26),
-    "planar3": lambda: SerialArm.from_config(OmegaConf.load(CONFIGS / "planar3.yaml")),
-    "puma560": lambda: SerialArm.from_config(OmegaConf.load(CONFIGS / "puma560.yaml")),
+    "planar3": lambda: serial_tests.load("planar3"),
+    "puma560": lambda: serial_tests.load("puma560"),
     "random6": lambda: random_arm(3),
 }
 
