@@ -1,10 +1,11 @@
 """General serial arm of N revolute joints: the simulator of the paper's section 4, batched in torch.
 
-Eq. (4) τ = H(q)q̈ + C(q, q̇)q̇ + G(q) + K(q)ᵀk is evaluated by recursive Newton–Euler (Luh, Walker &
-Paul 1980) with every vector in the base frame; H(q) by composite rigid bodies (Walker & Orin 1982, the
-paper's ref. [7]); the simulator of eq. (5) solves H(q)q̈ = τ − b with b = τ at q̈ = 0. All methods take
-tensors shaped ``[..., N]`` (``[..., 6]`` for the wrench k), broadcast their leading shapes, and compute
-in the inputs' dtype/device (float64 expected), in chunks, so one call can take 10⁶ states.
+Eq. (4) τ = H(q)q̈ + C(q, q̇)q̇ + G(q) + K(q)ᵀk is evaluated by recursive Newton–Euler in link
+coordinates (Luh, Walker & Paul 1980); H(q) by composite rigid bodies (Walker & Orin 1982, the paper's
+ref. [7]); the simulator of eq. (5) solves H(q)q̈ = τ − b, b = τ at q̈ = 0, by an LDLᵀ factorisation that
+also gives det H. All methods take tensors shaped ``[..., N]`` (``[..., 6]`` for the wrench k), broadcast
+their leading shapes and compute in the inputs' dtype/device (float64 expected), in chunks: 10⁶ PUMA 560
+states take about a second for τ and for q̈ on this 2-core machine.
 
 The wrench k = (force, moment), first three components force, last three moment (the paper's order),
 is expressed in the base frame and acts at the end point of the last link. It enters with eq. (4)'s
@@ -212,7 +213,7 @@ class SerialArm:
             raise ConfigError("gravity", gravity, "three finite numbers (m/s^2, base frame)")
         if not (len(end_point) == 3 and _finite(end_point)):
             raise ConfigError("end_point", end_point, "three finite numbers (m, last link's frame)")
-        self.gravity = tuple(float(g) for g in gravity)
+        self.gravity_vector = tuple(float(g) for g in gravity)
         self.end_point = tuple(float(e) for e in end_point)
         self.name, self.base, self.tip = name, base, tip
         names = [lk.name for lk in self.links] + [base]
@@ -271,7 +272,7 @@ class SerialArm:
                 joint["limits"] = list(lk.limits)
             links.append({"name": lk.name, "joint": joint, "mass": lk.mass, "com": list(lk.com),
                           "inertia": [list(r) for r in lk.inertia]})
-        return {"kind": "serial", "name": self.name, "gravity": list(self.gravity),
+        return {"kind": "serial", "name": self.name, "gravity": list(self.gravity_vector),
                 "end_point": list(self.end_point), "base": self.base, "tip": self.tip, "links": links}
 
     def __repr__(self) -> str:
@@ -336,12 +337,13 @@ class SerialArm:
                                    for c in range(3)) for r in range(3)))
         return out
 
-    def _rnea(self, rots: list, qd, qdd, k, gravity: bool) -> list:
+    def _rnea(self, rots: list, qd, qdd, k, with_gravity: bool) -> list:
         """Newton–Euler in link coordinates: τ for rates given as [B] rows (None = 0) and the base-frame
         wrench k (None = 0)."""
         zero = (0.0, 0.0, 0.0)
         w = dw = zero  # angular velocity and acceleration of the parent link, in its frame
-        acc = tuple(-g for g in self.gravity) if gravity else zero  # parent origin; the base "falls" up
+        # acceleration of the parent's origin; gravity enters as the base accelerating upwards
+        acc = tuple(-g for g in self.gravity_vector) if with_gravity else zero
         loads = []
         for i, (lk, rot) in enumerate(zip(self.links, rots)):
             p = lk.xyz
@@ -428,7 +430,7 @@ class SerialArm:
         return self._batched(lambda q_, qd_, k_: self._rnea(self._rotations(q_), qd_, None, k_, True),
                              self.dof, q, qd, k)
 
-    def gravity_torque(self, q: torch.Tensor) -> torch.Tensor:
+    def gravity(self, q: torch.Tensor) -> torch.Tensor:
         """G(q): the torques holding the arm still against gravity."""
         self._check(q=q)
         return self._batched(lambda q_: self._rnea(self._rotations(q_), None, None, None, True), self.dof, q)

@@ -348,8 +348,8 @@ def to_urdf(arm: SerialArm, path: str | Path) -> Path:
     if not write_tip and any(x != 0.0 for x in arm.end_point):
         raise ValueError(f"tip {arm.tip!r} is the last link but the end point {arm.end_point} "
                          "is not its origin")
-    g = math.sqrt(sum(x * x for x in arm.gravity))
-    turn = _gravity_turn(arm.gravity)
+    g = math.sqrt(sum(x * x for x in arm.gravity_vector))
+    turn = _gravity_turn(arm.gravity_vector)
     robot = ET.Element("robot", name=arm.name)
     robot.append(ET.Comment(
         f" written by selpres.urdf.to_urdf: {arm.dof} revolute joints. Gravity {g!r} m/s^2 along -z of the "

@@ -66,7 +66,7 @@ def energies(arm: SerialArm, q: torch.Tensor, qd: torch.Tensor) -> tuple[torch.T
     """(kinetic, potential) for one state: ½ m |v_c|² + ½ ω_bᵀ I ω_b per link, and −m gᵀ p_c."""
     frames = lambda x: reference_frames(arm, x)  # noqa: E731
     poses, rates = torch.func.jvp(frames, (q,), (qd,))
-    gravity = torch.tensor(arm.gravity, dtype=D)
+    gravity = torch.tensor(arm.gravity_vector, dtype=D)
     kinetic = potential = torch.zeros((), dtype=D)
     for lk, pose, rate in zip(arm.links, poses, rates):
         com = torch.tensor([*lk.com, 1.0], dtype=D)
@@ -166,7 +166,7 @@ def test_two_link_equals_the_papers_closed_form():
     assert (general.inverse_dynamics(q, qd, qdd) - tau).abs().max() <= 1e-12
     assert (general.mass_matrix(q) - closed.mass_matrix(q)).abs().max() <= 1e-12
     assert (general.coriolis(q, qd) - closed.coriolis(q, qd)).abs().max() <= 1e-12
-    assert (general.gravity_torque(q) - closed.gravity(q)).abs().max() <= 1e-12
+    assert (general.gravity(q) - closed.gravity(q)).abs().max() <= 1e-12
     assert (general.bias(q, qd) - closed.bias(q, qd)).abs().max() <= 1e-12
     assert (general.det_mass_matrix(q) - closed.det_mass_matrix(q)).abs().max() <= 1e-12
     # the simulator (eq. 5): both solve the same H q̈ = τ − b
@@ -215,7 +215,7 @@ def test_terms_of_eq4_add_up(name):
     """τ = H q̈ + C q̇ + G + Kᵀk, each term from its own method, b = τ at q̈ = 0 (eq. 5)."""
     arm = ARMS[name]()
     q, qd, qdd, k = states(64, arm.dof, seed=6)
-    parts = ((arm.mass_matrix(q) @ qdd[..., None]).squeeze(-1) + arm.coriolis(q, qd) + arm.gravity_torque(q)
+    parts = ((arm.mass_matrix(q) @ qdd[..., None]).squeeze(-1) + arm.coriolis(q, qd) + arm.gravity(q)
              + arm.wrench_torque(q, k))
     assert_rel(arm.inverse_dynamics(q, qd, qdd, k), parts, 1e-12)
     assert_rel(arm.bias(q, qd, k), arm.inverse_dynamics(q, qd, torch.zeros_like(qdd), k), 1e-14)
@@ -231,7 +231,7 @@ def test_euler_lagrange_reference_detects_a_wrong_model():
     bumped[2][2] += 1e-6
     links = list(arm.links)
     links[3] = dataclasses.replace(lk, inertia=tuple(map(tuple, bumped)))
-    wrong = SerialArm(links, arm.gravity, arm.end_point)
+    wrong = SerialArm(links, arm.gravity_vector, arm.end_point)
     assert (wrong.inverse_dynamics(q, qd, qdd) - ref).abs().max() > 1e-9
 
 
@@ -301,7 +301,7 @@ def test_puma560_matches_the_toolbox_published_values():
     armature Jm·G², which selpres leaves out (the toolbox's Jm, G per joint)."""
     arm = load("puma560")
     qn = torch.tensor([0.0, math.pi / 4, math.pi, 0.0, math.pi / 4, 0.0], dtype=D)
-    assert torch.allclose(arm.gravity_torque(qn), torch.tensor([0, 31.6399, 6.0351, 0, 0.0283, 0], dtype=D),
+    assert torch.allclose(arm.gravity(qn), torch.tensor([0, 31.6399, 6.0351, 0, 0.0283, 0], dtype=D),
                           atol=5e-5, rtol=0)
     toolbox_inertia = torch.tensor([
         [3.6594, -0.4044, 0.1006, -0.0025, 0.0000, -0.0000],

@@ -34,7 +34,7 @@ def random_arm(seed: int) -> SerialArm:
     names, so that everything a URDF can carry is exercised."""
     arm = serial_tests.random_arm(6, seed)
     links = [dataclasses.replace(lk, limits=(-2.0, 2.5) if i % 2 else None) for i, lk in enumerate(arm.links)]
-    return SerialArm(links, arm.gravity, arm.end_point, name="random6", base="mount", tip="tool")
+    return SerialArm(links, arm.gravity_vector, arm.end_point, name="random6", base="mount", tip="tool")
 
 
 ARMS = {
@@ -49,13 +49,13 @@ ARMS = {
 @pytest.mark.parametrize("name", ARMS)
 def test_export_import_round_trip(name, tmp_path):
     arm = ARMS[name]()
-    g = math.sqrt(sum(x * x for x in arm.gravity))
+    g = math.sqrt(sum(x * x for x in arm.gravity_vector))
     back = load_urdf(to_urdf(arm, tmp_path / f"{name}.urdf"), g=g)
     same_dynamics(arm, back)
     assert back.dof == arm.dof and [lk.name for lk in back.links] == [lk.name for lk in arm.links]
     assert (back.base, back.tip) == (arm.base, arm.tip)
     assert [lk.limits for lk in back.links] == [lk.limits for lk in arm.links]
-    assert max(abs(x - y) for x, y in zip(back.gravity, arm.gravity)) <= 1e-14
+    assert max(abs(x - y) for x, y in zip(back.gravity_vector, arm.gravity_vector)) <= 1e-14
 
 
 def test_exported_two_link_arm_hangs_gravity_on_minus_z_of_a_world_root(tmp_path):
@@ -69,7 +69,7 @@ def test_exported_two_link_arm_hangs_gravity_on_minus_z_of_a_world_root(tmp_path
     rot = rpy_matrix([float(x) for x in world.find("origin").get("rpy").split()])
     assert all(abs(a - b) < 1e-15 for a, b in zip((rot[2][0], rot[2][1], rot[2][2]), (0.0, 1.0, 0.0)))
     assert [j.get("type") for j in root.findall("joint")] == ["fixed", "continuous", "continuous", "fixed"]
-    assert load_urdf(path).gravity == (0.0, -9.81, 0.0)
+    assert load_urdf(path).gravity_vector == (0.0, -9.81, 0.0)
 
 
 def test_pinocchio_computes_the_same_torques(tmp_path):
@@ -80,7 +80,7 @@ def test_pinocchio_computes_the_same_torques(tmp_path):
         arm = ARMS[name]()
         model = pin.buildModelFromUrdf(str(to_urdf(arm, tmp_path / f"{name}.urdf")))
         data = model.createData()
-        model.gravity.linear = np.array([0.0, 0.0, -math.sqrt(sum(x * x for x in arm.gravity))])
+        model.gravity.linear = np.array([0.0, 0.0, -math.sqrt(sum(x * x for x in arm.gravity_vector))])
         q, qd, qdd, _ = states(20, arm.dof, seed=1)
         for x, v, a, tau in zip(q, qd, qdd, arm.inverse_dynamics(q, qd, qdd)):
             config = []
@@ -270,6 +270,6 @@ def test_urdf_error_is_a_config_error_that_survives_pickling(tmp_path):
 
 def test_export_refuses_a_tip_named_like_a_link(tmp_path):
     arm = SerialArm.two_link(0.42, 3.0, 0.2, 0.26)
-    clash = SerialArm(arm.links, arm.gravity, arm.end_point, tip="link1")
+    clash = SerialArm(arm.links, arm.gravity_vector, arm.end_point, tip="link1")
     with pytest.raises(ValueError, match="tip name 'link1' is already a link"):
         to_urdf(clash, tmp_path / "x.urdf")
