@@ -20,7 +20,9 @@ Only successes are remembered in the process: a later :func:`load` retries a fai
 live on the heap, so layer widths are bounded by memory only (not by a thread's stack).
 
 Threads: :meth:`Kernel.train` splits the groups into ``threads`` contiguous chunks and runs them on a
-thread pool; ctypes releases the GIL during the call, so the chunks run in parallel.
+thread pool; ctypes releases the GIL during the call, so the chunks run in parallel. :meth:`Kernel.forward`
+(evaluation: outputs of every replica, no update) does the same, or splits the patterns when there are
+fewer groups than threads.
 """
 
 from __future__ import annotations
@@ -114,15 +116,19 @@ def check_cpu(flags: frozenset[str]) -> None:
 
 
 class Kernel:
+    """One topology's compiled library: :meth:`train` (an epoch) and :meth:`forward` (evaluation)."""
+
     def __init__(self, path: Path):
         self.path = path
         self.lib = ctypes.CDLL(str(path))
-        f = self.lib.selpres_train
-        i64, dp, lp = ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p
-        f.argtypes = [ctypes.c_int, lp, i64, i64, i64, dp, dp, dp, dp, lp, i64, i64,
-                      ctypes.c_double, ctypes.c_double, dp]
-        f.restype = ctypes.c_int
-        self._f = f
+        i64, dp, lp, c_int = ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int
+        self._train = self.lib.selpres_train
+        self._train.argtypes = [c_int, lp, i64, i64, i64, dp, dp, dp, dp, lp, i64, i64,
+                                ctypes.c_double, ctypes.c_double, dp]
+        self._train.restype = c_int
+        self._forward = self.lib.selpres_forward
+        self._forward.argtypes = [c_int, lp, i64, i64, i64, i64, i64, dp, dp, i64, dp]
+        self._forward.restype = c_int
         self._pool: ThreadPoolExecutor | None = None
         self._pool_size = 0
 
@@ -134,35 +140,57 @@ class Kernel:
             self._pool_size = n
         return self._pool
 
+    def _run(self, fn, chunks: list[tuple]) -> None:
+        """``fn(*chunk)`` for every chunk, on the thread pool when there are several (ctypes releases
+        the GIL, so they run in parallel); a non-zero return code is an error."""
+        def call(args: tuple) -> None:
+            rc = fn(*args)
+            if rc != 0:
+                raise RuntimeError(f"selpres native kernel {fn.__name__} failed with code {rc}")
+
+        if len(chunks) == 1:
+            call(chunks[0])
+            return
+        for fut in [self._executor(len(chunks)).submit(call, c) for c in chunks]:
+            fut.result()
+
+    @staticmethod
+    def _bounds(n: int, threads: int) -> list[tuple[int, int]]:
+        T = max(1, min(int(threads), n))
+        return [(n * k // T, n * (k + 1) // T) for k in range(T)]
+
     def train(self, sizes, w: torch.Tensor, buf: torch.Tensor, X: torch.Tensor, Y: torch.Tensor,
               order: torch.Tensor, batch_size: int, lr: float, mom: float, loss: torch.Tensor,
               threads: int) -> None:
         """One epoch for all groups of ``w``/``buf`` ([G, P, 4], updated in place); ``loss`` [G*4] gets
-        per-lane sums."""
+        per-lane sums. Threads take contiguous chunks of groups."""
         G, P, lanes = w.shape
         assert lanes == LANES and buf.shape == w.shape and w.is_contiguous() and buf.is_contiguous()
         assert w.dtype == buf.dtype == X.dtype == Y.dtype == loss.dtype == torch.float64
         order = order.contiguous()
         assert order.dtype == torch.int64 and order.shape[0] == G * LANES
         sz = torch.tensor(list(sizes), dtype=torch.int64)
-        m = order.shape[1]
-        common = (sz.data_ptr(), P, w.data_ptr(), buf.data_ptr(), X.data_ptr(), Y.data_ptr(),
-                  order.data_ptr(), m, int(batch_size), float(lr), float(mom), loss.data_ptr())
-        nl = len(sizes) - 1
+        nl, m = len(sizes) - 1, order.shape[1]
+        rest = (P, w.data_ptr(), buf.data_ptr(), X.data_ptr(), Y.data_ptr(), order.data_ptr(), m,
+                int(batch_size), float(lr), float(mom), loss.data_ptr())
+        self._run(self._train, [(nl, sz.data_ptr(), g0, g1, *rest) for g0, g1 in self._bounds(G, threads)])
 
-        def run(g0: int, g1: int) -> None:
-            rc = self._f(nl, common[0], g0, g1, *common[1:])
-            if rc != 0:
-                raise RuntimeError(f"selpres native kernel failed with code {rc}")
-
-        T = max(1, min(int(threads), G))
-        if T == 1:
-            run(0, G)
-            return
-        bounds = [G * k // T for k in range(T + 1)]
-        futures = [self._executor(T).submit(run, bounds[k], bounds[k + 1]) for k in range(T)]
-        for fut in futures:
-            fut.result()
+    def forward(self, sizes, w: torch.Tensor, X: torch.Tensor, threads: int) -> torch.Tensor:
+        """Outputs of every lane of ``w`` ([G, P, 4]) on ``X`` [N, in]: [G*4, N, out] (padded lanes too).
+        Threads take chunks of groups, or chunks of patterns when there are fewer groups than threads."""
+        G, P, lanes = w.shape
+        assert lanes == LANES and w.is_contiguous() and w.dtype == X.dtype == torch.float64
+        X = X.contiguous()
+        N = X.shape[0]
+        out = torch.empty(G * LANES, N, sizes[-1], dtype=torch.float64)
+        sz = torch.tensor(list(sizes), dtype=torch.int64)
+        head, tail = (len(sizes) - 1, sz.data_ptr()), (P, w.data_ptr(), X.data_ptr(), N, out.data_ptr())
+        if G >= threads or N < 2:
+            chunks = [(*head, g0, g1, 0, N, *tail) for g0, g1 in self._bounds(G, threads)]
+        else:
+            chunks = [(*head, 0, G, n0, n1, *tail) for n0, n1 in self._bounds(N, threads)]
+        self._run(self._forward, chunks)
+        return out
 
 
 def macros(sizes) -> list[str]:

@@ -328,3 +328,50 @@ def test_bad_inputs_are_rejected():
         eng.train_epoch(X, Y, torch.tensor([[0, 1], [2, 3]]))
     with pytest.raises(ValueError):
         make_engine("nope", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+
+
+# ---------------------------------------------------------------- evaluation: predict
+def _bpn_outputs(sizes, params, X):
+    """The reference forward pass: one BPN (nn.Linear + sigmoid) per replica."""
+    from selpres.model import BPN, load_into
+
+    with torch.no_grad():
+        return torch.stack([load_into(BPN(sizes), params, r)(X) for r in range(params[0].shape[0])])
+
+
+@pytest.mark.parametrize("name", ["reference", "torch", NATIVE])
+@pytest.mark.parametrize("sizes", TOPOLOGIES, ids=lambda s: "-".join(map(str, s)))
+@pytest.mark.parametrize("R", [1, 5, 30])
+def test_predict_matches_reference_forward(scaled_exemplar, name, sizes, R):
+    X = scaled_exemplar[0][:37]  # 37 = 4 blocks of 8 patterns + 5 left over in the kernel
+    params = init_replica_params(sizes, list(range(R)))
+    params[0][0, 0, 0] = 7.0  # a saturated unit somewhere
+    expected = _bpn_outputs(sizes, params, X)
+    for threads in (1, 3):  # native: groups over threads, or patterns over threads when G < 3
+        got = make_engine(name, sizes, params, LR, MOM, 1, threads=threads).predict(X)
+        assert got.shape == (R, 37, sizes[-1]) and got.dtype == torch.float64
+        assert (got - expected).abs().max().item() <= TOL
+
+
+@pytest.mark.parametrize("name", ["reference", "torch", NATIVE])
+def test_predict_uses_the_trained_weights(name):
+    sizes, R, n = (6, 8, 2), 6, 40
+    X, Y = _data(n, sizes)
+    eng = make_engine(name, sizes, init_replica_params(sizes, list(range(R))), LR, MOM, 1)
+    eng.train_epoch(X, Y, _orders(R, n, [n])[0])
+    assert (eng.predict(X) - _bpn_outputs(sizes, eng.params(), X)).abs().max().item() <= TOL
+    with pytest.raises(ValueError, match=r"X must be \[N, 6\], got \(40, 5\)"):
+        eng.predict(X[:, :5])
+
+
+@requires_native
+def test_native_predict_keeps_a_nan_replica_to_itself():
+    sizes, R = (6, 4, 2), 6
+    X, _ = _data(20, sizes)
+    params = init_replica_params(sizes, list(range(R)))
+    poisoned = [t.clone() for t in params]
+    poisoned[0][1, 0, 0] = float("nan")  # replica 1 shares its vector with replicas 0, 2, 3
+    clean = make_engine("native", sizes, params, LR, MOM, 1).predict(X)
+    dirty = make_engine("native", sizes, poisoned, LR, MOM, 1).predict(X)
+    keep = [0, 2, 3, 4, 5]
+    assert torch.equal(clean[keep], dirty[keep]) and torch.isnan(dirty[1]).all()

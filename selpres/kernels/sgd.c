@@ -1,4 +1,5 @@
-/* selpres native kernel: SGD with momentum for many replicas of a sigmoid back-propagation network.
+/* selpres native kernel: SGD with momentum for many replicas of a sigmoid back-propagation network
+ * (selpres_train: one epoch), and their forward passes (selpres_forward: evaluation).
  *
  * Built and loaded by selpres/_kernels.py, which compiles this file once per topology with
  *   cc -O3 -march=native -fPIC -shared -std=c11 \
@@ -8,9 +9,9 @@
  *   P_TOTAL    parameters of one replica: sum over layers of out*in + out
  *   TOT_UNITS  sum of SIZES (activations of one presentation)
  *   MAXW       the widest layer
+ *   NI         groups advanced together in one instruction stream (see train_groups)
  * Work arrays (activations, deltas) live on the heap, one block per call, so no topology can overflow a
  * thread's stack.
- *   NI         groups advanced together in one instruction stream (see train_groups)
  *
  * Layout: replicas in groups of 4 lanes, one AVX2 vector of float64 per parameter; a group's parameters
  * are contiguous as [P_TOTAL][4] in the order W1 (row-major [out][in]), b1, W2, b2, ...
@@ -71,6 +72,17 @@ static inline __m256d sigmoid4(__m256d z) {
     return _mm256_div_pd(one, _mm256_add_pd(one, exp4(_mm256_xor_pd(z, _mm256_set1_pd(-0.0)))));
 }
 
+/* Where layer l's weights (woff) and biases (boff) start among a replica's parameters, and where the
+   activations of layer l's units start (aoff; layer 0 = the inputs). */
+static inline void layer_offsets(int64_t *woff, int64_t *boff, int64_t *aoff)
+{
+    int64_t off = 0, tot = 0;
+    for (int l = 0; l < NL; l++) {
+        woff[l] = off; off += S[l + 1] * S[l]; boff[l] = off; off += S[l + 1];
+    }
+    for (int l = 0; l <= NL; l++) { aoff[l] = tot; tot += S[l]; }
+}
+
 #define WORK_DOUBLES ((TOT_UNITS + 2 * MAXW) * 4)  /* one group's work arrays */
 
 /* Interleave. One presentation is a long chain of dependent operations (forward with ~90-cycle
@@ -88,13 +100,7 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *
 {
     const int64_t nin = S[0], nout = S[NL];
     int64_t woff[NL], boff[NL], aoff[NL + 1];
-    {
-        int64_t off = 0, tot = 0;
-        for (int l = 0; l < NL; l++) {
-            woff[l] = off; off += S[l + 1] * S[l]; boff[l] = off; off += S[l + 1];
-        }
-        for (int l = 0; l <= NL; l++) { aoff[l] = tot; tot += S[l]; }
-    }
+    layer_offsets(woff, boff, aoff);
     /* per group: activations [TOT_UNITS][4] and two delta buffers [MAXW][4], in `work` */
     double *act[NI], *da[NI], *db[NI];
     double *w[NI], *mb[NI], *G[NI];
@@ -260,5 +266,75 @@ int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t 
     for (; g < g1; g++) train_groups(1, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss);
     free(work);
     free(Gb);
+    return 0;
+}
+
+/* ------------------------------------------------------------------------------------------------
+   Forward passes only (evaluation): the same layout, 4 replicas per vector, every replica sees the
+   same inputs. Patterns are independent, so NPAT of them are advanced together: one weight load feeds
+   NPAT FMAs and the NPAT sigmoid chains overlap. The loop runs group by group so that a group's
+   weights stay in L1 while all patterns stream past. */
+#define NPAT 8
+
+static inline __attribute__((always_inline)) void
+forward_patterns(const int np, const double *w, double *work, const double *X, int64_t n,
+                 int64_t N, int64_t r0, double *out)
+{
+    const int64_t nin = S[0], nout = S[NL];
+    int64_t woff[NL], boff[NL], aoff[NL + 1];
+    layer_offsets(woff, boff, aoff);
+    double *act[NPAT];  /* activations [TOT_UNITS][4] of pattern n + p */
+#define EACHP for (int p = 0; p < np; p++)
+#pragma GCC unroll 8
+    EACHP {
+        act[p] = work + p * TOT_UNITS * 4;
+#pragma GCC unroll 4
+        for (int64_t i = 0; i < nin; i++) ST(act[p] + i * 4, _mm256_set1_pd(X[(n + p) * nin + i]));
+    }
+#pragma GCC unroll 8
+    for (int l = 0; l < NL; l++) {
+        const int64_t ni_ = S[l], no = S[l + 1];
+        for (int64_t o = 0; o < no; o++) {
+            __m256d z[NPAT];
+            const __m256d bias = LD(w + (boff[l] + o) * 4);
+#pragma GCC unroll 8
+            EACHP z[p] = bias;
+#pragma GCC unroll 4
+            for (int64_t i = 0; i < ni_; i++) {
+                const __m256d wv = LD(w + (woff[l] + o * ni_ + i) * 4);
+#pragma GCC unroll 8
+                EACHP z[p] = _mm256_fmadd_pd(wv, LD(act[p] + (aoff[l] + i) * 4), z[p]);
+            }
+#pragma GCC unroll 8
+            EACHP ST(act[p] + (aoff[l + 1] + o) * 4, sigmoid4(z[p]));
+        }
+    }
+#pragma GCC unroll 8
+    EACHP {  /* lane k is replica r0 + k: out[r][n][o] */
+        for (int64_t o = 0; o < nout; o++) {
+            double v[4];
+            _mm256_storeu_pd(v, LD(act[p] + (aoff[NL] + o) * 4));
+            for (int k = 0; k < 4; k++) out[((r0 + k) * N + n + p) * nout + o] = v[k];
+        }
+    }
+#undef EACHP
+}
+
+/* Outputs of the replicas of groups [g0, g1) on patterns [n0, n1) of X [N][S[0]]: out [G*4][N][S[NL]].
+   W as in selpres_train. Returns 0, -1 (out of memory) or -3 (not the topology compiled in). */
+int selpres_forward(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t n0, int64_t n1, int64_t P,
+                    const double *W, const double *X, int64_t N, double *out)
+{
+    if (nl != NL || P != P_TOTAL) return -3;
+    for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
+    double *work = (double *)aligned_alloc(32, (size_t)NPAT * TOT_UNITS * 32);
+    if (!work) return -1;
+    for (int64_t g = g0; g < g1; g++) {
+        const double *w = W + g * P_TOTAL * 4;
+        int64_t n = n0;
+        for (; n + NPAT <= n1; n += NPAT) forward_patterns(NPAT, w, work, X, n, N, g * 4, out);
+        for (; n < n1; n++) forward_patterns(1, w, work, X, n, N, g * 4, out);
+    }
+    free(work);
     return 0;
 }

@@ -1,0 +1,57 @@
+"""The network's forward pass for many replicas against one nn.Module per replica."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from selpres import model
+from selpres.model import BPN, forward_replicas, init_replica_params, load_into
+
+
+def _per_replica(sizes, params, X):
+    with torch.no_grad():
+        return torch.stack([load_into(BPN(sizes), params, r)(X) for r in range(params[0].shape[0])])
+
+
+@pytest.mark.parametrize("sizes", [(6, 13, 2), (6, 8, 8, 2), (3, 1, 1)], ids=lambda s: "-".join(map(str, s)))
+@pytest.mark.parametrize("block_activations", [1, 3 * 11 * 13, 1 << 20])  # blocks of 1, 3 (7 = 3+3+1), all
+def test_forward_replicas_matches_one_module_per_replica(monkeypatch, sizes, block_activations):
+    monkeypatch.setattr(model, "_BLOCK_ACTIVATIONS", block_activations)
+    R, N = 7, 11
+    params = init_replica_params(sizes, list(range(R)))
+    X = torch.rand(N, sizes[0], generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    got = forward_replicas(params, X)
+    assert got.shape == (R, N, sizes[-1]) and got.dtype == torch.float64
+    assert (got - _per_replica(sizes, params, X)).abs().max().item() <= 1e-15
+
+
+def test_forward_replicas_by_hand():
+    """A 1-1-1 net worked out by hand: sigmoid(w2 * sigmoid(w1 * x + b1) + b2)."""
+    params = [torch.tensor([[[2.0]]]), torch.tensor([[-1.0]]), torch.tensor([[[3.0]]]), torch.tensor([[0.5]])]
+    x = torch.tensor([[0.5]], dtype=torch.float64)
+    h = 1 / (1 + torch.exp(torch.tensor(-(2.0 * 0.5 - 1.0), dtype=torch.float64)))  # sigmoid(0) = 0.5
+    y = 1 / (1 + torch.exp(-(3.0 * h + 0.5)))  # sigmoid(2.0)
+    assert h.item() == 0.5
+    got = forward_replicas([p.to(torch.float64) for p in params], x)
+    assert got.shape == (1, 1, 1) and abs(got.item() - y.item()) <= 1e-16
+    assert abs(got.item() - 0.8807970779778823) <= 1e-15  # 1 / (1 + e^-2)
+
+
+def test_forward_replicas_keeps_autograd():
+    """torch.func gradients through forward_replicas (the reference tests take them) still work."""
+    sizes = (6, 5, 2)
+    params = [p[0] for p in init_replica_params(sizes, [3])]
+    X = torch.rand(4, 6, dtype=torch.float64)
+
+    def loss(p):
+        return forward_replicas([q.unsqueeze(0) for q in p], X).square().sum()
+
+    grads = torch.func.grad(loss)(params)
+    net = BPN(sizes)
+    with torch.no_grad():
+        for dst, src in zip(net.flat_params(), params):
+            dst.copy_(src)
+    net(X).square().sum().backward()
+    for g, p in zip(grads, net.flat_params()):
+        assert (g - p.grad).abs().max().item() <= 1e-14
