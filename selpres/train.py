@@ -30,7 +30,7 @@ from selpres.checks import batch_mode, optim_hparams, validate
 from selpres.config import to_container
 from selpres.engine import make_engine
 from selpres.errors import ConfigError
-from selpres.model import forward_replicas, init_replica_params
+from selpres.model import init_replica_params
 from selpres.orders import priority_orders
 from selpres.sampler import SelectivePresentationSampler, epoch_orders
 from selpres.schedule import EpochPlan, Schedule, build_schedule
@@ -135,16 +135,16 @@ def curve_point(engine, prob: Problem, cfg: DictConfig, ep: EpochPlan | None, lo
     epoch = -1 if ep is None else ep.index
     heldout_due = ep is None or epoch in prob.stage_ends or (cfg.eval.every and (epoch + 1) % cfg.eval.every == 0)
     heldout_X, heldout_Y = (t[: cfg.eval.heldout_curve] for t in prob.tests["heldout"])
-    with torch.no_grad():
-        params = engine.params()
-        rms = lambda X, Y: _as_list(D.rms_overall_nm(forward_replicas(params, X), Y, prob.scaler))  # noqa: E731
-        return {
-            "epoch": epoch, "stage": 0 if ep is None else ep.stage, "size": (ep or prob.plan[0]).size,
-            "presentations": progress.presentations,
-            "train_mse": [None] * len(prob.seeds) if loss is None else _as_list(loss),
-            "test10_rms_nm": rms(*prob.tests["test10"]),
-            "heldout_rms_nm": rms(heldout_X, heldout_Y) if heldout_due else None,
-        }
+    rms = lambda X, Y: _as_list(D.rms_overall_nm(engine.predict(X), Y, prob.scaler))
+    return {
+        "epoch": epoch,
+        "stage": 0 if ep is None else ep.stage,
+        "size": (ep or prob.plan[0]).size,
+        "presentations": progress.presentations,
+        "train_mse": [None] * len(prob.seeds) if loss is None else _as_list(loss),
+        "test10_rms_nm": rms(*prob.tests["test10"]),
+        "heldout_rms_nm": rms(heldout_X, heldout_Y) if heldout_due else None,
+    }
 
 
 def mark_diverged(progress: Progress, engine, loss: torch.Tensor, epoch: int) -> None:
@@ -158,12 +158,10 @@ def mark_diverged(progress: Progress, engine, loss: torch.Tensor, epoch: int) ->
 def final_scores(engine, prob: Problem) -> dict:
     """RMS of every replica on each test set, per joint and overall, in Nm and scaled units."""
     out = {}
-    with torch.no_grad():
-        params = engine.params()
-        for name, (X, Y) in prob.tests.items():
-            flat = D.rms_errors(forward_replicas(params, X), Y, prob.scaler)
-            out[name] = {unit: {j: flat[f"{j}_{u}"] for j in results_json.JOINTS}
-                         for unit, u in (("nm", "Nm"), ("scaled", "scaled"))}
+    for name, (X, Y) in prob.tests.items():
+        flat = D.rms_errors(engine.predict(X), Y, prob.scaler)
+        units = (("nm", "Nm"), ("scaled", "scaled"))
+        out[name] = {unit: {j: flat[f"{j}_{u}"] for j in results_json.JOINTS} for unit, u in units}
     return out
 
 
