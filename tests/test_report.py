@@ -310,6 +310,20 @@ def test_jobs_of_one_schedule_name_that_differ_become_separate_methods(tmp_path)
     assert {r["comparison"] for r in rows} == {expected}
 
 
+def test_an_optimizers_own_parameters_are_left_out_of_other_optimizers_labels(tmp_path):
+    """optim.mu exists only in QuickProp's config: SGD's label must not say "optim.mu=None"."""
+    s = tmp_path / "sw"
+    sgd, quickprop = {"name": "paper", "lr": 0.15, "momentum": 0.9}, {"name": "quickprop", "lr": 0.001, "mu": 1.75}
+    for optim in (sgd, quickprop):
+        res = results("conventional", "6-4-2", [0.1, 0.2])
+        res["config"] = {"schedule": {"name": "conventional"}, "optim": optim}
+        d = write_job(s, "conventional", "6-4-2", res)
+        d.rename(d.with_name(d.name + f",optim={optim['name']}"))
+    _, _, methods = aggregate(load_jobs(s))
+    assert methods == ["conventional optim.lr=0.001 optim.mu=1.75 optim.name=quickprop",
+                       "conventional optim.lr=0.15 optim.momentum=0.9 optim.name=paper"]
+
+
 def test_jobs_pool_by_seed_union(tmp_path):
     """replicas=2 then replicas=4 of the same method: seeds 0..3 once each, the shared seeds agreeing."""
     s = tmp_path / "sw"
