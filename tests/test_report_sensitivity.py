@@ -11,6 +11,7 @@ from test_report import PAPER_SGD, results, write_job, write_setting
 from selpres.report import aggregate, load_jobs
 from selpres.report.build import Report
 from selpres.report.families import families, family_name, paper_conventional
+from selpres.report.sections.error_cost import grid, plane_rows
 from selpres.report.sections.sensitivity import sensitivity_rows, verdict_text
 
 T = "6-4-2"
@@ -165,8 +166,8 @@ def test_no_family_with_two_settings_no_section(tmp_path):
         res["schedule"]["order"] = "random" if name == "random_growth" else "stratified"
         write_job(s, name, T, res)
     report = Report.build(s)
-    assert "Sensitivity" not in report.markdown
-    assert all("sensitivity.csv" not in sec.csv for sec in report.sections)
+    assert "Sensitivity" not in report.markdown and "Error–cost" not in report.markdown
+    assert all(not ({"sensitivity.csv", "error_cost.csv"} & set(sec.csv)) for sec in report.sections)
 
 
 def test_sensitivity_csv_written(sweep, tmp_path):
@@ -175,3 +176,46 @@ def test_sensitivity_csv_written(sweep, tmp_path):
     text = (tmp_path / "out" / "sensitivity.csv").read_text()
     assert text.splitlines()[0].startswith("kind,family,topology,settings,swept,")
     assert "## Sensitivity" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_error_cost_rows_and_figures(sweep, tmp_path):
+    groups, tops, _ = aggregate(load_jobs(sweep))
+    rows = {r["setting"]: r for r in plane_rows(groups, tops)}
+    r = rows["schedule.sizes=[50,1002]"]  # S1 = .10 .12 .11 .11: sd √(2e-4 / 3), t(0.975, 3) = 3.182446
+    half = 3.182446 * math.sqrt(2e-4 / 3) / 2
+    assert (r["family"], r["presentations"], r["n"]) == ("selective presentation", 31560, 4)
+    assert [r["heldout_nm_mean"], r["heldout_nm_ci_lo"], r["heldout_nm_ci_hi"]] == pytest.approx(
+        [0.11, 0.11 - half, 0.11 + half], abs=1e-6)
+    dead = rows["optim.lr=0.3 optim.momentum=0.8"]
+    assert (dead["n"], dead["diverged"], dead["heldout_nm_mean"]) == (0, 4, None)
+    files = Report.build(sweep).write(tmp_path / "out")
+    assert {"error_cost.csv", "error_cost.png", "heatmap_conventional_SGD_at_150_300_t_6-4-2.png"} \
+        <= set(files)
+    assert "heatmap_selective_presentation_6-4-2.png" not in files  # one swept parameter: no grid
+    assert (tmp_path / "out" / "error_cost.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_heat_map_grid_of_three_parameters_by_hand(tmp_path):
+    """Delta-bar-delta over κ (3 values) × φ (2) × θ (2), one setting not run: κ and φ are the axes (most
+    values; φ before θ by name), θ makes the panels; the cell values are the settings' means."""
+    s = tmp_path / "dbd"
+    done = {}
+    for kappa in (0.001, 0.002, 0.003):
+        for phi in (0.5, 0.7):
+            for theta in (0.6, 0.7):
+                if (kappa, phi, theta) == (0.003, 0.7, 0.7):
+                    continue
+                v = 0.1 + 10 * kappa + phi / 100 + theta / 1000
+                done[(kappa, phi, theta)] = v
+                write_setting(s, f"k{kappa}p{phi}t{theta}", "conventional", T, [v - 0.001, v + 0.001],
+                              [1002], [150], optim={"name": "delta_bar_delta", "kappa": kappa, "phi": phi,
+                                                    "theta": theta})
+    groups, tops, _ = aggregate(load_jobs(s))
+    (fam,) = families(groups, tops)
+    gr = grid(fam)
+    assert (gr.x, gr.y) == ("optim.kappa", "optim.phi")
+    assert (gr.xs, gr.ys) == (["0.001", "0.002", "0.003"], ["0.5", "0.7"])
+    assert list(gr.panels) == ["optim.theta=0.6", "optim.theta=0.7"]
+    for (kappa, phi, theta), v in done.items():
+        assert gr.panels[f"optim.theta={theta}"][(str(kappa), str(phi))] == pytest.approx(v)
+    assert ("0.003", "0.7") not in gr.panels["optim.theta=0.7"]  # not run: a blank cell
