@@ -130,9 +130,17 @@ def test_schedule_alone_rows_hold_the_learning_rate_fixed(tmp_path):
     text = verdict_text(rows, T)
     assert ("With optim.lr held fixed (2 values), selective presentation's spread over the schedule alone "
             "is worst ÷ best 1.050–1.200, with 50–100 % of settings within 10 % of the best.") in text
-    assert "No rival family with more than one setting" in text
+    assert "No rival family (one-stage training, an optimizer swept over its parameters) with more" in text
     assert "target_heldout_curve_rms_nm" in rows[0] and rows[0]["target_heldout_curve_rms_nm"] is None
     assert "no conventional run" in Report.build(s).markdown  # time to target without a target says so
+    # growing the set in another order is an ablation of selective presentation, not a rival speed-up method
+    for n1 in (50, 100):
+        write_setting(s, f"r{n1}", "random_growth", T, [0.3] * 2, [n1, 1002], [30, 30], order="random")
+    groups, tops, _ = aggregate(load_jobs(s))
+    rows = sensitivity_rows(groups, tops)
+    assert [r["family"] for r in rows if r["kind"] == "family"] == ["selective presentation",
+                                                                   "staged, random order"]
+    assert "No rival family" in verdict_text(rows, T)
 
 
 def test_family_names_and_the_paper_conventional_target(tmp_path):
@@ -174,7 +182,7 @@ def test_sensitivity_csv_written(sweep, tmp_path):
     files = Report.build(sweep).write(tmp_path / "out")
     assert "sensitivity.csv" in files
     text = (tmp_path / "out" / "sensitivity.csv").read_text()
-    assert text.splitlines()[0].startswith("kind,family,topology,settings,swept,")
+    assert text.splitlines()[0].startswith("kind,family,topology,staged,settings,swept,")
     assert "## Sensitivity" in (tmp_path / "out" / "report.md").read_text()
 
 

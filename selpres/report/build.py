@@ -13,12 +13,13 @@ from pathlib import Path
 from selpres.report.compare import Options
 from selpres.report.context import Context, Section
 from selpres.report.markdown import to_csv
-from selpres.report.sections import error_cost, plots, runs, sensitivity, table1, time_to_target, verdict
+from selpres.report.sections import (error_cost, plots, runs, selection, sensitivity, table1, time_to_target,
+                                     verdict)
 from selpres.storage import atomic_write
 
 # a section that has nothing to show for a sweep returns None and is left out
-SECTIONS = [table1.section, verdict.section, sensitivity.section, error_cost.section, time_to_target.section,
-            plots.section, runs.section]
+SECTIONS = [table1.section, verdict.section, selection.section, sensitivity.section, error_cost.section,
+            time_to_target.section, plots.section, runs.section]
 
 
 def write_text(path: Path, text: str) -> None:
