@@ -18,7 +18,7 @@ from pathlib import Path
 from selpres.report.compare import mean_curve
 from selpres.report.context import Context, Section
 from selpres.report.families import Family, families, paper_conventional
-from selpres.report.sections.plots import _plt, _save
+from selpres.report.sections.plots import pyplot, save_png
 from selpres.stats import summarize
 
 NOTE = (
@@ -74,14 +74,14 @@ def grid(fam: Family) -> Grid | None:
 
 
 def _colors(names: list[str]) -> dict[str, str]:
-    plt = _plt()
+    plt = pyplot()
     cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     return {n: cycle[i % len(cycle)] for i, n in enumerate(names)}
 
 
 def plot_plane(rows: list[dict], groups, topologies: list[str], path: Path) -> None:
     """One panel per topology: configurations with 95 % bars, and conventional's mean curve."""
-    plt = _plt()
+    plt = pyplot()
     from matplotlib.ticker import FuncFormatter
 
     colors = _colors(list(dict.fromkeys(r["family"] for r in rows)))
@@ -112,12 +112,12 @@ def plot_plane(rows: list[dict], groups, topologies: list[str], path: Path) -> N
     fig.suptitle("Error–cost plane: every configuration (mean final held-out RMS, 95 % interval)\n"
                  "over conventional training's mean learning curve", fontsize=9)
     fig.tight_layout()
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def plot_grid(gr: Grid, path: Path) -> None:
     """One heat map per panel, cells annotated with the mean, the family's best boxed."""
-    plt = _plt()
+    plt = pyplot()
     import numpy as np
 
     n = len(gr.panels)
@@ -147,7 +147,7 @@ def plot_grid(gr: Grid, path: Path) -> None:
         fig.colorbar(im, ax=ax, label="mean final held-out RMS (Nm)")
     fig.suptitle(f"{gr.family.name}, {gr.family.topology}", fontsize=9)
     fig.tight_layout()
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def slug(text: str) -> str:
