@@ -1,5 +1,5 @@
-"""Seed statistics without scipy: mean, standard deviation, Student-t intervals, paired t-tests, the
-equivalence test (TOST) and Holm's correction for a family of tests.
+"""Seed statistics without scipy: mean, standard deviation, median, Student-t intervals, paired t-tests,
+the equivalence test (TOST) and Holm's correction for a family of tests.
 
 The t quantile is found by bisection on the exact Student-t CDF for whole degrees of freedom
 (closed-form finite series in θ = atan(t/√ν)), so intervals and p-values over a handful of seeds are
@@ -62,6 +62,16 @@ def summarize(values: Iterable[float | None]) -> dict:
         half = t_quantile(0.975, n - 1) * std / math.sqrt(n)
         out.update(std=std, ci95=[mean - half, mean + half])
     return out
+
+
+def median(values: Iterable[float | None]) -> float | None:
+    """The middle value (the mean of the two middle ones for an even count) over the values that are not
+    None or NaN; ±inf are kept, so a setting that never got there (inf) still counts in the middle."""
+    vals = sorted(float(v) for v in values if v is not None and not math.isnan(v))
+    n = len(vals)
+    if n == 0:
+        return None
+    return vals[n // 2] if n % 2 else 0.5 * (vals[n // 2 - 1] + vals[n // 2])
 
 
 def _mean_se(values: Iterable[float | None]) -> tuple[int, float | None, float | None]:

@@ -72,6 +72,31 @@ def write_job(sweep: Path, schedule: str, topology: str, res: dict | None) -> Pa
     return d
 
 
+PAPER_SGD = {"name": "paper", "lr": 0.15, "momentum": 0.9, "batch_size": 1}
+
+
+def write_setting(sweep: Path, folder: str, name: str, topology: str, heldout: list, sizes: list,
+                  epochs: list, optim: dict | None = None, order: str = "stratified", extra: int = 0,
+                  curves=None, diverged=(), seed0: int = 0) -> Path:
+    """One job of a parameter sweep: a results.json with the given stages (``extra`` presentations after the
+    last full epoch, as a budget leaves), order, optimizer config and final held-out RMS per replica."""
+    res = results("selective", topology, heldout, curves=curves, diverged=diverged, seed0=seed0)
+    pres = sum(n * e for n, e in zip(sizes, epochs)) + extra
+    res["schedule"].update(name=name, order=order, p=len(sizes) - 1, sizes=sizes, epochs=epochs,
+                           extra_presentations=[0] * (len(sizes) - 1) + [extra],
+                           presentations_per_stage=[n * e for n, e in zip(sizes, epochs)], presentations=pres,
+                           conventional_presentations=sizes[-1] * sum(epochs),
+                           cost_ratio=pres / (sizes[-1] * sum(epochs)))
+    res["presentations_done"] = pres
+    res["config"] = {"schedule": {"name": name, "sizes": sizes, "epochs": epochs, "order": order},
+                     "topology": {"layers": topology}, "optim": dict(optim or PAPER_SGD), "seed": seed0,
+                     "replicas": len(heldout)}
+    d = sweep / folder
+    d.mkdir(parents=True)
+    (d / "results.json").write_text(json.dumps(res))
+    return d
+
+
 SEL = [0.10, 0.12, 0.11, 0.13, 0.09]
 CON = [0.15, 0.14, 0.16, 0.15, 0.17]  # selective − conventional = -0.05 -0.02 -0.05 -0.02 -0.08
 RG = [0.11, 0.11, 0.12, 0.12, 0.10]  # selective − random_growth = -0.01 +0.01 -0.01 +0.01 -0.01
@@ -308,6 +333,20 @@ def test_jobs_of_one_schedule_name_that_differ_become_separate_methods(tmp_path)
     rows = verdict_rows(groups, tops, methods)  # only selective variants: each compared with the first
     expected = "selective schedule.sizes=[50,1002] vs selective schedule.sizes=[100,1002]"
     assert {r["comparison"] for r in rows} == {expected}
+
+
+def test_an_optimizers_own_parameters_are_left_out_of_other_optimizers_labels(tmp_path):
+    """optim.mu exists only in QuickProp's config: SGD's label must not say "optim.mu=None"."""
+    s = tmp_path / "sw"
+    sgd = {"name": "paper", "lr": 0.15, "momentum": 0.9}
+    for optim in (sgd, {"name": "quickprop", "lr": 0.001, "mu": 1.75}):
+        res = results("conventional", "6-4-2", [0.1, 0.2])
+        res["config"] = {"schedule": {"name": "conventional"}, "optim": optim}
+        d = write_job(s, "conventional", "6-4-2", res)
+        d.rename(d.with_name(d.name + f",optim={optim['name']}"))
+    _, _, methods = aggregate(load_jobs(s))
+    assert methods == ["conventional optim.lr=0.001 optim.mu=1.75 optim.name=quickprop",
+                       "conventional optim.lr=0.15 optim.momentum=0.9 optim.name=paper"]
 
 
 def test_jobs_pool_by_seed_union(tmp_path):

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from selpres.stats import holm, summarize, t_cdf, t_quantile, t_test, tost
+from selpres.stats import holm, median, summarize, t_cdf, t_quantile, t_test, tost
 
 
 @pytest.mark.parametrize("p, df, q", [
@@ -93,3 +93,14 @@ def test_holm_by_hand():
     assert holm([0.2]) == [0.2] and holm([]) == []
     with pytest.raises(ValueError, match="position 1"):
         holm([0.1, None])
+
+
+def test_median_odd_even_none_nan_and_inf():
+    """Middle values by hand: the odd count's middle, the even count's two middles averaged, None/NaN
+    dropped, and inf kept (a setting that never reached a target sorts last, not away)."""
+    assert median([0.3, 0.1, 0.2]) == 0.2
+    assert median([0.4, 0.1, 0.3, 0.2]) == pytest.approx(0.25)
+    assert median([None, math.nan, 5.0, 1.0]) == 3.0
+    assert median([1.0, math.inf, math.inf]) == math.inf
+    assert median([1.0, 2.0, math.inf]) == 2.0
+    assert median([]) is None and median([None]) is None

@@ -1,4 +1,5 @@
-"""Table 1 of the paper from a sweep's ``results.json`` files: tables, verdicts, time-to-target, plots.
+"""Table 1 of the paper from a sweep's ``results.json`` files: tables, verdicts, time-to-target, plots;
+and, when the sweep has them, the sensitivity study, the error–cost plane and the selection verdict.
 
     python -m selpres.report outputs/sweeps/table1 [--out DIR]     (default DIR = <sweep>/report)
     python -m selpres.report outputs/sweeps/table1 --readme README.md   (also its Table 1 block)
@@ -9,10 +10,12 @@ The package reads in the data's direction, one concern per module:
 - ``jobs``      every job folder under the sweep (finished, diverged, failed or missing);
 - ``groups``    method labels, and the replicas of each (topology, method) pooled by seed;
 - ``paper``     the paper's Table 1 numbers, and whether a schedule is the paper's;
+- ``families``  a method with its parameters swept (schedule kind × optimizer), the sensitivity unit;
 - ``compare``   paired differences by seed and their readings, mean curves, time to target;
 - ``markdown``  number formats, Markdown tables and CSV text;
 - ``sections/`` one module per section of the report, each ``section(ctx) -> Section`` (Markdown, CSV
-  rows, figures): a new section is a new module added to ``build.SECTIONS``;
+  rows, figures; None when the sweep lacks what it needs): a new section is a new module added to
+  ``build.SECTIONS``;
 - ``build``     the report: its sections in order, written to the output folder;
 - ``readme``    the README's Table 1 block (between ``<!-- table1:begin/end -->``), from the report;
 - ``__main__``  the command line.

@@ -29,11 +29,12 @@ def main(argv: list[str] | None = None) -> int:
                     help=f"also rewrite the block between {BEGIN} and {END} in FILE with the Table 1 section "
                          "generated from this report (nothing is written if the markers are missing)")
     ap.add_argument("--margin", default="5%",
-                    help="equivalence margin m of the verdicts: a percentage of selective's mean final RMS "
-                         "over the paired seeds (default 5%%) or a value in Nm (e.g. 0.002)")
+                    help="equivalence margin m of the verdicts: a percentage of selective's (in the "
+                         "selection verdict: the staged run's) mean final RMS over the paired seeds (default "
+                         "5%%) or a value in Nm (e.g. 0.002)")
     ap.add_argument("--holm", action="store_true",
                     help="Holm-adjust the paired tests' p-values within each family (one metric across the "
-                         "verdict table)")
+                         "verdict table; the selection verdict table)")
     a = ap.parse_args(argv)
     try:
         options = Options(margin=Margin.parse(a.margin), holm=a.holm)

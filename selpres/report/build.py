@@ -1,7 +1,8 @@
 """The report: its sections in order, rendered to one Markdown file plus the CSV and PNG files behind it.
 
 A new section (sensitivity, error–cost plane, selection verdicts, ...) is a module in ``sections/`` with
-``section(ctx) -> Section``, added to :data:`SECTIONS` where it should appear.
+``section(ctx) -> Section | None`` (None: the sweep lacks what the section needs), added to
+:data:`SECTIONS` where it should appear.
 """
 
 from __future__ import annotations
@@ -12,10 +13,13 @@ from pathlib import Path
 from selpres.report.compare import Options
 from selpres.report.context import Context, Section
 from selpres.report.markdown import to_csv
-from selpres.report.sections import plots, runs, table1, time_to_target, verdict
+from selpres.report.sections import (error_cost, plots, runs, selection, sensitivity, table1, time_to_target,
+                                     verdict)
 from selpres.storage import atomic_write
 
-SECTIONS = [table1.section, verdict.section, time_to_target.section, plots.section, runs.section]
+# a section that has nothing to show for a sweep returns None and is left out
+SECTIONS = [table1.section, verdict.section, selection.section, sensitivity.section, error_cost.section,
+            time_to_target.section, plots.section, runs.section]
 
 
 def write_text(path: Path, text: str) -> None:
@@ -32,7 +36,7 @@ class Report:
     @classmethod
     def build(cls, sweep: Path, options: Options | None = None) -> Report:
         ctx = Context.load(sweep, options)
-        return cls(ctx, [make(ctx) for make in SECTIONS])
+        return cls(ctx, [s for make in SECTIONS if (s := make(ctx)) is not None])
 
     @property
     def markdown(self) -> str:

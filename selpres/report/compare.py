@@ -49,9 +49,10 @@ class Margin:
             return self.value
         return None if ref_mean is None else self.value * abs(ref_mean)
 
-    def describe(self) -> str:
+    def describe(self, of: str = REFERENCE) -> str:
+        """The margin in words; ``of``: whose mean a relative margin is a fraction of."""
         if self.relative:
-            return (f"{self.value * 100:g} % of {REFERENCE}'s mean final RMS over the paired seeds (per row "
+            return (f"{self.value * 100:g} % of {of}'s mean final RMS over the paired seeds (per row "
                     "and metric)")
         return f"{self.value:g} Nm (fixed with --margin)"
 
@@ -131,26 +132,38 @@ def verdict_rows(groups, topologies, methods, options: Options = Options()) -> l
             row["cost_ratio"] = ga.sched["presentations"] / gb.sched["presentations"]
             for set_, _ in SETS:
                 v = paired(ga.values(set_), gb.values(set_), options.margin)
-                row.update({f"{set_}_pairs": v["n"], f"{set_}_diff_mean": v["mean"],
-                            f"{set_}_diff_std": v["std"], f"{set_}_ci_lo": v["ci95"][0],
-                            f"{set_}_ci_hi": v["ci95"][1], f"{set_}_other_mean": v["other_mean"],
-                            f"{set_}_margin": v["margin"], f"{set_}_p": v["p"], f"{set_}_tost_p": v["p_tost"],
-                            f"{set_}_ci90_lo": v["ci90"][0], f"{set_}_ci90_hi": v["ci90"][1]})
+                row.update(paired_columns(set_, v))
                 found.append((row, set_, v, base(a)))
     for set_, _ in SETS:
-        family = [(row, v) for row, s, v, _ in found if s == set_ and v["p"] is not None]
-        for key in ("p", "p_tost"):
-            tested = [(row, v) for row, v in family if v[key] is not None]
-            adjusted = holm([v[key] for _, v in tested]) if options.holm else [v[key] for _, v in tested]
-            for (row, v), p in zip(tested, adjusted):
-                v[key] = p
-                if options.holm:
-                    row[f"{set_}_{'p' if key == 'p' else 'tost_p'}_holm"] = p
-        for row, _ in family:
-            row[f"{set_}_family_size"] = len(family)
+        adjust_family([(row, v) for row, s, v, _ in found if s == set_], set_, options)
     for row, set_, v, name in found:
         row[f"reading_{set_}"] = reading({**v, "holm": options.holm}, name=name)
     return rows
+
+
+def paired_columns(prefix: str, v: dict) -> dict:
+    """A :func:`paired` result as CSV columns named ``<prefix>_…`` (prefix: the metric, e.g. "heldout")."""
+    return {f"{prefix}_pairs": v["n"], f"{prefix}_diff_mean": v["mean"], f"{prefix}_diff_std": v["std"],
+            f"{prefix}_ci_lo": v["ci95"][0], f"{prefix}_ci_hi": v["ci95"][1],
+            f"{prefix}_other_mean": v["other_mean"], f"{prefix}_margin": v["margin"], f"{prefix}_p": v["p"],
+            f"{prefix}_tost_p": v["p_tost"], f"{prefix}_ci90_lo": v["ci90"][0],
+            f"{prefix}_ci90_hi": v["ci90"][1]}
+
+
+def adjust_family(found: list[tuple[dict, dict]], prefix: str, options: Options) -> None:
+    """One family of tests ([(row, paired(...))]; those without a p-value are not tests): its size into
+    ``<prefix>_family_size`` of each row and, with ``options.holm``, the t-test and TOST p-values
+    Holm-adjusted within it (in ``v`` and as ``<prefix>_p_holm`` / ``<prefix>_tost_p_holm``)."""
+    family = [(row, v) for row, v in found if v["p"] is not None]
+    for key in ("p", "p_tost"):
+        tested = [(row, v) for row, v in family if v[key] is not None]
+        adjusted = holm([v[key] for _, v in tested]) if options.holm else [v[key] for _, v in tested]
+        for (row, v), p in zip(tested, adjusted):
+            v[key] = p
+            if options.holm:
+                row[f"{prefix}_{'p' if key == 'p' else 'tost_p'}_holm"] = p
+    for row, _ in family:
+        row[f"{prefix}_family_size"] = len(family)
 
 
 def mean_curve(g: Group) -> list[tuple[int, float, dict]]:
@@ -168,7 +181,7 @@ def mean_curve(g: Group) -> list[tuple[int, float, dict]]:
     return out
 
 
-def _reach_row(curve: list, target: float, base_cost: float | None) -> dict:
+def reach(curve: list, target: float, base_cost: float | None) -> dict:
     """Where a mean curve first gets to ``target``: the curve point at or below it and the one before."""
     hit = next((i for i, (_, v, _) in enumerate(curve) if v <= target), None)
     if not curve:
@@ -205,6 +218,6 @@ def time_to_target_rows(groups, topologies, methods) -> list[dict]:
                        "target_heldout_curve_rms_nm": target, f"{BASELINE}_presentations": base_cost,
                        "final_curve_rms_nm": curve[-1][1] if curve else None,
                        "method_presentations": g.sched["presentations"] if g and g.sched else None}
-                row.update(_reach_row(curve, target, base_cost))
+                row.update(reach(curve, target, base_cost))
                 rows.append(row)
     return rows

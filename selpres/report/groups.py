@@ -125,22 +125,41 @@ def base(method: str) -> str:
     return method.split(" ", 1)[0]
 
 
+def settings(job: Job) -> dict[str, str]:
+    """The job's resolved config as flat key -> compact JSON text, without the keys that never make two
+    jobs different methods: what a method label, a family's swept parameters and a compute-matched
+    partner are read from."""
+    if not (job.results and "config" in job.results):
+        return {}
+    return {k: json.dumps(v, separators=(",", ":")) for k, v in flatten(job.results["config"]).items()
+            if not k.startswith(_NOT_A_METHOD)}
+
+
+def varying(members: list[dict[str, str]]) -> list[str]:
+    """The keys whose value differs between the given settings (a key absent from some counts as
+    differing), sorted."""
+    keys = sorted({k for f in members for k in f})
+    return [k for k in keys if len({f.get(k) for f in members}) > 1]
+
+
+def setting_text(f: dict[str, str], keys: list[str]) -> str:
+    """"k=v k=v" for ``keys`` present in ``f``; a key a config does not have is left out (an optimizer's
+    own parameter in another optimizer's job)."""
+    return " ".join(f"{k}={f[k]}".replace('"', "") for k in keys if k in f)
+
+
 def label_methods(jobs: list[Job]) -> None:
     """A job's method is its schedule's name; when jobs of one name differ in other settings (a sweep over
     stage sizes, epochs, lr, ...), the settings that differ are added to the name, so they are not pooled."""
     by_name: dict[str, list[tuple[Job, dict]]] = {}
     for j in jobs:
         if j.results and "config" in j.results:
-            flat = {k: json.dumps(v) for k, v in flatten(j.results["config"]).items()
-                    if not k.startswith(_NOT_A_METHOD)}
-            by_name.setdefault(j.schedule, []).append((j, flat))
+            by_name.setdefault(j.schedule, []).append((j, settings(j)))
     for name, members in by_name.items():
-        keys = sorted({k for _, f in members for k in f})
-        varying = [k for k in keys if len({f.get(k) for _, f in members}) > 1]
+        keys = varying([f for _, f in members])
         for j, f in members:
-            if varying:
-                j.schedule = name + " " + " ".join(f"{k}={f.get(k)}".replace('"', "").replace(" ", "")
-                                                   for k in varying)
+            if keys:
+                j.schedule = name + " " + setting_text(f, keys)
 
 
 def aggregate(jobs: list[Job]) -> tuple[dict[tuple[str, str], Group], list[str], list[str]]:

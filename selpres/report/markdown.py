@@ -21,6 +21,23 @@ def ci(s: dict, nd: int = 4) -> str:
     return "n/a" if lo is None else f"[{fmt(lo, nd)}, {fmt(hi, nd)}]"
 
 
+def pvalue(x: float | None) -> str:
+    return "n/a" if x is None else ("<0.0001" if x < 1e-4 else f"{x:.4f}")
+
+
+def diff_text(r: dict, prefix: str) -> str:
+    """A paired difference of a :func:`selpres.report.compare.paired_columns` row: mean and 95 % interval."""
+    if r.get(f"{prefix}_diff_mean") is None:
+        return "n/a"
+    return f"{r[f'{prefix}_diff_mean']:+.4f} " + signed_interval(r[f"{prefix}_ci_lo"], r[f"{prefix}_ci_hi"])
+
+
+def pvalues_text(r: dict, prefix: str, holm: bool) -> str:
+    """"t-test p / TOST p" of such a row; the Holm-adjusted ones with ``holm``."""
+    suffix = "_holm" if holm else ""
+    return f"{pvalue(r.get(f'{prefix}_p{suffix}'))} / {pvalue(r.get(f'{prefix}_tost_p{suffix}'))}"
+
+
 def signed_interval(lo: float | None, hi: float | None, nd: int = 4) -> str:
     """An interval of differences, signs always shown: whether it straddles 0 is read at a glance."""
     return "[n/a]" if lo is None else f"[{lo:+.{nd}f}, {hi:+.{nd}f}]"

@@ -17,6 +17,8 @@ PAPER = {
     },
 }
 PAPER_UNITS_NOTE = "paper (units unstated)"
+# Note 1 of Table 1: SGD with momentum (optim.name "paper"), online; what configs/optim/paper.yaml holds.
+PAPER_OPTIM = {"name": "paper", "lr": 0.15, "momentum": 0.9, "batch_size": 1}
 
 
 def _stages(sched: dict, method: str) -> bool:

@@ -12,7 +12,7 @@ from selpres.report.paper import PAPER, PAPER_UNITS_NOTE
 from selpres.storage import atomic_write
 
 
-def _plt():
+def pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
@@ -21,15 +21,15 @@ def _plt():
     return plt
 
 
-def _save(fig, path: Path) -> None:
-    plt = _plt()
+def save_png(fig, path: Path) -> None:
+    plt = pyplot()
     atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110))
     plt.close(fig)
 
 
 def plot_curves(groups, topologies, methods, path: Path) -> None:
     """Held-out curve RMS (Nm) against cumulative presentations; one panel per topology."""
-    plt = _plt()
+    plt = pyplot()
     from matplotlib.ticker import FuncFormatter
 
     fig, axes = plt.subplots(1, len(topologies), figsize=(5.2 * len(topologies), 4.2), squeeze=False)
@@ -64,12 +64,12 @@ def plot_curves(groups, topologies, methods, path: Path) -> None:
     fig.suptitle("Held-out RMS vs cost: mean over seeds, band = 95 % t-interval of the mean; "
                  f"dotted = {REFERENCE} stage boundaries", fontsize=9)
     fig.tight_layout()
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def plot_cost(groups, topologies, methods, path: Path) -> None:
     """Presentations per method, and measured wall seconds per replica-run per (topology, method)."""
-    plt = _plt()
+    plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
     pres = {}
     for m in methods:
@@ -97,7 +97,7 @@ def plot_cost(groups, topologies, methods, path: Path) -> None:
     a2.set_title(f"measured wall time per replica-run, engine: {', '.join(sorted(set(ran.values())))}")
     a2.legend(fontsize=8)
     fig.tight_layout()
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def section(ctx: Context) -> Section:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from selpres.report.compare import ALPHA, Options, verdict_rows
 from selpres.report.context import Context, Section
 from selpres.report.groups import REFERENCE, SETS
-from selpres.report.markdown import fmt, signed_interval, table
+from selpres.report.markdown import diff_text, fmt, pvalues_text, table
 
 
 def method_note(rows: list[dict], options: Options) -> str:
@@ -33,21 +33,6 @@ NOTE = (
 )
 
 
-def _p(x) -> str:
-    return "n/a" if x is None else ("<0.0001" if x < 1e-4 else f"{x:.4f}")
-
-
-def _diff(r: dict, set_: str) -> str:
-    if r.get(f"{set_}_diff_mean") is None:
-        return "n/a"
-    return f"{r[f'{set_}_diff_mean']:+.4f} " + signed_interval(r[f"{set_}_ci_lo"], r[f"{set_}_ci_hi"])
-
-
-def _pvalues(r: dict, set_: str, holm: bool) -> str:
-    suffix = "_holm" if holm else ""
-    return f"{_p(r.get(f'{set_}_p{suffix}'))} / {_p(r.get(f'{set_}_tost_p{suffix}'))}"
-
-
 def verdict_markdown(rows: list[dict], options: Options = Options()) -> str:
     head = ["topology", "comparison", "cost ratio", "pairs"]
     for _, name in SETS[::-1]:  # held-out first: the paper's claim is about generalisation
@@ -57,7 +42,7 @@ def verdict_markdown(rows: list[dict], options: Options = Options()) -> str:
     for r in rows:
         cells = [r["topology"], r["comparison"], fmt(r.get("cost_ratio"), 3), str(r.get("heldout_pairs", 0))]
         for set_, _ in SETS[::-1]:
-            cells += [_diff(r, set_), fmt(r.get(f"{set_}_margin")), _pvalues(r, set_, options.holm),
+            cells += [diff_text(r, set_), fmt(r.get(f"{set_}_margin")), pvalues_text(r, set_, options.holm),
                       r.get(f"reading_{set_}", "")]
         body.append(cells)
     return table(head, body)
