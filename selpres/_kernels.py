@@ -50,6 +50,7 @@ SOURCE = Path(__file__).resolve().parent / "kernels" / "sgd.c"  # compiled in pl
 CFLAGS = ["-O3", "-march=native", "-fPIC", "-shared", "-std=c11"]
 LIBS = ["-lm"]
 COMPILE_TIMEOUT = 300  # seconds; a time-out (a busy machine) is reported and retried by a later load()
+REQUIRED_CPU_FEATURES = ("avx2", "fma")  # what the kernel's intrinsics need (sgd.c stops without them)
 
 log = logging.getLogger(__name__)
 
@@ -64,9 +65,6 @@ def cache_dir() -> Path:
         return Path(env)
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "selpres"
-
-
-REQUIRED_CPU_FEATURES = ("avx2", "fma")  # what the kernel's intrinsics need (sgd.c stops without them)
 
 
 def _compiler() -> list[str]:

@@ -9,7 +9,7 @@ Every engine does the same thing, defined by :class:`ReferenceEngine` (plain PyT
 * ``"native"``    -- :class:`NativeEngine`: an AVX2 C kernel (4 float64 replicas per vector, inline
   vector ``exp``, topology compiled in; ``selpres/kernels/sgd.c``), built with the system C compiler at
   first use and cached (see :mod:`selpres._kernels`). Its ``predict`` runs the kernel's forward pass on
-  the packed weights (~2x ``forward_replicas`` at R = 1000 on 2,000 patterns, 2 threads).
+  the packed weights (~3x faster than ``forward_replicas`` at R = 1000 on 2,000 patterns).
 * ``"fast"``      -- ``native`` if the kernel can be had here, else ``torch``. Not a class: the returned
   engine's ``name`` says which one runs, and its ``fallback_reason`` why it is not native (the
   compiler's message, "no AVX2/FMA ...", "disabled by SELPRES_NO_NATIVE"); one warning line goes to the

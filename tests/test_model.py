@@ -15,13 +15,21 @@ def _per_replica(sizes, params, X):
 
 
 @pytest.mark.parametrize("sizes", [(6, 13, 2), (6, 8, 8, 2), (3, 1, 1)], ids=lambda s: "-".join(map(str, s)))
-@pytest.mark.parametrize("block_activations", [1, 3 * 11 * 13, 1 << 20])  # blocks of 1, 3 (7 = 3+3+1), all
-def test_forward_replicas_matches_one_module_per_replica(monkeypatch, sizes, block_activations):
-    monkeypatch.setattr(model, "_BLOCK_ACTIVATIONS", block_activations)
+@pytest.mark.parametrize("blocks", [(1, 7, 7), (3, 7, 3), (1 << 20, 7, 1), (1, 2, 2)],
+                         ids=["blocks-of-1", "3-3-1", "one-block", "cap-2-blocks"])
+def test_forward_replicas_matches_one_module_per_replica(monkeypatch, sizes, blocks):
+    """R = 7 in blocks of 1, of 3 (3 + 3 + 1), in one, and in blocks of 4 when at most 2 are allowed."""
     R, N = 7, 11
+    per_block, max_blocks, calls = blocks
+    monkeypatch.setattr(model, "_BLOCK_ACTIVATIONS", per_block * N * max(sizes[1:]))
+    monkeypatch.setattr(model, "_MAX_BLOCKS", max_blocks)
+    seen = []
+    real = model._forward_block
+    monkeypatch.setattr(model, "_forward_block", lambda p, x: seen.append(p[0].shape[0]) or real(p, x))
     params = init_replica_params(sizes, list(range(R)))
     X = torch.rand(N, sizes[0], generator=torch.Generator().manual_seed(0), dtype=torch.float64)
     got = forward_replicas(params, X)
+    assert len(seen) == calls and sum(seen) == R
     assert got.shape == (R, N, sizes[-1]) and got.dtype == torch.float64
     assert (got - _per_replica(sizes, params, X)).abs().max().item() <= 1e-15
 
