@@ -19,10 +19,14 @@ raises :class:`KernelUnavailable` with the reason, and ``make_engine("fast")`` f
 Only successes are remembered in the process: a later :func:`load` retries a failed build. Work arrays
 live on the heap, so layer widths are bounded by memory only (not by a thread's stack).
 
-Threads: :meth:`Kernel.train` splits the groups into ``threads`` contiguous chunks and runs them on a
-thread pool; ctypes releases the GIL during the call, so the chunks run in parallel. :meth:`Kernel.forward`
+Threads: :meth:`Kernel.train` splits the groups into contiguous chunks and runs them on a thread pool;
+ctypes releases the GIL during the call, so the chunks run in parallel. :meth:`Kernel.forward`
 (evaluation: outputs of every replica, no update) does the same, or splits the patterns when there are
-fewer groups than threads.
+fewer groups than threads. Small calls run in the calling thread: handing a chunk to the pool costs a
+queue put, a wake-up and a lock wait (0.02-0.3 ms on this 2-core machine, the most when it is busy),
+more than the arithmetic of a few replicas on a few patterns; see :data:`MIN_THREAD_WORK`. Chunking
+never changes a result: every replica sees the same operations in the same order however groups and
+patterns are split.
 """
 
 from __future__ import annotations
@@ -49,6 +53,16 @@ SOURCE = Path(__file__).resolve().parent / "kernels" / "sgd.c"  # compiled in pl
 
 CFLAGS = ["-O3", "-march=native", "-fPIC", "-shared", "-std=c11"]
 LIBS = ["-lm"]
+# The pool takes a thread only for at least this many multiply-adds (replica lanes x patterns x
+# parameters; an epoch counts TRAIN_WORK_PER_PARAMETER per parameter: forward, backward, update), so with 2
+# threads a call runs in the calling thread below 2**21 (~0.3 ms of one core: forward and training both
+# take ~0.15 ns a multiply-add here). Handing work to the pool costs 0.02-0.3 ms (queue put, wake-up, lock
+# wait; the most on a busy machine), while a second core can save at most half the call. Measured side by
+# side (6-13-2, 2 threads, load ~4 on 2 cores; calling thread vs pool): predict R = 1 on 10 patterns 12 vs
+# 124 us, on 2,000 158 vs 186 us; R = 30 on 10 patterns 15 vs 36 us, on 1,000 587 vs 617 us; an epoch
+# of 1002 patterns at R = 5: 366 vs 478 us. On a busy machine the pool did not pay below 4e6.
+MIN_THREAD_WORK = 1 << 20
+TRAIN_WORK_PER_PARAMETER = 3
 COMPILE_TIMEOUT = 300  # seconds; a time-out (a busy machine) is reported and retried by a later load()
 REQUIRED_CPU_FEATURES = ("avx2", "fma")  # what the kernel's intrinsics need (sgd.c stops without them)
 
@@ -129,6 +143,15 @@ class Kernel:
         self._forward.restype = c_int
         self._pool: ThreadPoolExecutor | None = None
         self._pool_size = 0
+        self._sizes: dict[tuple[int, ...], torch.Tensor] = {}
+
+    def _sizes_arg(self, sizes) -> tuple[int, int]:
+        """``(nl, pointer to sizes as int64)`` for the C entry points; the tensor is kept, not rebuilt
+        per call (a call at R = 1 costs tens of microseconds, so every torch op shows)."""
+        key = tuple(sizes)
+        if key not in self._sizes:
+            self._sizes[key] = torch.tensor(key, dtype=torch.int64)
+        return len(key) - 1, self._sizes[key].data_ptr()
 
     def _executor(self, n: int) -> ThreadPoolExecutor:
         if self._pool is None or self._pool_size < n:
@@ -149,8 +172,15 @@ class Kernel:
         if len(chunks) == 1:
             call(chunks[0])
             return
-        for fut in [self._executor(len(chunks)).submit(call, c) for c in chunks]:
+        pool = self._executor(len(chunks))
+        for fut in [pool.submit(call, c) for c in chunks]:
             fut.result()
+
+    @staticmethod
+    def threads_for(work: int, threads: int) -> int:
+        """How many threads a call of ``work`` multiply-adds gets: at most ``threads``, and no more than
+        one per :data:`MIN_THREAD_WORK` (1: the calling thread, no pool)."""
+        return max(1, min(int(threads), int(work) // MIN_THREAD_WORK))
 
     @staticmethod
     def _bounds(n: int, threads: int) -> list[tuple[int, int]]:
@@ -167,11 +197,12 @@ class Kernel:
         assert w.dtype == buf.dtype == X.dtype == Y.dtype == loss.dtype == torch.float64
         order = order.contiguous()
         assert order.dtype == torch.int64 and order.shape[0] == G * LANES
-        sz = torch.tensor(list(sizes), dtype=torch.int64)
-        nl, m = len(sizes) - 1, order.shape[1]
+        m = order.shape[1]
+        threads = self.threads_for(TRAIN_WORK_PER_PARAMETER * G * LANES * m * P, threads)
         rest = (P, w.data_ptr(), buf.data_ptr(), X.data_ptr(), Y.data_ptr(), order.data_ptr(), m,
                 int(batch_size), float(lr), float(mom), loss.data_ptr())
-        self._run(self._train, [(nl, sz.data_ptr(), g0, g1, *rest) for g0, g1 in self._bounds(G, threads)])
+        head = self._sizes_arg(sizes)
+        self._run(self._train, [(*head, g0, g1, *rest) for g0, g1 in self._bounds(G, threads)])
 
     def forward(self, sizes, w: torch.Tensor, X: torch.Tensor, threads: int) -> torch.Tensor:
         """Outputs of every lane of ``w`` ([G, P, 4]) on ``X`` [N, in]: [G*4, N, out] (padded lanes too).
@@ -181,8 +212,8 @@ class Kernel:
         X = X.contiguous()
         N = X.shape[0]
         out = torch.empty(G * LANES, N, sizes[-1], dtype=torch.float64)
-        sz = torch.tensor(list(sizes), dtype=torch.int64)
-        head, tail = (len(sizes) - 1, sz.data_ptr()), (P, w.data_ptr(), X.data_ptr(), N, out.data_ptr())
+        threads = self.threads_for(G * LANES * N * P, threads)
+        head, tail = self._sizes_arg(sizes), (P, w.data_ptr(), X.data_ptr(), N, out.data_ptr())
         if G >= threads or N < 2:
             chunks = [(*head, g0, g1, 0, N, *tail) for g0, g1 in self._bounds(G, threads)]
         else:

@@ -32,7 +32,8 @@ Semantics: replica r presents ``X[order[r, j]]`` for j = 0..m-1 in consecutive m
 Momentum buffers persist across ``train_epoch`` calls and are part of ``state_dict``.
 
 Threads: ``native`` splits replicas (in groups of 4; in ``predict``, patterns when there are fewer
-groups than threads) over ``threads`` OS threads; the default is
+groups than threads) over up to ``threads`` OS threads, and runs small calls (a few replicas, a few
+patterns) in the calling thread (see :data:`selpres._kernels.MIN_THREAD_WORK`); the default is
 ``torch.get_num_threads()`` (set it, or pass ``threads=1`` to ``make_engine``, e.g. when a joblib
 sweep already runs one process per core). Environment variable ``SELPRES_THREADS`` overrides the default.
 """

@@ -159,3 +159,39 @@ def test_wide_layer_does_not_overflow_the_stack(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600,
                           preexec_fn=two_mb_stack)
     assert proc.returncode == 0 and proc.stdout.strip() == "ok", (proc.returncode, proc.stderr[-2000:])
+
+
+# ---------------------------------------------------------------- small work stays in the calling thread
+def test_threads_for_gives_a_thread_only_work_worth_one():
+    M, threads_for = _kernels.MIN_THREAD_WORK, _kernels.Kernel.threads_for
+    assert [threads_for(w, 2) for w in (0, 1, M, 2 * M - 1)] == [1, 1, 1, 1]
+    assert [threads_for(w, 2) for w in (2 * M, 10**12)] == [2, 2]
+    assert threads_for(10**12, 1) == 1 and threads_for(3 * M, 8) == 3 and threads_for(10**12, 8) == 8
+
+
+@requires_native
+def test_small_calls_never_touch_the_pool_and_large_ones_do(monkeypatch):
+    """R = 1 on the 10 test patterns (the curve's every-epoch call) and a small epoch run in the calling
+    thread; the same calls with MIN_THREAD_WORK = 1 go to the pool, with bitwise the same numbers."""
+    import torch
+
+    from selpres.engine import make_engine
+    from selpres.model import init_replica_params
+
+    sizes = (6, 13, 2)
+    g = torch.Generator().manual_seed(0)
+    X = torch.rand(50, 6, generator=g, dtype=torch.float64)
+    Y = torch.rand(50, 2, generator=g, dtype=torch.float64)
+    order = torch.stack([torch.randperm(50, generator=g) for _ in range(5)])
+    real = _kernels.Kernel._executor
+    pooled = []
+    monkeypatch.setattr(_kernels.Kernel, "_executor", lambda self, n: pooled.append(n) or real(self, n))
+    results = []
+    for min_work in (_kernels.MIN_THREAD_WORK, 1):
+        monkeypatch.setattr(_kernels, "MIN_THREAD_WORK", min_work)
+        one, five = (make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1,
+                                 threads=2) for R in (1, 5))
+        results.append([one.predict(X[:10]), five.train_epoch(X, Y, order), *five.params(), five.predict(X)])
+        # forced: R = 1's predict splits its 10 patterns, R = 5's calls their 2 groups
+        assert pooled == ([] if min_work > 1 else [2] * 3), pooled
+    assert all(torch.equal(a, b) for a, b in zip(*results))
