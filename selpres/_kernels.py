@@ -21,12 +21,12 @@ live on the heap, so layer widths are bounded by memory only (not by a thread's 
 
 Threads: :meth:`Kernel.train` splits the groups into contiguous chunks and runs them on a thread pool;
 ctypes releases the GIL during the call, so the chunks run in parallel. :meth:`Kernel.forward`
-(evaluation: outputs of every replica, no update) does the same, or splits the patterns when there are
-fewer groups than threads. Small calls run in the calling thread: handing a chunk to the pool costs a
-queue put, a wake-up and a lock wait (0.02-0.3 ms on this 2-core machine, the most when it is busy),
-more than the arithmetic of a few replicas on a few patterns; see :data:`MIN_THREAD_WORK`. Chunking
-never changes a result: every replica sees the same operations in the same order however groups and
-patterns are split.
+(evaluation: outputs of every replica, no update) and :meth:`Kernel.squared_errors` (scoring: summed
+squared errors, no outputs written) do the same, or split the patterns when there are fewer groups than
+threads. Small calls run in the calling thread: handing a chunk to the pool costs a queue put, a wake-up
+and a lock wait (0.02-0.3 ms on this 2-core machine, the most when it is busy), more than the arithmetic
+of a few replicas on a few patterns; see :data:`MIN_THREAD_WORK`. Chunking never changes a result:
+every replica sees the same operations in the same order however groups, patterns and blocks are split.
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ LIBS = ["-lm"]
 # of 1002 patterns at R = 5: 366 vs 478 us. On a busy machine the pool did not pay below 4e6.
 MIN_THREAD_WORK = 1 << 20
 TRAIN_WORK_PER_PARAMETER = 3
+SCORE_BLOCK = 1024  # patterns per partial sum of squared_errors (fixed: results never depend on threads)
 COMPILE_TIMEOUT = 300  # seconds; a time-out (a busy machine) is reported and retried by a later load()
 REQUIRED_CPU_FEATURES = ("avx2", "fma")  # what the kernel's intrinsics need (sgd.c stops without them)
 
@@ -128,7 +129,8 @@ def check_cpu(flags: frozenset[str]) -> None:
 
 
 class Kernel:
-    """One topology's compiled library: :meth:`train` (an epoch) and :meth:`forward` (evaluation)."""
+    """One topology's compiled library: :meth:`train` (an epoch), :meth:`forward` (evaluation) and
+    :meth:`squared_errors` (scoring)."""
 
     def __init__(self, path: Path):
         self.path = path
@@ -141,6 +143,9 @@ class Kernel:
         self._forward = self.lib.selpres_forward
         self._forward.argtypes = [c_int, lp, i64, i64, i64, i64, i64, dp, dp, i64, dp]
         self._forward.restype = c_int
+        self._sqerr = self.lib.selpres_sqerr
+        self._sqerr.argtypes = [c_int, lp, i64, i64, i64, i64, i64, i64, dp, dp, dp, i64, i64, dp]
+        self._sqerr.restype = c_int
         self._pool: ThreadPoolExecutor | None = None
         self._pool_size = 0
         self._sizes: dict[tuple[int, ...], torch.Tensor] = {}
@@ -220,6 +225,34 @@ class Kernel:
             chunks = [(*head, 0, G, n0, n1, *tail) for n0, n1 in self._bounds(N, threads)]
         self._run(self._forward, chunks)
         return out
+
+    def squared_errors(self, sizes, w: torch.Tensor, X: torch.Tensor, Y: torch.Tensor,
+                       threads: int) -> torch.Tensor:
+        """Per lane of ``w`` ([G, P, 4]) and output, the sum over the patterns of ``X`` [N, in] of
+        (output - ``Y``)^2: [G*4, out] float64, with no [G*4, N, out] array in between. Patterns are
+        summed in fixed blocks of :data:`SCORE_BLOCK` (then the blocks in order), so the numbers do not
+        depend on ``threads``; threads take chunks of groups, or of blocks when there are fewer groups."""
+        G, P, lanes = w.shape
+        assert lanes == LANES and w.is_contiguous() and w.dtype == X.dtype == Y.dtype == torch.float64
+        X, Y = X.contiguous(), Y.contiguous()
+        N, nout = X.shape[0], sizes[-1]
+        assert Y.shape == (N, nout)
+        nb = -(-N // SCORE_BLOCK)
+        if nb == 0:
+            return torch.zeros(G * LANES, nout, dtype=torch.float64)
+        partial = torch.empty(nb, G * LANES, nout, dtype=torch.float64)
+        threads = self.threads_for(G * LANES * N * P, threads)
+        head = self._sizes_arg(sizes)
+        tail = (SCORE_BLOCK, P, w.data_ptr(), X.data_ptr(), Y.data_ptr(), N, G, partial.data_ptr())
+        if G >= threads or nb < 2:
+            chunks = [(*head, g0, g1, 0, nb, *tail) for g0, g1 in self._bounds(G, threads)]
+        else:
+            chunks = [(*head, 0, G, b0, b1, *tail) for b0, b1 in self._bounds(nb, threads)]
+        self._run(self._sqerr, chunks)
+        total = partial[0]
+        for b in range(1, nb):  # in block order, one addition each (a tree sum's order depends on torch)
+            total = total + partial[b]
+        return total
 
 
 def macros(sizes) -> list[str]:

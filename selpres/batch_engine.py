@@ -29,7 +29,7 @@ import copy
 
 import torch
 
-from selpres.engine import _check_inputs
+from selpres.engine import ScoredByPredict, _check_inputs
 from selpres.errors import ConfigError
 from selpres.model import forward_replicas
 from selpres.optim import make_optimizer, offset_sigmoid
@@ -48,7 +48,7 @@ def check_batch_options(sigmoid_prime_offset, reduction, prefix: str = "optim") 
     return offset, reduction
 
 
-class BatchEngine:
+class BatchEngine(ScoredByPredict):
     """R replicas of the sigmoid BPN trained in batch mode with one optimizer over the stacked weights.
 
     ``optimizer`` and ``hparams``: see :func:`selpres.optim.make_optimizer`. ``sigmoid_prime_offset``:

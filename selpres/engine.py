@@ -23,6 +23,8 @@ Interface (all engines)::
     losses = eng.train_epoch(X, Y, order)   # order [R, m] int64; returns [R] mean pre-update pattern loss
     eng.predict(X)        # [N, in] -> [R, N, out] float64: every replica's scaled outputs (evaluation);
                           # reference/torch: model.forward_replicas(eng.params(), X)
+    eng.squared_errors(X, Y)  # [N, in], [N, out] scaled targets -> [R, out] float64: per replica and
+                          # output, sum over patterns of (output - Y)^2 (scoring without [R, N, out])
     eng.params(); eng.state_dict(); eng.load_state_dict(state)
 
 Semantics: replica r presents ``X[order[r, j]]`` for j = 0..m-1 in consecutive mini-batches of
@@ -31,9 +33,10 @@ Semantics: replica r presents ``X[order[r, j]]`` for j = 0..m-1 in consecutive m
 ``SGD(lr, momentum)`` (no dampening/nesterov/weight decay): ``buf = momentum*buf + g; p -= lr*buf``.
 Momentum buffers persist across ``train_epoch`` calls and are part of ``state_dict``.
 
-Threads: ``native`` splits replicas (in groups of 4; in ``predict``, patterns when there are fewer
-groups than threads) over up to ``threads`` OS threads, and runs small calls (a few replicas, a few
-patterns) in the calling thread (see :data:`selpres._kernels.MIN_THREAD_WORK`); the default is
+Threads: ``native`` splits replicas (in groups of 4; in ``predict`` and ``squared_errors``, patterns when
+there are fewer groups than threads) over up to ``threads`` OS threads, and runs small calls (a few
+replicas, a few patterns) in the calling thread (see :data:`selpres._kernels.MIN_THREAD_WORK`); the
+default is
 ``torch.get_num_threads()`` (set it, or pass ``threads=1`` to ``make_engine``, e.g. when a joblib
 sweep already runs one process per core). Environment variable ``SELPRES_THREADS`` overrides the default.
 """
@@ -48,7 +51,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from selpres.model import BPN, forward_replicas, load_into
+from selpres.model import BPN, forward_replicas, load_into, squared_errors_of
 
 ENGINE_NAMES = ("reference", "torch", "native", "fast")
 
@@ -62,6 +65,8 @@ class Engine(Protocol):
     def train_epoch(self, X: torch.Tensor, Y: torch.Tensor, order: torch.Tensor) -> torch.Tensor: ...
 
     def predict(self, X: torch.Tensor) -> torch.Tensor: ...
+
+    def squared_errors(self, X: torch.Tensor, Y: torch.Tensor) -> torch.Tensor: ...
 
     def params(self) -> list[torch.Tensor]: ...
 
@@ -88,6 +93,15 @@ def _check_patterns(sizes, X: torch.Tensor) -> torch.Tensor:
     return X.detach().to(torch.float64)
 
 
+def _check_scoring(sizes, X: torch.Tensor, Y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``squared_errors``' inputs as float64, or a ValueError naming the bad shape."""
+    X = _check_patterns(sizes, X)
+    if Y.dim() != 2 or Y.shape != (X.shape[0], sizes[-1]):
+        raise ValueError(f"Y must be [{X.shape[0]}, {sizes[-1]}] (scaled targets of X's patterns), "
+                         f"got {tuple(Y.shape)}")
+    return X, Y.detach().to(torch.float64)
+
+
 def _default_threads(threads: int | None) -> int:
     if threads is None:
         env = os.environ.get("SELPRES_THREADS")
@@ -98,7 +112,16 @@ def _default_threads(threads: int | None) -> int:
 # ----------------------------------------------------------------------------------------------
 # reference: the idiomatic code that defines correct results
 # ----------------------------------------------------------------------------------------------
-class ReferenceEngine:
+class ScoredByPredict:
+    """``squared_errors`` from ``predict``'s [R, N, out] outputs: for the engines without a fused scoring
+    pass (reference, torch, batch); needs ``self.sizes`` and ``self.predict``."""
+
+    def squared_errors(self, X, Y):
+        X, Y = _check_scoring(self.sizes, X, Y)
+        return squared_errors_of(self.predict(X), Y)
+
+
+class ReferenceEngine(ScoredByPredict):
     """One ``BPN`` + one ``torch.optim.SGD`` per replica, trained pattern by pattern with autograd."""
 
     name = "reference"
@@ -156,7 +179,7 @@ class ReferenceEngine:
 # ----------------------------------------------------------------------------------------------
 # torch: all replicas at once, eager PyTorch (the pure-torch fallback)
 # ----------------------------------------------------------------------------------------------
-class TorchEngine:
+class TorchEngine(ScoredByPredict):
     """Replica-batched eager PyTorch with a hand-written backward. Same updates as the reference."""
 
     name = "torch"
@@ -272,6 +295,12 @@ class NativeEngine:
         """The kernel's forward pass on the packed weights (4 replicas per vector, threads over groups)."""
         out = self._k.forward(self.sizes, self.w, _check_patterns(self.sizes, X), self.threads)
         return out[: self.R]
+
+    def squared_errors(self, X, Y):
+        """Summed inside the kernel's forward pass: no [R, N, out] outputs are written. The lead's RMS:
+        scaled = sqrt(sum / N); in Nm, times (y_max - y_min) / (hi - lo) of the output's scaler."""
+        X, Y = _check_scoring(self.sizes, X, Y)
+        return self._k.squared_errors(self.sizes, self.w, X, Y, self.threads)[: self.R]
 
     def params(self):
         return self._unpack(self.w)

@@ -137,3 +137,10 @@ def forward_replicas(params: list[torch.Tensor], x: torch.Tensor) -> torch.Tenso
     for r0 in range(0, R, block):
         out[r0 : r0 + block] = _forward_block([p[r0 : r0 + block] for p in params], x)
     return out
+
+
+def squared_errors_of(outputs: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+    """Per replica and output, the sum over patterns of (output - target)^2: [R, N, out] and [N, out] ->
+    [R, out] float64. What an engine's ``squared_errors`` returns, from outputs already computed (RMS
+    errors in any unit follow from these sums; see :meth:`selpres.engine.NativeEngine.squared_errors`)."""
+    return (outputs - targets.to(outputs)).square().sum(-2)

@@ -365,13 +365,99 @@ def test_predict_uses_the_trained_weights(name):
 
 
 @requires_native
-def test_native_predict_keeps_a_nan_replica_to_itself():
+@pytest.mark.parametrize("method", ["predict", "squared_errors"])
+def test_native_evaluation_keeps_a_nan_replica_to_itself(method):
     sizes, R = (6, 4, 2), 6
-    X, _ = _data(20, sizes)
+    X, Y = _data(20, sizes)
     params = init_replica_params(sizes, list(range(R)))
     poisoned = [t.clone() for t in params]
     poisoned[0][1, 0, 0] = float("nan")  # replica 1 shares its vector with replicas 0, 2, 3
-    clean = make_engine("native", sizes, params, LR, MOM, 1).predict(X)
-    dirty = make_engine("native", sizes, poisoned, LR, MOM, 1).predict(X)
+    args = (X,) if method == "predict" else (X, Y)
+    clean = getattr(make_engine("native", sizes, params, LR, MOM, 1), method)(*args)
+    dirty = getattr(make_engine("native", sizes, poisoned, LR, MOM, 1), method)(*args)
     keep = [0, 2, 3, 4, 5]
     assert torch.equal(clean[keep], dirty[keep]) and torch.isnan(dirty[1]).all()
+
+
+# ---------------------------------------------------------------- scoring: squared_errors
+def _batch_engine(sizes, params):
+    from selpres.batch_engine import BatchEngine
+
+    return BatchEngine(sizes, params, "sgd", {"lr": LR})
+
+
+def _engine(name, sizes, params, threads=1):
+    return _batch_engine(sizes, params) if name == "batch" else make_engine(name, sizes, params, LR, MOM, 1,
+                                                                            threads=threads)
+
+
+def _fsum_squared_errors(outputs, Y):
+    """Per replica and output, math.fsum over the patterns (an exactly rounded sum, not torch's)."""
+    sq = (outputs - Y).square()
+    return torch.tensor([[math.fsum(sq[r, :, o].tolist()) for o in range(sq.shape[2])]
+                         for r in range(sq.shape[0])], dtype=torch.float64)
+
+
+# three of the kernel's blocks of patterns, the last partly full, ending 5 patterns past a multiple of 8
+SCORE_N = 2 * _kernels.SCORE_BLOCK + 45
+
+
+@pytest.mark.parametrize("name", ["reference", "torch", NATIVE, "batch"])
+@pytest.mark.parametrize("sizes", TOPOLOGIES, ids=lambda s: "-".join(map(str, s)))
+@pytest.mark.parametrize("R", [1, 5, 30])
+def test_squared_errors_match_predict(monkeypatch, name, sizes, R):
+    """[R, out] sums of (output - Y)^2 equal predict's outputs summed exactly, to 1e-12 relative; native with
+    1 and 2 threads forced onto the pool (MIN_THREAD_WORK = 1: groups or blocks split), bitwise alike."""
+    g = torch.Generator().manual_seed(R)
+    X = torch.rand(SCORE_N, sizes[0], generator=g, dtype=torch.float64)
+    Y = 0.1 + 0.8 * torch.rand(SCORE_N, sizes[-1], generator=g, dtype=torch.float64)
+    params = init_replica_params(sizes, list(range(R)))
+    params[0][0, 0, 0] = 7.0  # a saturated unit somewhere
+    monkeypatch.setattr(_kernels, "MIN_THREAD_WORK", 1)
+    got = []
+    for threads in (1, 2):
+        eng = _engine(name, sizes, params, threads)
+        sums = eng.squared_errors(X, Y)
+        expected = _fsum_squared_errors(eng.predict(X), Y)
+        assert sums.shape == (R, sizes[-1]) and sums.dtype == torch.float64
+        assert ((sums - expected).abs() / expected).max().item() <= TOL
+        got.append(sums)
+    assert torch.equal(got[0], got[1])
+
+
+@requires_native
+def test_native_squared_errors_do_not_depend_on_threads_or_pool(monkeypatch):
+    """Bitwise the same sums whether they are summed in the calling thread or in 2 or 3 chunks of groups
+    or of pattern blocks (R = 3: one group, so threads take blocks; R = 13: 4 groups)."""
+    sizes = (6, 13, 2)
+    X, Y = _data(SCORE_N, sizes)
+    for R in (3, 13):
+        params = init_replica_params(sizes, list(range(R)))
+        outs = []
+        for threads, min_work in ((1, 1 << 60), (2, 1), (3, 1)):
+            monkeypatch.setattr(_kernels, "MIN_THREAD_WORK", min_work)
+            eng = make_engine("native", sizes, params, LR, MOM, 1, threads=threads)
+            outs.append(eng.squared_errors(X, Y))
+        assert all(torch.equal(outs[0], o) for o in outs[1:])
+
+
+@pytest.mark.parametrize("name", ["reference", "torch", NATIVE, "batch"])
+def test_squared_errors_by_hand_and_bad_targets(name):
+    """A net whose outputs are all sigmoid(0) = 0.5 (zero weights): the sums are sum_n (0.5 - y_n)^2, known
+    here; no patterns give zeros; targets of the wrong shape are refused with the shapes named."""
+    sizes, R = (6, 4, 2), 5
+    params = [torch.zeros_like(p) for p in init_replica_params(sizes, list(range(R)))]
+    eng = _engine(name, sizes, params)
+    X = torch.rand(3, 6, dtype=torch.float64)
+    Y = torch.tensor([[0.1, 0.5], [0.9, 0.25], [0.5, 0.0]], dtype=torch.float64)
+    # output 0: 0.4^2 + 0.4^2 + 0 = 0.32; output 1: 0 + 0.25^2 + 0.5^2 = 0.3125
+    expected = torch.tensor([[0.32, 0.3125]] * R, dtype=torch.float64)
+    assert (eng.squared_errors(X, Y) - expected).abs().max().item() <= 1e-15
+    assert torch.equal(eng.squared_errors(X[:0], Y[:0]), torch.zeros(R, 2, dtype=torch.float64))
+    msg = r"Y must be \[3, 2\] \(scaled targets of X's patterns\), got \(3, 1\)"
+    with pytest.raises(ValueError, match=msg):
+        eng.squared_errors(X, Y[:, :1])
+    with pytest.raises(ValueError, match=r"Y must be \[3, 2\].*got \(2, 2\)"):
+        eng.squared_errors(X, Y[:2])
+    with pytest.raises(ValueError, match=r"X must be \[N, 6\], got \(3, 5\)"):
+        eng.squared_errors(X[:, :5], Y)

@@ -191,7 +191,9 @@ def test_small_calls_never_touch_the_pool_and_large_ones_do(monkeypatch):
         monkeypatch.setattr(_kernels, "MIN_THREAD_WORK", min_work)
         one, five = (make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1,
                                  threads=2) for R in (1, 5))
-        results.append([one.predict(X[:10]), five.train_epoch(X, Y, order), *five.params(), five.predict(X)])
-        # forced: R = 1's predict splits its 10 patterns, R = 5's calls their 2 groups
-        assert pooled == ([] if min_work > 1 else [2] * 3), pooled
+        small = [one.predict(X[:10]), one.squared_errors(X[:10], Y[:10]), five.train_epoch(X, Y, order)]
+        results.append([*small, *five.params(), five.predict(X), five.squared_errors(X, Y)])
+        # forced: R = 1's predict splits its 10 patterns, R = 5's calls their 2 groups; R = 1's squared
+        # errors stay whole (one group, one block of patterns: nothing to split)
+        assert pooled == ([] if min_work > 1 else [2] * 4), pooled
     assert all(torch.equal(a, b) for a, b in zip(*results))

@@ -63,3 +63,15 @@ def test_forward_replicas_keeps_autograd():
     net(X).square().sum().backward()
     for g, p in zip(grads, net.flat_params()):
         assert (g - p.grad).abs().max().item() <= 1e-14
+
+
+def test_squared_errors_of_by_hand():
+    """Two replicas, three patterns, two outputs, numbers summed by hand."""
+    out = torch.tensor([[[0.5, 0.2], [0.1, 0.9], [0.3, 0.3]],
+                        [[0.0, 0.0], [1.0, 1.0], [0.5, 0.5]]], dtype=torch.float64)
+    Y = torch.tensor([[0.25, 0.2], [0.1, 0.4], [0.8, 0.3]], dtype=torch.float64)
+    # replica 0: 0.25^2 + 0 + 0.5^2 = 0.3125, 0 + 0.5^2 + 0 = 0.25
+    # replica 1: 0.25^2 + 0.9^2 + 0.3^2 = 0.9625, 0.2^2 + 0.6^2 + 0.2^2 = 0.44
+    got = model.squared_errors_of(out, Y)
+    expected = torch.tensor([[0.3125, 0.25], [0.9625, 0.44]], dtype=torch.float64)
+    assert got.shape == (2, 2) and (got - expected).abs().max().item() <= 1e-15

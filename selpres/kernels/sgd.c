@@ -1,5 +1,6 @@
 /* selpres native kernel: SGD with momentum for many replicas of a sigmoid back-propagation network
- * (selpres_train: one epoch), and their forward passes (selpres_forward: evaluation).
+ * (selpres_train: one epoch), their forward passes (selpres_forward: evaluation), and their squared
+ * errors summed inside the forward pass (selpres_sqerr: scoring).
  *
  * Built and loaded by selpres/_kernels.py, which compiles this file once per topology with
  *   cc -O3 -march=native -fPIC -shared -std=c11 \
@@ -276,14 +277,15 @@ int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t 
    weights stay in L1 while all patterns stream past. */
 #define NPAT 8
 
+/* Forward pass of patterns n .. n+np-1 of X through one group's weights w: the activations of pattern
+   n + p end in work + p * TOT_UNITS * 4 ([TOT_UNITS][4], the outputs last). */
 static inline __attribute__((always_inline)) void
-forward_patterns(const int np, const double *w, double *work, const double *X, int64_t n,
-                 int64_t N, int64_t r0, double *out)
+forward_act(const int np, const double *w, double *work, const double *X, int64_t n)
 {
-    const int64_t nin = S[0], nout = S[NL];
+    const int64_t nin = S[0];
     int64_t woff[NL], boff[NL], aoff[NL + 1];
     layer_offsets(woff, boff, aoff);
-    double *act[NPAT];  /* activations [TOT_UNITS][4] of pattern n + p */
+    double *act[NPAT];
 #define EACHP for (int p = 0; p < np; p++)
 #pragma GCC unroll 8
     EACHP {
@@ -309,11 +311,21 @@ forward_patterns(const int np, const double *w, double *work, const double *X, i
             EACHP ST(act[p] + (aoff[l + 1] + o) * 4, sigmoid4(z[p]));
         }
     }
+}
+
+#define OUT_ACT(work, p) ((work) + ((p) * TOT_UNITS + TOT_UNITS - S[NL]) * 4)  /* pattern p's outputs */
+
+static inline __attribute__((always_inline)) void
+forward_patterns(const int np, const double *w, double *work, const double *X, int64_t n,
+                 int64_t N, int64_t r0, double *out)
+{
+    const int64_t nout = S[NL];
+    forward_act(np, w, work, X, n);
 #pragma GCC unroll 8
     EACHP {  /* lane k is replica r0 + k: out[r][n][o] */
         for (int64_t o = 0; o < nout; o++) {
             double v[4];
-            _mm256_storeu_pd(v, LD(act[p] + (aoff[NL] + o) * 4));
+            _mm256_storeu_pd(v, LD(OUT_ACT(work, p) + o * 4));
             for (int k = 0; k < 4; k++) out[((r0 + k) * N + n + p) * nout + o] = v[k];
         }
     }
@@ -334,6 +346,62 @@ int selpres_forward(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_
         int64_t n = n0;
         for (; n + NPAT <= n1; n += NPAT) forward_patterns(NPAT, w, work, X, n, N, g * 4, out);
         for (; n < n1; n++) forward_patterns(1, w, work, X, n, N, g * 4, out);
+    }
+    free(work);
+    return 0;
+}
+
+
+/* ------------------------------------------------------------------------------------------------
+   Scoring without outputs (evaluation): per replica and output, the sum over patterns of
+   (output - target)^2, accumulated inside the forward pass, so no [R][N][out] array is written.
+   Patterns are cut into blocks of bn (fixed by the caller, not by the thread count); sums gets one
+   partial sum per block, sums[b][g*4 + k][o] for group g of G, and the caller adds the blocks in order.
+   Within a block, pattern n adds into accumulator n mod NPAT (the leftover patterns into accumulator
+   0), and the accumulators are added 0, 1, ..., NPAT-1: the result depends on bn only, never on how
+   groups or blocks are spread over threads. Y [N][S[NL]] in the network's (scaled) units. */
+int selpres_sqerr(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t b0, int64_t b1, int64_t bn,
+                  int64_t P, const double *W, const double *X, const double *Y, int64_t N, int64_t G,
+                  double *sums)
+{
+    if (nl != NL || P != P_TOTAL || bn < 1) return -3;
+    for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
+    const int64_t nout = S[NL];
+    double *work = (double *)aligned_alloc(32, (size_t)NPAT * (TOT_UNITS + MAXW) * 32);
+    if (!work) return -1;
+    double *acc = work + NPAT * TOT_UNITS * 4;  /* [NPAT][MAXW][4] */
+    for (int64_t g = g0; g < g1; g++) {
+        const double *w = W + g * P_TOTAL * 4;
+        for (int64_t b = b0; b < b1; b++) {
+            const int64_t n1 = (b + 1) * bn < N ? (b + 1) * bn : N;
+            memset(acc, 0, (size_t)NPAT * MAXW * 32);
+            int64_t n = b * bn;
+            for (; n + NPAT <= n1; n += NPAT) {
+                forward_act(NPAT, w, work, X, n);
+#pragma GCC unroll 8
+                for (int p = 0; p < NPAT; p++)
+                    for (int64_t o = 0; o < nout; o++) {
+                        double *a = acc + (p * MAXW + o) * 4;
+                        __m256d d = _mm256_sub_pd(LD(OUT_ACT(work, p) + o * 4),
+                                                  _mm256_set1_pd(Y[(n + p) * nout + o]));
+                        ST(a, _mm256_fmadd_pd(d, d, LD(a)));
+                    }
+            }
+            for (; n < n1; n++) {
+                forward_act(1, w, work, X, n);
+                for (int64_t o = 0; o < nout; o++) {
+                    __m256d d = _mm256_sub_pd(LD(OUT_ACT(work, 0) + o * 4), _mm256_set1_pd(Y[n * nout + o]));
+                    ST(acc + o * 4, _mm256_fmadd_pd(d, d, LD(acc + o * 4)));
+                }
+            }
+            for (int64_t o = 0; o < nout; o++) {
+                __m256d s = LD(acc + o * 4);
+                for (int p = 1; p < NPAT; p++) s = _mm256_add_pd(s, LD(acc + (p * MAXW + o) * 4));
+                double v[4];
+                _mm256_storeu_pd(v, s);
+                for (int k = 0; k < 4; k++) sums[(b * G * 4 + g * 4 + k) * nout + o] = v[k];
+            }
+        }
     }
     free(work);
     return 0;
