@@ -129,8 +129,8 @@ def check_cpu(flags: frozenset[str]) -> None:
 
 
 class Kernel:
-    """One topology's compiled library: :meth:`train` (an epoch), :meth:`forward` (evaluation) and
-    :meth:`squared_errors` (scoring)."""
+    """One topology's compiled library: :meth:`train` (an epoch), :meth:`forward` (evaluation),
+    :meth:`squared_errors` (scoring) and :meth:`finite` (the divergence check)."""
 
     def __init__(self, path: Path):
         self.path = path
@@ -146,6 +146,9 @@ class Kernel:
         self._sqerr = self.lib.selpres_sqerr
         self._sqerr.argtypes = [c_int, lp, i64, i64, i64, i64, i64, i64, dp, dp, dp, i64, i64, dp]
         self._sqerr.restype = c_int
+        self._finite = self.lib.selpres_finite
+        self._finite.argtypes = [i64, i64, dp, lp]
+        self._finite.restype = c_int
         self._pool: ThreadPoolExecutor | None = None
         self._pool_size = 0
         self._sizes: dict[tuple[int, ...], torch.Tensor] = {}
@@ -253,6 +256,15 @@ class Kernel:
         for b in range(1, nb):  # in block order, one addition each (a tree sum's order depends on torch)
             total = total + partial[b]
         return total
+
+    def finite(self, w: torch.Tensor) -> torch.Tensor:
+        """[G*4] bool: whether every parameter of each lane of ``w`` ([G, P, 4]) is finite. One pass
+        over the packed weights in the calling thread (no unpacking, no torch parallel region)."""
+        G, P, lanes = w.shape
+        assert lanes == LANES and w.is_contiguous() and w.dtype == torch.float64
+        out = torch.empty(G * LANES, dtype=torch.int8)
+        self._run(self._finite, [(G, P, w.data_ptr(), out.data_ptr())])
+        return out.bool()
 
 
 def macros(sizes) -> list[str]:

@@ -31,7 +31,7 @@ import torch
 
 from selpres.engine import ScoredByPredict, _check_inputs
 from selpres.errors import ConfigError
-from selpres.model import forward_replicas
+from selpres.model import forward_replicas, replicas_finite
 from selpres.optim import make_optimizer, offset_sigmoid
 from selpres.optim._base import require
 
@@ -102,6 +102,10 @@ class BatchEngine(ScoredByPredict):
     def predict(self, X):
         """Outputs of every replica: [N, in] -> [R, N, out]."""
         return forward_replicas(self.params(), X.to(torch.float64))
+
+    def finite(self):
+        """[R] bool: every weight of replica r finite (the divergence check, without copying)."""
+        return replicas_finite([t.detach() for t in self.p])
 
     def params(self):
         return [t.detach().clone() for t in self.p]

@@ -25,6 +25,7 @@ Interface (all engines)::
                           # reference/torch: model.forward_replicas(eng.params(), X)
     eng.squared_errors(X, Y)  # [N, in], [N, out] scaled targets -> [R, out] float64: per replica and
                           # output, sum over patterns of (output - Y)^2 (scoring without [R, N, out])
+    eng.finite()          # [R] bool: every weight of replica r finite (the divergence check)
     eng.params(); eng.state_dict(); eng.load_state_dict(state)
 
 Semantics: replica r presents ``X[order[r, j]]`` for j = 0..m-1 in consecutive mini-batches of
@@ -51,7 +52,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from selpres.model import BPN, forward_replicas, load_into, squared_errors_of
+from selpres.model import BPN, forward_replicas, load_into, replicas_finite, squared_errors_of
 
 ENGINE_NAMES = ("reference", "torch", "native", "fast")
 
@@ -67,6 +68,8 @@ class Engine(Protocol):
     def predict(self, X: torch.Tensor) -> torch.Tensor: ...
 
     def squared_errors(self, X: torch.Tensor, Y: torch.Tensor) -> torch.Tensor: ...
+
+    def finite(self) -> torch.Tensor: ...
 
     def params(self) -> list[torch.Tensor]: ...
 
@@ -154,6 +157,9 @@ class ReferenceEngine(ScoredByPredict):
     def predict(self, X):
         return forward_replicas(self.params(), _check_patterns(self.sizes, X))
 
+    def finite(self):
+        return replicas_finite(self.params())
+
     def params(self):
         return [torch.stack(group) for group in zip(*(
             [p.detach().clone() for p in model.flat_params()] for model in self.models))]
@@ -224,6 +230,9 @@ class TorchEngine(ScoredByPredict):
 
     def predict(self, X):
         return forward_replicas(self.p, _check_patterns(self.sizes, X))
+
+    def finite(self):
+        return replicas_finite(self.p)
 
     def params(self):
         return [t.clone() for t in self.p]
@@ -301,6 +310,10 @@ class NativeEngine:
         scaled = sqrt(sum / N); in Nm, times (y_max - y_min) / (hi - lo) of the output's scaler."""
         X, Y = _check_scoring(self.sizes, X, Y)
         return self._k.squared_errors(self.sizes, self.w, X, Y, self.threads)[: self.R]
+
+    def finite(self):
+        """On the packed [G, P, 4] weights, in one pass (no unpacking)."""
+        return self._k.finite(self.w)[: self.R]
 
     def params(self):
         return self._unpack(self.w)

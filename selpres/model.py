@@ -144,3 +144,8 @@ def squared_errors_of(outputs: torch.Tensor, targets: torch.Tensor) -> torch.Ten
     [R, out] float64. What an engine's ``squared_errors`` returns, from outputs already computed (RMS
     errors in any unit follow from these sums; see :meth:`selpres.engine.NativeEngine.squared_errors`)."""
     return (outputs - targets.to(outputs)).square().sum(-2)
+
+
+def replicas_finite(params: list[torch.Tensor]) -> torch.Tensor:
+    """[R] bool: whether every weight and bias of replica r is finite (a diverged replica's are not)."""
+    return torch.stack([torch.isfinite(p).flatten(1).all(1) for p in params]).all(0)

@@ -461,3 +461,48 @@ def test_squared_errors_by_hand_and_bad_targets(name):
         eng.squared_errors(X, Y[:2])
     with pytest.raises(ValueError, match=r"X must be \[N, 6\], got \(3, 5\)"):
         eng.squared_errors(X[:, :5], Y)
+
+
+# ---------------------------------------------------------------- the divergence check: finite
+@pytest.mark.parametrize("name", ["reference", "torch", NATIVE, "batch"])
+@pytest.mark.parametrize("sizes", [(6, 13, 2), (6, 8, 8, 2)], ids=lambda s: "-".join(map(str, s)))
+def test_finite_flags_the_replicas_with_a_nan_or_inf(name, sizes):
+    """R = 9 (3 groups of 4, the last padded): a NaN in replica 1's first weight, +inf in replica 4's last
+    bias (the last parameter of a packed group), -inf in replica 8's first-layer bias; each tensor of the
+    list is also hit alone in its last element, in replica 6. The answer is that of params() + isfinite."""
+    R = 9
+    params = init_replica_params(sizes, list(range(R)))
+    eng = _engine(name, sizes, params)
+    assert eng.finite().dtype == torch.bool and eng.finite().tolist() == [True] * R
+    planted = [t.clone() for t in params]
+    planted[0][1, 0, 0] = float("nan")
+    planted[-1][4, -1] = float("inf")
+    planted[1][8, 0] = float("-inf")
+    got = _engine(name, sizes, planted).finite()
+    assert got.tolist() == [r not in (1, 4, 8) for r in range(R)]
+    assert torch.equal(got, torch.stack([torch.isfinite(p).flatten(1).all(1) for p in planted]).all(0))
+    for k in range(len(params)):
+        one = [t.clone() for t in params]
+        one[k][6].view(-1)[-1] = float("nan")
+        assert _engine(name, sizes, one).finite().tolist() == [r != 6 for r in range(R)], f"tensor {k}"
+
+
+@pytest.mark.parametrize("name", ["reference", "torch", NATIVE])
+def test_finite_sees_weights_that_diverge_in_training(name):
+    """Momentum 10 (beyond what a config allows) blows every learning replica up to inf and NaN within a few
+    epochs; replica 3's outputs are saturated (output bias 1000: sigmoid = 1.0 exactly, so its gradients are
+    0) and it never moves, and replica 1 carries huge but finite weights. The check agrees with params() +
+    isfinite before and after."""
+    sizes, R, n = (6, 4, 2), 5, 50
+    X, Y = _data(n, sizes)
+    params = init_replica_params(sizes, list(range(R)))
+    params[-1][3] = 1000.0
+    params[0][1, 0, 0] = 1e308
+    params[0][1, 1] *= 1e300  # a sum of these would overflow: a finiteness test by summing would be wrong
+    eng = make_engine(name, sizes, params, LR, 10.0, 1)
+    assert eng.finite().tolist() == [True] * R
+    for o in _orders(R, n, [n] * 10):
+        eng.train_epoch(X, Y, o)
+    want = torch.stack([torch.isfinite(p).flatten(1).all(1) for p in eng.params()]).all(0)
+    assert torch.equal(eng.finite(), want)
+    assert want.tolist() == [False, False, False, True, False]

@@ -75,3 +75,12 @@ def test_squared_errors_of_by_hand():
     got = model.squared_errors_of(out, Y)
     expected = torch.tensor([[0.3125, 0.25], [0.9625, 0.44]], dtype=torch.float64)
     assert got.shape == (2, 2) and (got - expected).abs().max().item() <= 1e-15
+
+
+def test_replicas_finite_flags_nan_and_inf_in_any_tensor():
+    params = init_replica_params((6, 4, 2), list(range(4)))
+    assert model.replicas_finite(params).tolist() == [True] * 4
+    params[0][1, 3, 5] = float("nan")
+    params[3][2, 1] = float("-inf")
+    params[1][0, 0] = 1e308  # huge is still finite
+    assert model.replicas_finite(params).tolist() == [True, False, False, True]

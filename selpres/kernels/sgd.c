@@ -1,6 +1,7 @@
 /* selpres native kernel: SGD with momentum for many replicas of a sigmoid back-propagation network
- * (selpres_train: one epoch), their forward passes (selpres_forward: evaluation), and their squared
- * errors summed inside the forward pass (selpres_sqerr: scoring).
+ * (selpres_train: one epoch), their forward passes (selpres_forward: evaluation), their squared errors
+ * summed inside the forward pass (selpres_sqerr: scoring), and whether their weights are finite
+ * (selpres_finite: the divergence check).
  *
  * Built and loaded by selpres/_kernels.py, which compiles this file once per topology with
  *   cc -O3 -march=native -fPIC -shared -std=c11 \
@@ -404,5 +405,28 @@ int selpres_sqerr(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t 
         }
     }
     free(work);
+    return 0;
+}
+
+/* finite[g*4 + k] = 1 if every parameter of lane k of group g (of groups [0, G)) is finite, else 0.
+   x * 0 is 0 for a finite x and NaN for an infinite or NaN one, so a lane's sum of them is 0 exactly when
+   all its parameters are finite, whatever their size (no overflow, unlike a sum of the weights). */
+int selpres_finite(int64_t G, int64_t P, const double *W, int8_t *finite)
+{
+    if (P != P_TOTAL) return -3;
+    const __m256d zero = _mm256_setzero_pd();
+    for (int64_t g = 0; g < G; g++) {
+        const double *w = W + g * P_TOTAL * 4;
+        __m256d a0 = zero, a1 = zero;
+        int64_t p = 0;
+        for (; p + 2 <= P_TOTAL; p += 2) {
+            a0 = _mm256_fmadd_pd(LD(w + p * 4), zero, a0);
+            a1 = _mm256_fmadd_pd(LD(w + p * 4 + 4), zero, a1);
+        }
+        if (p < P_TOTAL) a0 = _mm256_fmadd_pd(LD(w + p * 4), zero, a0);
+        double v[4];
+        _mm256_storeu_pd(v, _mm256_add_pd(a0, a1));
+        for (int k = 0; k < 4; k++) finite[g * 4 + k] = v[k] == 0.0;
+    }
     return 0;
 }
