@@ -64,6 +64,16 @@ class Problem:
     def stage_ends(self) -> frozenset[int]:
         return frozenset(self.schedule.stage_ends())
 
+    @functools.cached_property
+    def scored(self) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
+        """name -> (inputs, targets), both scaled: what the engines score (tests holds targets in Nm)."""
+        return {name: (X, self.scaler.transform_y(Y)) for name, (X, Y) in self.tests.items()}
+
+    @functools.cached_property
+    def nm_per_scaled(self) -> torch.Tensor:
+        """Nm per scaled unit of each output (the scaler is affine): scaled errors times this are errors in Nm."""
+        return (self.scaler.y_max - self.scaler.y_min) / (self.scaler.hi - self.scaler.lo)
+
 
 def prepare(cfg: DictConfig) -> Problem:
     """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
@@ -130,27 +140,31 @@ def _as_list(t: torch.Tensor) -> list:
     return [v if math.isfinite(v) else None for v in t.tolist()]
 
 
+def _rms_nm(sums: torch.Tensor, n: int, prob: Problem) -> torch.Tensor:
+    """Overall RMS in Nm of every replica from its per-output sums of squared scaled errors [R, out]."""
+    return (sums * prob.nm_per_scaled.square()).sum(1).div(n * sums.shape[1]).sqrt()
+
+
 def curve_point(engine, prob: Problem, cfg: DictConfig, ep: EpochPlan | None, loss, progress: Progress) -> dict:
     """One history record: where the job is, the training MSE, test-10 RMS and (when due) held-out RMS."""
     epoch = -1 if ep is None else ep.index
     heldout_due = ep is None or epoch in prob.stage_ends or (cfg.eval.every and (epoch + 1) % cfg.eval.every == 0)
-    heldout_X, heldout_Y = (t[: cfg.eval.heldout_curve] for t in prob.tests["heldout"])
-    rms = lambda X, Y: _as_list(D.rms_overall_nm(engine.predict(X), Y, prob.scaler))
+    heldout_X, heldout_Y = (t[: cfg.eval.heldout_curve] for t in prob.scored["heldout"])
+    rms = lambda X, Y: _as_list(_rms_nm(engine.squared_errors(X, Y), X.shape[0], prob))
     return {
         "epoch": epoch,
         "stage": 0 if ep is None else ep.stage,
         "size": (ep or prob.plan[0]).size,
         "presentations": progress.presentations,
         "train_mse": [None] * len(prob.seeds) if loss is None else _as_list(loss),
-        "test10_rms_nm": rms(*prob.tests["test10"]),
+        "test10_rms_nm": rms(*prob.scored["test10"]),
         "heldout_rms_nm": rms(heldout_X, heldout_Y) if heldout_due else None,
     }
 
 
 def mark_diverged(progress: Progress, engine, loss: torch.Tensor, epoch: int) -> None:
     """A replica whose loss or weights are no longer finite diverged here (its results are withheld)."""
-    finite = torch.isfinite(loss) & torch.stack([torch.isfinite(p).flatten(1).all(1) for p in engine.params()]).all(0)
-    for r in torch.nonzero(~finite).flatten().tolist():
+    for r in torch.nonzero(~(torch.isfinite(loss) & engine.finite())).flatten().tolist():
         if progress.diverged_at[r] is None:
             progress.diverged_at[r] = {"epoch": epoch + 1, "presentations": progress.presentations}
 
@@ -158,10 +172,14 @@ def mark_diverged(progress: Progress, engine, loss: torch.Tensor, epoch: int) ->
 def final_scores(engine, prob: Problem) -> dict:
     """RMS of every replica on each test set, per joint and overall, in Nm and scaled units."""
     out = {}
-    for name, (X, Y) in prob.tests.items():
-        flat = D.rms_errors(engine.predict(X), Y, prob.scaler)
-        units = (("nm", "Nm"), ("scaled", "scaled"))
-        out[name] = {unit: {j: flat[f"{j}_{u}"] for j in results_json.JOINTS} for unit, u in units}
+    for name, (X, Y) in prob.scored.items():
+        sums, n = engine.squared_errors(X, Y), X.shape[0]  # [R, out] in scaled units
+        scores = {}
+        for unit, weight in (("nm", prob.nm_per_scaled.square()), ("scaled", torch.ones_like(prob.nm_per_scaled))):
+            per_joint = (sums * weight).div(n).sqrt()
+            scores[unit] = {"overall": (sums * weight).sum(1).div(n * sums.shape[1]).sqrt(),
+                            **{joint: per_joint[:, k] for k, joint in enumerate(results_json.JOINTS[1:])}}
+        out[name] = scores
     return out
 
 
