@@ -55,7 +55,7 @@ def stated_cost(point: str) -> int:
 
 
 def presentations(sch: dict) -> int:
-    """T/t written out from a composed schedule: sum n_i N_i (a fraction of n rounded half up), or the budget."""
+    """T/t from a composed schedule: sum n_i N_i (a fraction of n rounded half up), or the budget."""
     sizes = [int(s * N + 0.5) if isinstance(s, float) else s for s in sch["sizes"]]
     return sch["budget"] if sch["budget"] is not None else sum(n * e for n, e in zip(sizes, sch["epochs"]))
 
