@@ -10,7 +10,9 @@ of the same hashes); the priority orders' selection cost; the native kernel's bu
 generation. A "replica-run" is one conventional run of the paper: 150 epochs x 1002 single-pattern
 updates of a 6-13-2 sigmoid net (SGD lr 0.15, momentum 0.9). Slow configurations are timed over a few
 epochs and extrapolated to 150 (the ``ep`` column says how many were timed); times are medians. Engine
-rows use random data in the real shapes (6 inputs, 2 outputs); job rows use the real configs.
+rows use random data in the real shapes (6 inputs, 2 outputs); job rows use the real configs. The batch
+optimizers (``BatchEngine``, one step per epoch, ``configs/optim/<name>.yaml``) follow the online engine rows
+on the same axis: a replica-run is then 150 epochs of 1002 presentations and 150 steps.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import torch
@@ -92,10 +95,9 @@ def bench_idiomatic(table: EngineTable, epochs: int, repeats: int) -> None:
     table.record("idiomatic DataLoader", 1, 1, epochs, statistics.median(times))
 
 
-def bench_engine(table: EngineTable, name: str, R: int, epochs: int, repeats: int, threads=None,
-                 note: str = "") -> float:
-    """One engine's updates alone (no shuffles, scoring or logging); returns ms per replica-run."""
-    from selpres.engine import make_engine
+def time_epochs(make, R: int, epochs: int, repeats: int):
+    """(engine, median seconds) of ``epochs`` epochs of R replicas on random data in the real shapes, a fresh
+    engine ``make(params)`` per repeat: the updates alone (no shuffles, scoring or logging)."""
     from selpres.model import init_replica_params
 
     X, Y = data()
@@ -104,13 +106,23 @@ def bench_engine(table: EngineTable, name: str, R: int, epochs: int, repeats: in
     params = init_replica_params(SIZES, list(range(R)))
     times = []
     for _ in range(repeats):
-        eng = make_engine(name, SIZES, params, LR, MOM, 1, threads=threads)
+        eng = make(params)
         t = time.perf_counter()
         for o in orders:
             eng.train_epoch(X, Y, o)
         times.append(time.perf_counter() - t)
+    return eng, statistics.median(times)
+
+
+def bench_engine(table: EngineTable, name: str, R: int, epochs: int, repeats: int, threads=None,
+                 note: str = "") -> float:
+    """One online engine's updates alone; returns ms per replica-run."""
+    from selpres.engine import make_engine
+
+    make = lambda p: make_engine(name, SIZES, p, LR, MOM, 1, threads=threads)  # noqa: E731
+    eng, sec = time_epochs(make, R, epochs, repeats)
     label = f"{name} engine" if name != "fast" else f"fast engine ({type(eng).__name__})"
-    return table.record(label, R, getattr(eng, "threads", 1), epochs, statistics.median(times), note)
+    return table.record(label, R, getattr(eng, "threads", 1), epochs, sec, note)
 
 
 def bench_engines(table: EngineTable, quick: bool, native: bool) -> None:
@@ -131,6 +143,48 @@ def bench_engines(table: EngineTable, quick: bool, native: bool) -> None:
                 bench_engine(table, "native", R, ep, rep)
 
 
+BATCH_OPTIMIZERS = ("quickprop", "delta_bar_delta", "rprop", "adam")  # configs/optim/<name>.yaml
+
+
+def compose_train(configs: str | Path, overrides: list[str]):
+    """The ``train`` config composed from ``configs`` as ``python train.py <overrides>`` composes it."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    import selpres.config  # noqa: F401  registers the typed schema and resolvers
+
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(configs), version_base="1.3"):
+            return compose("train", overrides=overrides)
+    finally:
+        GlobalHydra.instance().clear()
+
+
+def bench_batch_engines(table: EngineTable, quick: bool, configs: Path) -> None:
+    """The batch optimizers in ``BatchEngine`` (one step per epoch, as ``optim=<name>`` runs them), in the
+    engine table beside the online rows: the same random data and presentations, so ms per replica-run and
+    the ratio compare directly. The note gives ms per epoch of all R replicas. Timed at one thread (as the
+    sensitivity sweep's jobs run) and, at R = 1000, at torch's default threads."""
+    from selpres.train import job_engine
+
+    default_threads = torch.get_num_threads()
+    for name in BATCH_OPTIMIZERS:
+        cfg = compose_train(configs, [f"optim={name}"])
+        # job_engine reads only the problem's topology and initial weights: the engine a job builds
+        make = lambda p, cfg=cfg: job_engine(cfg, SimpleNamespace(sizes=SIZES, init_params=p))  # noqa: E731
+        plan = [(1, 30, 3, 1), (30, 10, 3, 1), (1000, 1 if quick else 3, 1, 1)]
+        if default_threads > 1:
+            plan.append((1000, 1 if quick else 3, 1, default_threads))
+        for R, epochs, repeats, threads in plan:
+            torch.set_num_threads(threads)
+            try:
+                _, sec = time_epochs(make, R, epochs, 1 if quick else repeats)
+            finally:
+                torch.set_num_threads(default_threads)
+            table.record(f"batch {name}", R, threads, epochs, sec, f"{sec / epochs * 1e3:.2f} ms/epoch")
+
+
 # ------------------------------------------------------------------------------------------- the whole job
 
 
@@ -140,15 +194,9 @@ def train_job(configs: str, overrides: list[str], out_dir: str) -> dict:
     import contextlib
     import io
 
-    from hydra import compose, initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
-
-    import selpres.config  # noqa: F401  registers the typed schema and resolvers
     from selpres.train import train
 
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=configs, version_base="1.3"):
-        cfg = compose("train", overrides=overrides)
+    cfg = compose_train(configs, overrides)
     with contextlib.redirect_stdout(io.StringIO()):
         return train(cfg, out_dir)
 
@@ -370,6 +418,7 @@ def main(argv: list[str] | None = None) -> int:
 
     table = EngineTable()
     bench_engines(table, q, native)
+    bench_batch_engines(table, q, args.configs.resolve())
     jobs_ok = bench_jobs(table, q, args.configs.resolve())
     bench_shuffles(q)
     bench_orders(q)
