@@ -1,0 +1,143 @@
+"""Orders chosen stage by stage: adaptive loss orders and re-drawn subsets, with the cost of choosing counted.
+
+The priority orders of :mod:`selpres.orders` are fixed before training. The orders here choose A_k at the
+start of stage k (its first epoch), so each replica's sampler gets a new order there:
+
+* ``loss_high`` / ``loss_low``: adaptive and nested. A_1 is the seed's *stratified* sample (there is no
+  network to ask yet); at each enlargement A_k = A_{k-1} plus the n_k - n_{k-1} patterns of U \\ A_{k-1} on
+  which the replica's *current* network errs most (hard first) or least (easy first): per-pattern squared
+  error summed over the outputs, in scaled units. Ties go to the earlier pattern of the seed's stratified
+  order. All replicas are scored together by one forward pass over U (``engine.predict``).
+* ``reselect``: not nested. Stage k's A_k is a fresh stratified draw of size n_k (stage 1's is the
+  ``stratified`` order's A_1; stage k > 1 draws from the seed's stream ``(seed, "subset", k)``), so
+  consecutive subsets overlap only by chance, about n_{k-1} n_k / n patterns; the last stage is U.
+
+The cost of choosing (``schedule.selection_cost``, default 1/3): scoring a candidate is one forward pass,
+charged as that fraction of a training presentation. Why 1/3: the backward pass of a layer costs about two
+forward passes (the error propagated through W and the weight gradient, each a product of W's size), the
+common rule of training = 3 x forward (Kaplan et al. 2020, "Scaling laws for neural language models",
+section 2.1: C_forward ~ 2N, C_train ~ 6N per token). Counted for the 6-13-2 net: forward 208 flops
++ 15 sigmoids, backward 260 flops (no error is propagated into the inputs), the momentum update 4 flops a
+weight (476); measured for this package's torch engine in one layout (forward of the same [R, n, 6] batch
+against ``TorchEngine.train_epoch``, one batch of n = 1002): 0.18 at R = 1, 0.41 at R = 30, 0.31 at
+R = 1000. So 1/3 is neither generous nor harsh; set 0 to ignore the cost, as CORDS and DeepCore do.
+A charge is per replica (every replica scores the same number of candidates) and is added to the job's
+cumulative presentations, the cost axis of curves and results; its wall time is the clock phase
+"select". Stratified draws (A_1, ``reselect``) need no network and are charged nothing.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from selpres.model import forward_replicas
+from selpres.orders import priority_orders
+from selpres.sampler import SelectivePresentationSampler
+from selpres.schedule import EpochPlan, Schedule
+from selpres.seeding import generator
+
+LOSS_ORDERS = {"loss_high": True, "loss_low": False}  # order -> hard first?
+STAGEWISE = (*LOSS_ORDERS, "reselect")  # the orders whose A_k is chosen at the start of stage k
+
+
+def initial_kind(kind: str) -> str:
+    """The priority order a job starts from: the stage-wise orders begin with the stratified A_1."""
+    return "stratified" if kind in STAGEWISE else kind
+
+
+def pattern_errors(outputs: torch.Tensor, Y: torch.Tensor) -> torch.Tensor:
+    """Squared error of every replica on every pattern, summed over outputs: [R, n, out], [n, out] -> [R, n].
+    A diverged replica's NaN counts as +inf, so its choice stays deterministic."""
+    return torch.nan_to_num((outputs - Y).square().sum(-1), nan=float("inf"))
+
+
+def ranks_of(orders: torch.Tensor) -> torch.Tensor:
+    """rank[r, i] = position of pattern i in row r of ``orders`` [R, n] (the inverse permutations)."""
+    ranks = torch.empty_like(orders)
+    ranks.scatter_(1, orders, torch.arange(orders.shape[1]).expand_as(orders).contiguous())
+    return ranks
+
+
+def enlarge_by_loss(orders: torch.Tensor, ranks: torch.Tensor, errors: torch.Tensor, kept: int,
+                    hard: bool) -> torch.Tensor:
+    """New orders [R, n]: each row's first ``kept`` patterns (A_{k-1}) stay; the rest follow by error
+    (``hard``: largest first), equal errors in the order of ``ranks`` (the stratified order)."""
+    tail = orders[:, kept:]
+    tail = tail.gather(1, ranks.gather(1, tail).argsort(1))  # the candidates in stratified order
+    by_error = torch.sort(errors.gather(1, tail), dim=1, descending=hard, stable=True).indices
+    return torch.cat([orders[:, :kept], tail.gather(1, by_error)], 1)
+
+
+def reselected_orders(X_raw: torch.Tensor, seeds: list[int], stage: int, bins: int) -> torch.Tensor:
+    """Stage ``stage``'s fresh stratified orders [R, n] (stage 0: the ``stratified`` order's own draw)."""
+    gens = [generator(s, "subset") if stage == 0 else generator(s, "subset", stage) for s in seeds]
+    return torch.stack(priority_orders(X_raw, "stratified", gens, bins))
+
+
+def selection_charge(candidates: int, fraction: float) -> float:
+    """Presentations charged per replica for scoring ``candidates`` patterns by a forward pass."""
+    return candidates * fraction
+
+
+def outputs_of(engine, X: torch.Tensor) -> torch.Tensor:
+    """Every replica's scaled outputs on X [n, in] -> [R, n, out], in one call."""
+    predict = getattr(engine, "predict", None)  # every engine gains predict(); until then its params
+    with torch.no_grad():
+        return predict(X) if predict is not None else forward_replicas(engine.params(), X)
+
+
+class StageSelection:
+    """Chooses each replica's A_k at the start of stage k, and charges what choosing costs.
+
+    The chosen orders live in the job's progress (``progress.orders`` [R, n], None until the first choice:
+    the prepared orders), so a checkpoint holds them and a resumed job presents what it would have.
+    """
+
+    def __init__(self, kind: str, schedule: Schedule, seeds: list[int], X_raw: torch.Tensor, bins: int,
+                 X: torch.Tensor, Y: torch.Tensor, cost_fraction: float,
+                 samplers: list[SelectivePresentationSampler]):
+        if kind not in STAGEWISE:
+            raise ValueError(f"order {kind!r} is fixed before training; stage-wise orders: {STAGEWISE}")
+        self.kind, self.schedule, self.seeds, self.X_raw, self.bins = kind, schedule, seeds, X_raw, bins
+        self.X, self.Y, self.cost_fraction = X, Y, float(cost_fraction)
+        self.samplers = samplers
+        initial = torch.stack([s.order for s in samplers])
+        self.ranks = ranks_of(initial) if kind in LOSS_ORDERS else None  # ties: the stratified order
+        plan = schedule.plan()
+        self.stage_starts = {ep.index: ep.stage for ep in plan
+                             if ep.stage > 0 and plan[ep.index - 1].stage != ep.stage}
+        self._applied = None  # the orders tensor the samplers currently present
+
+    def begin_epoch(self, ep: EpochPlan, engine, progress) -> float | int:
+        """Before epoch ``ep``: the samplers present ``progress.orders`` (restored after a resume); at a
+        stage start the new A_k is chosen into it. Returns the presentations charged per replica (also
+        added to ``progress.presentations`` and ``progress.selection_presentations``)."""
+        stage = self.stage_starts.get(ep.index)
+        charge = 0  # an int while nothing is charged: the presentations stay whole numbers
+        if stage is not None:
+            current = (progress.orders if progress.orders is not None
+                       else torch.stack([s.order for s in self.samplers]))
+            if self.kind == "reselect":
+                progress.orders = reselected_orders(self.X_raw, self.seeds, stage, self.bins)
+            else:
+                kept = self.schedule.stages[stage - 1].size
+                errors = pattern_errors(outputs_of(engine, self.X), self.Y)
+                progress.orders = enlarge_by_loss(current, self.ranks, errors, kept, LOSS_ORDERS[self.kind])
+                charge = selection_charge(self.schedule.n - kept, self.cost_fraction)
+            progress.presentations += charge
+            progress.selection_presentations += charge
+        if progress.orders is not None and progress.orders is not self._applied:
+            for s, order in zip(self.samplers, progress.orders):
+                s.order = order
+            self._applied = progress.orders
+        return charge
+
+
+def stage_selection(kind: str, schedule: Schedule, seeds: list[int], X_raw: torch.Tensor, bins: int,
+                    X: torch.Tensor, Y: torch.Tensor, cost_fraction: float,
+                    samplers: list[SelectivePresentationSampler]) -> StageSelection | None:
+    """The job's stage-wise selection, or None for an order fixed before training (nothing to choose or
+    charge)."""
+    if kind not in STAGEWISE:
+        return None
+    return StageSelection(kind, schedule, seeds, X_raw, bins, X, Y, cost_fraction, samplers)
