@@ -7,7 +7,10 @@ start of stage k (its first epoch), so each replica's sampler gets a new order t
   network to ask yet); at each enlargement A_k = A_{k-1} plus the n_k - n_{k-1} patterns of U \\ A_{k-1} on
   which the replica's *current* network errs most (hard first) or least (easy first): per-pattern squared
   error summed over the outputs, in scaled units. Ties go to the earlier pattern of the seed's stratified
-  order. All replicas are scored together by one forward pass over U (``engine.predict``).
+  order: the candidates are kept in that order, and the chosen ones join A_k in it too. All replicas are
+  scored together by one forward pass over U (``engine.predict``, or the model's forward over the engine's
+  weights in blocks of ``SCORE_BLOCK`` replicas), and the chosen patterns are found by a partition, not a
+  sort (at R = 1000: ~10 ms against ~80 ms for a stable argsort).
 * ``reselect``: not nested. Stage k's A_k is a fresh stratified draw of size n_k (stage 1's is the
   ``stratified`` order's A_1; stage k > 1 draws from the seed's stream ``(seed, "subset", k)``), so
   consecutive subsets overlap only by chance, about n_{k-1} n_k / n patterns; the last stage is U.
@@ -28,6 +31,7 @@ cumulative presentations, the cost axis of curves and results; its wall time is 
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from selpres.model import forward_replicas
@@ -37,6 +41,7 @@ from selpres.schedule import EpochPlan, Schedule
 from selpres.seeding import generator
 
 LOSS_ORDERS = {"loss_high": True, "loss_low": False}  # order -> hard first?
+SCORE_BLOCK = 4  # replicas per forward pass when scoring: their activations stay in cache (R = 1000: ~6x)
 STAGEWISE = (*LOSS_ORDERS, "reselect")  # the orders whose A_k is chosen at the start of stage k
 
 
@@ -51,21 +56,26 @@ def pattern_errors(outputs: torch.Tensor, Y: torch.Tensor) -> torch.Tensor:
     return torch.nan_to_num((outputs - Y).square().sum(-1), nan=float("inf"))
 
 
-def ranks_of(orders: torch.Tensor) -> torch.Tensor:
-    """rank[r, i] = position of pattern i in row r of ``orders`` [R, n] (the inverse permutations)."""
-    ranks = torch.empty_like(orders)
-    ranks.scatter_(1, orders, torch.arange(orders.shape[1]).expand_as(orders).contiguous())
-    return ranks
-
-
-def enlarge_by_loss(orders: torch.Tensor, ranks: torch.Tensor, errors: torch.Tensor, kept: int,
+def enlarge_by_loss(orders: torch.Tensor, errors: torch.Tensor, kept: int, added: int,
                     hard: bool) -> torch.Tensor:
-    """New orders [R, n]: each row's first ``kept`` patterns (A_{k-1}) stay; the rest follow by error
-    (``hard``: largest first), equal errors in the order of ``ranks`` (the stratified order)."""
+    """New orders [R, n]: each row's first ``kept`` patterns (A_{k-1}) stay; of the candidates after them,
+    the ``added`` with the largest (``hard``) or smallest ``errors`` [R, n] come next and the others after,
+    both in the order the candidates were in (so equal errors go to the earlier candidate).
+
+    Exactly the first ``added`` of a stable sort by error, found by a partition: v = the added-th value, then
+    every candidate beyond v and the first of those equal to v."""
     tail = orders[:, kept:]
-    tail = tail.gather(1, ranks.gather(1, tail).argsort(1))  # the candidates in stratified order
-    by_error = torch.sort(errors.gather(1, tail), dim=1, descending=hard, stable=True).indices
-    return torch.cat([orders[:, :kept], tail.gather(1, by_error)], 1)
+    e = errors.gather(1, tail).numpy()
+    c = e.shape[1]
+    at = c - added if hard else added - 1  # v's position in each row sorted ascending
+    v = np.partition(e, at, axis=1)[:, at, None]
+    beyond = e > v if hard else e < v
+    tied = e == v
+    need = added - beyond.sum(1, keepdims=True)
+    chosen = torch.from_numpy(beyond | (tied & (np.cumsum(tied, 1) <= need)))
+    R = len(orders)
+    return torch.cat([orders[:, :kept], tail[chosen].reshape(R, added), tail[~chosen].reshape(R, c - added)],
+                     1)
 
 
 def reselected_orders(X_raw: torch.Tensor, seeds: list[int], stage: int, bins: int) -> torch.Tensor:
@@ -79,11 +89,17 @@ def selection_charge(candidates: int, fraction: float) -> float:
     return candidates * fraction
 
 
-def outputs_of(engine, X: torch.Tensor) -> torch.Tensor:
-    """Every replica's scaled outputs on X [n, in] -> [R, n, out], in one call."""
-    predict = getattr(engine, "predict", None)  # every engine gains predict(); until then its params
+def errors_of(engine, X: torch.Tensor, Y: torch.Tensor) -> torch.Tensor:
+    """Every replica's per-pattern squared error on (X, Y) [n, in], [n, out] -> [R, n]: ``engine.predict``
+    where the engine has it (one call), else the model's forward over its weights, SCORE_BLOCK replicas at
+    a time (every engine will gain predict(); until then this path scores them all)."""
     with torch.no_grad():
-        return predict(X) if predict is not None else forward_replicas(engine.params(), X)
+        predict = getattr(engine, "predict", None)
+        if predict is not None:
+            return pattern_errors(predict(X), Y)
+        params = engine.params()
+        return torch.cat([pattern_errors(forward_replicas([p[r0 : r0 + SCORE_BLOCK] for p in params], X), Y)
+                          for r0 in range(0, len(params[0]), SCORE_BLOCK)])
 
 
 class StageSelection:
@@ -101,8 +117,6 @@ class StageSelection:
         self.kind, self.schedule, self.seeds, self.X_raw, self.bins = kind, schedule, seeds, X_raw, bins
         self.X, self.Y, self.cost_fraction = X, Y, float(cost_fraction)
         self.samplers = samplers
-        initial = torch.stack([s.order for s in samplers])
-        self.ranks = ranks_of(initial) if kind in LOSS_ORDERS else None  # ties: the stratified order
         plan = schedule.plan()
         self.stage_starts = {ep.index: ep.stage for ep in plan
                              if ep.stage > 0 and plan[ep.index - 1].stage != ep.stage}
@@ -120,9 +134,9 @@ class StageSelection:
             if self.kind == "reselect":
                 progress.orders = reselected_orders(self.X_raw, self.seeds, stage, self.bins)
             else:
-                kept = self.schedule.stages[stage - 1].size
-                errors = pattern_errors(outputs_of(engine, self.X), self.Y)
-                progress.orders = enlarge_by_loss(current, self.ranks, errors, kept, LOSS_ORDERS[self.kind])
+                kept, size = self.schedule.stages[stage - 1].size, self.schedule.stages[stage].size
+                errors = errors_of(engine, self.X, self.Y)
+                progress.orders = enlarge_by_loss(current, errors, kept, size - kept, LOSS_ORDERS[self.kind])
                 charge = selection_charge(self.schedule.n - kept, self.cost_fraction)
             progress.presentations += charge
             progress.selection_presentations += charge

@@ -14,7 +14,7 @@ from selpres.errors import ConfigError
 from selpres.model import BPN, load_into
 from selpres.orders import priority_order
 from selpres.seeding import generator
-from selpres.selection import enlarge_by_loss, pattern_errors, ranks_of, reselected_orders
+from selpres.selection import enlarge_by_loss, pattern_errors, reselected_orders
 from selpres.task import load_task
 from selpres.train import Clock, run_epoch, start, train
 
@@ -31,18 +31,45 @@ def _raw_X(cfg) -> torch.Tensor:
 # ------------------------------------------------------------------------------------ the pure step
 
 
+def _enlarged_by_definition(order: list[int], err: dict, kept: int, added: int, hard: bool) -> list[int]:
+    """The definition, by a plain stable sort: the first ``added`` candidates by error (ties: the earlier
+    candidate), then joined to A_{k-1} in the candidates' own order, the others after them."""
+    tail = order[kept:]
+    best = sorted(range(len(tail)), key=lambda j: (-err[tail[j]] if hard else err[tail[j]], j))[:added]
+    return order[:kept] + [tail[j] for j in sorted(best)] + [t for j, t in enumerate(tail) if j not in best]
+
+
 def test_enlarge_by_loss_on_a_hand_worked_example():
-    """Row 0: A_{k-1} = {4, 2}; candidates 0, 1, 3 with errors 0.5, 0.2, 0.5. The tie between 0 and 3 goes
-    to the earlier pattern of the *stratified* order [3, 4, 2, 1, 0] (3 before 0), not to the current
-    order's (0 before 3). Row 1: errors rising with the index, no ties."""
-    orders = torch.tensor([[4, 2, 0, 1, 3], [0, 1, 2, 3, 4]])
-    ranks = ranks_of(torch.tensor([[3, 4, 2, 1, 0], [0, 1, 2, 3, 4]]))
-    assert ranks[0].tolist() == [4, 3, 2, 0, 1]
+    """Row 0: A_{k-1} = {4, 2}; candidates, in stratified order, 3, 1, 0 with errors 0.5, 0.2, 0.5: the tie
+    between 3 and 0 goes to 3 (the earlier candidate), though 0 has the lower index. Row 1: errors rising
+    with the index, no ties."""
+    orders = torch.tensor([[4, 2, 3, 1, 0], [0, 1, 2, 3, 4]])
     errors = torch.tensor([[0.5, 0.2, 9.0, 0.5, 1.0], [1.0, 2.0, 3.0, 4.0, 5.0]], dtype=torch.float64)
-    hard = enlarge_by_loss(orders, ranks, errors, kept=2, hard=True)
-    easy = enlarge_by_loss(orders, ranks, errors, kept=2, hard=False)
-    assert hard.tolist() == [[4, 2, 3, 0, 1], [0, 1, 4, 3, 2]]
-    assert easy.tolist() == [[4, 2, 1, 3, 0], [0, 1, 2, 3, 4]]
+    expected = {  # (added, hard) -> rows, worked out by hand
+        (1, True): [[4, 2, 3, 1, 0], [0, 1, 4, 2, 3]],
+        (2, True): [[4, 2, 3, 0, 1], [0, 1, 3, 4, 2]],
+        (1, False): [[4, 2, 1, 3, 0], [0, 1, 2, 3, 4]],
+        (2, False): [[4, 2, 3, 1, 0], [0, 1, 2, 3, 4]],
+        (3, True): [[4, 2, 3, 1, 0], [0, 1, 2, 3, 4]],
+    }
+    for (added, hard), rows in expected.items():
+        assert enlarge_by_loss(orders, errors, 2, added, hard).tolist() == rows, (added, hard)
+
+
+@pytest.mark.parametrize("hard", [True, False])
+def test_enlarge_by_loss_equals_the_stable_sort_definition_with_many_ties(hard):
+    """Random orders and errors from only five values (ties everywhere, and inf): the partition equals the
+    plain stable-sort definition on every row."""
+    g = torch.Generator().manual_seed(3)
+    R, n = 40, 60
+    orders = torch.stack([torch.randperm(n, generator=g) for _ in range(R)])
+    values = torch.tensor([0.0, 0.25, 0.5, 1.0, math.inf], dtype=torch.float64)
+    errors = values[torch.randint(5, (R, n), generator=g)]
+    for kept, added in [(0, 1), (5, 10), (20, 17), (30, 30), (59, 1)]:
+        got = enlarge_by_loss(orders, errors, kept, added, hard)
+        for r in range(R):
+            err = dict(enumerate(errors[r].tolist()))
+            assert got[r].tolist() == _enlarged_by_definition(orders[r].tolist(), err, kept, added, hard)
 
 
 def test_a_diverged_replicas_nan_errors_count_as_largest():
@@ -50,8 +77,7 @@ def test_a_diverged_replicas_nan_errors_count_as_largest():
     e = pattern_errors(out, torch.tensor([[0.4], [0.4], [0.4]], dtype=torch.float64))
     assert e[0, 1] == math.inf
     assert e[0, 0].item() == pytest.approx(0.01) and e[0, 2].item() == pytest.approx(0.09)
-    order = enlarge_by_loss(torch.tensor([[0, 1, 2]]), ranks_of(torch.tensor([[0, 1, 2]])), e, 0, True)
-    assert order.tolist() == [[1, 2, 0]]
+    assert enlarge_by_loss(torch.tensor([[0, 1, 2]]), e, 0, 1, True).tolist() == [[1, 0, 2]]
 
 
 # ------------------------------------------------------------------------- loss orders in the real loop
@@ -62,7 +88,7 @@ def test_each_enlargement_adds_the_candidates_the_current_network_errs_most_or_l
     """In the training loop: A_1 is the seed's stratified A_1; at each stage start, A_{k-1} stays the prefix
     (nesting) and the n_k - n_{k-1} added patterns are the top ones of U \\ A_{k-1} by the squared error
     of that replica's network at that moment, computed here by a plain loop over BPN forward passes, ties
-    by the stratified order."""
+    by the stratified order; the chosen join A_k, and the other candidates stay, in the stratified order."""
     hard = kind == "loss_high"
     cfg = cfg_of(f"schedule.order={kind}", "replicas=3", "schedule.epochs=[2,1,1,1,1]", "engine=torch",
                  "seed=7")
@@ -91,11 +117,10 @@ def test_each_enlargement_adds_the_candidates_the_current_network_errs_most_or_l
             kept = set(prev[r])
             cands = [i for i in range(N) if i not in kept]
             expected = sorted(cands, key=lambda i: (-err[i] if hard else err[i], rank[r][i]))
-            added = s.order[SIZES[k - 1] : SIZES[k]].tolist()
-            m = SIZES[k] - SIZES[k - 1]
-            assert set(added) == set(expected[:m]), (k, r)
-            e_added = [err[i] for i in added]  # in error order, up to rounding
-            assert all((a - b) * (1 if hard else -1) >= -1e-12 for a, b in zip(e_added, e_added[1:]))
+            added, rest = s.order[SIZES[k - 1] : SIZES[k]].tolist(), s.order[SIZES[k] :].tolist()
+            assert set(added) == set(expected[: SIZES[k] - SIZES[k - 1]]), (k, r)
+            for part in (added, rest):
+                assert [rank[r][i] for i in part] == sorted(rank[r][i] for i in part)
             assert sorted(s.order.tolist()) == list(range(N))
     assert starts == 4
     assert job.progress.selection_presentations == pytest.approx((952 + 902 + 602 + 202) / 3, rel=1e-12)
