@@ -31,6 +31,8 @@ cumulative presentations, the cost axis of curves and results; its wall time is 
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 import torch
 
@@ -43,6 +45,20 @@ from selpres.seeding import generator
 LOSS_ORDERS = {"loss_high": True, "loss_low": False}  # order -> hard first?
 SCORE_BLOCK = 4  # replicas per forward pass when scoring: their activations stay in cache (R = 1000: ~6x)
 STAGEWISE = (*LOSS_ORDERS, "reselect")  # the orders whose A_k is chosen at the start of stage k
+
+
+@contextmanager
+def one_thread():
+    """Choosing runs on one torch thread: its blocks are too small to share (with two threads on a busy
+    machine, R = 1000, one enlargement took 0.8 s instead of 0.07 s: OpenMP waits at every small op), and
+    ``threads`` is not part of a job's identity, so the choice must not depend on it (BLAS may round
+    differently with another thread count)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
 
 
 def initial_kind(kind: str) -> str:
@@ -66,16 +82,16 @@ def enlarge_by_loss(orders: torch.Tensor, errors: torch.Tensor, kept: int, added
     every candidate beyond v and the first of those equal to v."""
     tail = orders[:, kept:]
     e = errors.gather(1, tail).numpy()
-    c = e.shape[1]
+    R, c = e.shape
     at = c - added if hard else added - 1  # v's position in each row sorted ascending
     v = np.partition(e, at, axis=1)[:, at, None]
     beyond = e > v if hard else e < v
     tied = e == v
     need = added - beyond.sum(1, keepdims=True)
-    chosen = torch.from_numpy(beyond | (tied & (np.cumsum(tied, 1) <= need)))
-    R = len(orders)
-    return torch.cat([orders[:, :kept], tail[chosen].reshape(R, added), tail[~chosen].reshape(R, c - added)],
-                     1)
+    chosen = beyond | (tied & (np.cumsum(tied, 1) <= need))
+    t = tail.numpy()  # numpy's boolean indexing: ~4x torch's here
+    rows = (orders[:, :kept].numpy(), t[chosen].reshape(R, added), t[~chosen].reshape(R, c - added))
+    return torch.from_numpy(np.concatenate(rows, axis=1))
 
 
 def reselected_orders(X_raw: torch.Tensor, seeds: list[int], stage: int, bins: int) -> torch.Tensor:
@@ -129,15 +145,8 @@ class StageSelection:
         stage = self.stage_starts.get(ep.index)
         charge = 0  # an int while nothing is charged: the presentations stay whole numbers
         if stage is not None:
-            current = (progress.orders if progress.orders is not None
-                       else torch.stack([s.order for s in self.samplers]))
-            if self.kind == "reselect":
-                progress.orders = reselected_orders(self.X_raw, self.seeds, stage, self.bins)
-            else:
-                kept, size = self.schedule.stages[stage - 1].size, self.schedule.stages[stage].size
-                errors = errors_of(engine, self.X, self.Y)
-                progress.orders = enlarge_by_loss(current, errors, kept, size - kept, LOSS_ORDERS[self.kind])
-                charge = selection_charge(self.schedule.n - kept, self.cost_fraction)
+            with one_thread():
+                charge = self._choose(stage, engine, progress)
             progress.presentations += charge
             progress.selection_presentations += charge
         if progress.orders is not None and progress.orders is not self._applied:
@@ -145,6 +154,19 @@ class StageSelection:
                 s.order = order
             self._applied = progress.orders
         return charge
+
+    def _choose(self, stage: int, engine, progress) -> float | int:
+        """Stage ``stage``'s orders into ``progress.orders``; returns the charge per replica."""
+        if self.kind == "reselect":
+            progress.orders = reselected_orders(self.X_raw, self.seeds, stage, self.bins)
+            return 0  # a stratified draw needs no network
+        current = progress.orders
+        if current is None:  # the first choice: from the prepared (stratified) orders
+            current = torch.stack([s.order for s in self.samplers])
+        kept, size = self.schedule.stages[stage - 1].size, self.schedule.stages[stage].size
+        errors = errors_of(engine, self.X, self.Y)
+        progress.orders = enlarge_by_loss(current, errors, kept, size - kept, LOSS_ORDERS[self.kind])
+        return selection_charge(self.schedule.n - kept, self.cost_fraction)
 
 
 def stage_selection(kind: str, schedule: Schedule, seeds: list[int], X_raw: torch.Tensor, bins: int,
