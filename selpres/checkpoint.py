@@ -34,8 +34,8 @@ class Progress:
     history: list[dict]  # one record per scored epoch (epoch -1 = the untrained network)
     diverged_at: list[dict | None]  # per replica: None, or the epoch/presentations where it diverged
     epoch: int = 0  # epochs done
-    presentations: int | float = 0  # the cost axis: training presentations plus selection's charge
-    selection_presentations: int | float = 0  # selection's charge (selpres.selection), per replica
+    presentations: int = 0  # the cost axis: training presentations plus selection's charge
+    selection_presentations: int = 0  # selection's charge (selpres.selection), per replica
     orders: torch.Tensor | None = None  # [R, n] the samplers' orders once chosen during training
     seconds: dict = field(default_factory=dict)  # accumulated seconds per phase of the loop
     resumed_from: int | None = None  # the epoch a resume started from

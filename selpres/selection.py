@@ -10,20 +10,22 @@ start of stage k (its first epoch), so each replica's sampler gets a new order t
   order: the candidates are kept in that order, and the chosen ones join A_k in it too. All replicas are
   scored together by one forward pass over U (``engine.predict``, or the model's forward over the engine's
   weights in blocks of ``SCORE_BLOCK`` replicas), and the chosen patterns are found by a partition, not a
-  sort (at R = 1000: ~10 ms against ~80 ms for a stable argsort).
+  sort (at R = 1000: ~13 ms against ~60-80 ms for a stable sort).
 * ``reselect``: not nested. Stage k's A_k is a fresh stratified draw of size n_k (stage 1's is the
   ``stratified`` order's A_1; stage k > 1 draws from the seed's stream ``(seed, "subset", k)``), so
   consecutive subsets overlap only by chance, about n_{k-1} n_k / n patterns; the last stage is U.
 
 The cost of choosing (``schedule.selection_cost``, default 1/3): scoring a candidate is one forward pass,
-charged as that fraction of a training presentation. Why 1/3: the backward pass of a layer costs about two
-forward passes (the error propagated through W and the weight gradient, each a product of W's size), the
-common rule of training = 3 x forward (Kaplan et al. 2020, "Scaling laws for neural language models",
-section 2.1: C_forward ~ 2N, C_train ~ 6N per token). Counted for the 6-13-2 net: forward 208 flops
-+ 15 sigmoids, backward 260 flops (no error is propagated into the inputs), the momentum update 4 flops a
-weight (476); measured for this package's torch engine in one layout (forward of the same [R, n, 6] batch
-against ``TorchEngine.train_epoch``, one batch of n = 1002): 0.18 at R = 1, 0.41 at R = 30, 0.31 at
-R = 1000. So 1/3 is neither generous nor harsh; set 0 to ignore the cost, as CORDS and DeepCore do.
+charged as that fraction of a training presentation (per enlargement, rounded up to whole presentations).
+Why 1/3: the backward pass of a layer costs about two forward passes (the error propagated through W and
+the weight gradient, each a product of W's size), the common rule of training = 3 x forward (Kaplan et al.
+2020, "Scaling laws for neural language models", section 2.1: "the backwards pass is approximately twice
+the compute as the forwards pass", C ~ 6N per training token against 2N per forward pass). Counted for
+the 6-13-2 net: forward 208 flops + 15 sigmoids, backward 260 flops (no error is propagated into the
+inputs), the momentum update 4 flops for each of 119 weights (476): forward / all = 0.22 (0.37 if a
+sigmoid costs ~15 flops); measured for this package's torch engine in one layout (forward of the same
+[R, n, 6] batch against ``TorchEngine.train_epoch``, one batch of n = 1002): 0.18 at R = 1, 0.41 at
+R = 30, 0.31 at R = 1000. So 1/3 is neither generous nor harsh; set 0 to ignore the cost, as CORDS and DeepCore do.
 A charge is per replica (every replica scores the same number of candidates) and is added to the job's
 cumulative presentations, the cost axis of curves and results; its wall time is the clock phase
 "select". Stratified draws (A_1, ``reselect``) need no network and are charged nothing.
@@ -31,6 +33,7 @@ cumulative presentations, the cost axis of curves and results; its wall time is 
 
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 
 import numpy as np
@@ -43,7 +46,7 @@ from selpres.schedule import EpochPlan, Schedule
 from selpres.seeding import generator
 
 LOSS_ORDERS = {"loss_high": True, "loss_low": False}  # order -> hard first?
-SCORE_BLOCK = 4  # replicas per forward pass when scoring: their activations stay in cache (R = 1000: ~6x)
+SCORE_BLOCK = 4  # replicas per forward pass when scoring: their activations stay in cache (R = 1000: 3-6x)
 STAGEWISE = (*LOSS_ORDERS, "reselect")  # the orders whose A_k is chosen at the start of stage k
 
 
@@ -100,9 +103,11 @@ def reselected_orders(X_raw: torch.Tensor, seeds: list[int], stage: int, bins: i
     return torch.stack(priority_orders(X_raw, "stratified", gens, bins))
 
 
-def selection_charge(candidates: int, fraction: float) -> float:
-    """Presentations charged per replica for scoring ``candidates`` patterns by a forward pass."""
-    return candidates * fraction
+def selection_charge(candidates: int, fraction: float) -> int:
+    """Presentations charged per replica for scoring ``candidates`` patterns by a forward pass: candidates x
+    fraction, rounded up to a whole presentation (presentations are counts; never under-charged), after
+    rounding off float noise (952 x 1/3 -> 318, 900 x 1/3 -> 300)."""
+    return math.ceil(round(candidates * fraction, 9))
 
 
 def errors_of(engine, X: torch.Tensor, Y: torch.Tensor) -> torch.Tensor:
@@ -138,12 +143,12 @@ class StageSelection:
                              if ep.stage > 0 and plan[ep.index - 1].stage != ep.stage}
         self._applied = None  # the orders tensor the samplers currently present
 
-    def begin_epoch(self, ep: EpochPlan, engine, progress) -> float | int:
+    def begin_epoch(self, ep: EpochPlan, engine, progress) -> int:
         """Before epoch ``ep``: the samplers present ``progress.orders`` (restored after a resume); at a
         stage start the new A_k is chosen into it. Returns the presentations charged per replica (also
         added to ``progress.presentations`` and ``progress.selection_presentations``)."""
         stage = self.stage_starts.get(ep.index)
-        charge = 0  # an int while nothing is charged: the presentations stay whole numbers
+        charge = 0
         if stage is not None:
             with one_thread():
                 charge = self._choose(stage, engine, progress)
@@ -155,7 +160,7 @@ class StageSelection:
             self._applied = progress.orders
         return charge
 
-    def _choose(self, stage: int, engine, progress) -> float | int:
+    def _choose(self, stage: int, engine, progress) -> int:
         """Stage ``stage``'s orders into ``progress.orders``; returns the charge per replica."""
         if self.kind == "reselect":
             progress.orders = reselected_orders(self.X_raw, self.seeds, stage, self.bins)

@@ -14,7 +14,7 @@ from selpres.errors import ConfigError
 from selpres.model import BPN, load_into
 from selpres.orders import priority_order
 from selpres.seeding import generator
-from selpres.selection import enlarge_by_loss, pattern_errors, reselected_orders
+from selpres.selection import enlarge_by_loss, pattern_errors, reselected_orders, selection_charge
 from selpres.task import load_task
 from selpres.train import Clock, run_epoch, start, train
 
@@ -123,7 +123,7 @@ def test_each_enlargement_adds_the_candidates_the_current_network_errs_most_or_l
                 assert [rank[r][i] for i in part] == sorted(rank[r][i] for i in part)
             assert sorted(s.order.tolist()) == list(range(N))
     assert starts == 4
-    assert job.progress.selection_presentations == pytest.approx((952 + 902 + 602 + 202) / 3, rel=1e-12)
+    assert job.progress.selection_presentations == 318 + 301 + 201 + 68  # 952, 902, 602, 202 candidates / 3
 
 
 def test_hard_and_easy_first_choose_differently_and_differ_from_stratified():
@@ -206,24 +206,30 @@ def test_reselected_subsets_are_stratified():
 
 def test_selection_is_charged_per_candidate_at_the_configured_fraction():
     """loss_high, stages 50/100/400/800/1002, one epoch each, selection_cost 0.25: the enlargements score
-    952, 902, 602 and 202 candidates, charged 238, 225.5, 150.5 and 50.5 presentations (664.5 in all) on
-    top of 2352 training presentations, and the curve's cost axis carries both."""
+    952, 902, 602 and 202 candidates, charged 238, 225.5, 150.5 and 50.5 presentations, rounded up to 238,
+    226, 151 and 51 (666 in all) on top of 2352 training presentations; the curve's cost axis carries both."""
     res = train(cfg_of("schedule.order=loss_high", "schedule.selection_cost=0.25", "replicas=2",
                        "schedule.epochs=[1,1,1,1,1]", "engine=torch"))
     assert res["training_presentations"] == 2352
-    assert res["selection_presentations"] == 664.5
-    assert res["presentations_done"] == 3016.5
-    assert [c["presentations"] for c in res["curves"]] == [0, 50, 388, 1013.5, 1964, 3016.5]
+    assert res["selection_presentations"] == 666
+    assert res["presentations_done"] == 3018
+    assert [c["presentations"] for c in res["curves"]] == [0, 50, 388, 1014, 1965, 3018]
     assert res["selection_cost"] == 0.25 and "select" in res["wall_seconds"]
 
 
 def test_default_charge_is_a_third_and_fixed_orders_are_charged_nothing():
+    """1/3 of 952, 902, 602, 202 candidates: 317.3, 300.7, 200.7, 67.3, charged 318 + 301 + 201 + 68."""
     lh = train(cfg_of("schedule.order=loss_high", "replicas=1", "schedule.epochs=[1,1,1,1,1]"))
-    assert lh["selection_presentations"] == pytest.approx(2658 / 3, rel=1e-12)
+    assert lh["selection_presentations"] == 888 and lh["presentations_done"] == 2352 + 888
     for kind in ("stratified", "random", "coverage"):
         res = train(cfg_of(f"schedule.order={kind}", "replicas=1", "schedule.epochs=[1,1,1,1,1]"))
         assert res["selection_presentations"] == 0 and res["presentations_done"] == 2352
         assert isinstance(res["presentations_done"], int) and "select" not in res["wall_seconds"]
+
+
+def test_charge_rounds_up_to_whole_presentations_without_float_noise():
+    assert [selection_charge(c, 1 / 3) for c in (952, 900, 3, 1, 0)] == [318, 300, 1, 1, 0]
+    assert [selection_charge(c, f) for c, f in ((10, 0.1), (7, 0.0), (5, 1.0), (3, 0.7))] == [1, 0, 5, 3]
 
 
 @pytest.mark.parametrize("bad", [-0.1, 1.5])
