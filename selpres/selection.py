@@ -25,10 +25,10 @@ the 6-13-2 net: forward 208 flops + 15 sigmoids, backward 260 flops (no error is
 inputs), the momentum update 4 flops for each of 119 weights (476): forward / all = 0.22 (0.37 if a
 sigmoid costs ~15 flops); measured for this package's torch engine in one layout (forward of the same
 [R, n, 6] batch against ``TorchEngine.train_epoch``, one batch of n = 1002): 0.18 at R = 1, 0.41 at
-R = 30, 0.31 at R = 1000. So 1/3 is neither generous nor harsh; set 0 to ignore the cost, as CORDS and DeepCore do.
-A charge is per replica (every replica scores the same number of candidates) and is added to the job's
-cumulative presentations, the cost axis of curves and results; its wall time is the clock phase
-"select". Stratified draws (A_1, ``reselect``) need no network and are charged nothing.
+R = 30, 0.31 at R = 1000. So 1/3 is neither generous nor harsh; set 0 to ignore the cost, as CORDS and
+DeepCore do. A charge is per replica (every replica scores the same number of candidates) and is added
+to the job's cumulative presentations, the cost axis of curves and results; its wall time is the clock
+phase "select". Stratified draws (A_1, ``reselect``) need no network and are charged nothing.
 """
 
 from __future__ import annotations
