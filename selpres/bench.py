@@ -18,6 +18,7 @@ rows use random data in the real shapes (6 inputs, 2 outputs); job rows use the 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -319,16 +320,15 @@ def bench_selection(quick: bool, configs: Path) -> bool:
     for R in (1, 30, 1000):
         params = init_replica_params(SIZES, list(range(R)))
         orders = torch.stack(priority_orders(X, "stratified", [generator(s, "subset") for s in range(R)], 2))
-        eng, reps = Weights(params), 3
+        eng, seeds = Weights(params), list(range(R))
+        batched = functools.partial(lambda o, e: enlarge_by_loss(o, errors_of(e, X, Y), 50, 50, True),
+                                    orders, eng)
+        loop = functools.partial(_per_replica_enlargement, params, X, Y, orders, 50, 50)
         with one_thread():  # as a job chooses
-            a = enlarge_by_loss(orders, errors_of(eng, X, Y), 50, 50, True)[:, :100].sort(1).values
-            b = _per_replica_enlargement(params, X, Y, orders, 50, 50)[:, :100].sort(1).values
-            if not torch.equal(a, b):
+            if not torch.equal(batched()[:, :100].sort(1).values, loop()[:, :100].sort(1).values):
                 raise AssertionError("the batched enlargement chose other patterns than the per-replica loop")
-            batched = median_seconds(lambda: enlarge_by_loss(orders, errors_of(eng, X, Y), 50, 50, True),
-                                     reps)
-            loop = median_seconds(lambda: _per_replica_enlargement(params, X, Y, orders, 50, 50), reps)
-            redraw = median_seconds(lambda: reselected_orders(X, list(range(R)), 1, 2), reps)
+            batched, loop = median_seconds(batched, 3), median_seconds(loop, 3)
+            redraw = median_seconds(functools.partial(reselected_orders, X, seeds, 1, 2), 3)
         print(f"select      loss_high   R={R:<5} batched {batched * 1e3:9.2f} ms  per-replica loop "
               f"{loop * 1e3:9.2f} ms  x{loop / batched:.1f}   reselect draw {redraw * 1e3:8.2f} ms",
               flush=True)
