@@ -351,7 +351,7 @@ def bench_selection(quick: bool, configs: Path) -> bool:
                 print(f"select job  {order:<11} R={R:<5} select {sel:7.3f} s  train {ws['train']:7.3f} s  "
                       f"select/train {sel / ws['train']:6.1%}   "
                       f"presentations {res['training_presentations']:,} trained + "
-                      f"{res['selection_presentations']:,.1f} charged per replica", flush=True)
+                      f"{res['selection_presentations']:,} charged per replica", flush=True)
     return ok
 
 
