@@ -6,7 +6,9 @@
 
 Sections: the training engines alone; the whole job (``selpres.train.train`` end to end at R = 1, 30, 1000
 beside the engine alone at the same R); the per-epoch shuffles (the packed-key sort against an argsort
-of the same hashes); the priority orders' selection cost; the native kernel's build; exemplar-set
+of the same hashes); the priority orders' selection cost; the stage-wise orders' cost of choosing
+(``selpres.selection``: one enlargement batched against a per-replica loop, and whole jobs' "select"
+phase against "train"); the native kernel's build; exemplar-set
 generation. A "replica-run" is one conventional run of the paper: 150 epochs x 1002 single-pattern
 updates of a 6-13-2 sigmoid net (SGD lr 0.15, momentum 0.9). Slow configurations are timed over a few
 epochs and extrapolated to 150 (the ``ep`` column says how many were timed); times are medians. Engine
@@ -18,6 +20,7 @@ on the same axis: a replica-run is then 150 epochs of 1002 presentations and 150
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -326,6 +329,80 @@ def bench_orders(quick: bool) -> None:
                       f"{sec:.3f} ms per replica)", flush=True)
 
 
+def _per_replica_enlargement(params, X, Y, orders, kept: int, added: int) -> torch.Tensor:
+    """The obvious way to enlarge by loss, for comparison: one nn.Module forward and one stable sort per
+    replica (the chosen in error order)."""
+    from selpres.model import BPN, load_into
+
+    net, rows = BPN(SIZES), []
+    with torch.no_grad():
+        for r in range(len(orders)):
+            err = (load_into(net, params, r)(X) - Y).square().sum(1)
+            tail = orders[r, kept:]
+            by_error = torch.sort(err[tail], descending=True, stable=True).indices
+            rows.append(torch.cat([orders[r, :kept], tail[by_error]]))
+    return torch.stack(rows)
+
+
+def bench_selection(quick: bool, configs: Path) -> bool:
+    """The stage-wise orders' cost of choosing. One enlargement (loss_high, the paper's first: 50 of 952
+    candidates added) scored batched (``selpres.selection``) beside a per-replica loop, and one reselect
+    draw, at R = 1, 30, 1000; then whole selective 6-13-2 jobs at R = 30 and 1000 (R = 30 only with
+    --quick) per order: the "select" clock phase against "train", and the charged presentations against
+    the trained ones. Returns False if a job failed."""
+    from selpres.model import init_replica_params
+    from selpres.orders import priority_orders
+    from selpres.seeding import generator
+    from selpres.selection import enlarge_by_loss, errors_of, one_thread, reselected_orders
+
+    class Weights:  # an engine as selection sees it: weights, no predict()
+        def __init__(self, params):
+            self._p = params
+
+        def params(self):
+            return self._p
+
+    print("\nstage-wise orders: the cost of choosing, per enlargement (n = 1002, 50 of 952 candidates added; "
+          "one torch thread, as in a job)")
+    X, Y = data(N, seed=3)
+    for R in (1, 30, 1000):
+        params = init_replica_params(SIZES, list(range(R)))
+        orders = torch.stack(priority_orders(X, "stratified", [generator(s, "subset") for s in range(R)], 2))
+        eng, seeds = Weights(params), list(range(R))
+        batched = functools.partial(lambda o, e: enlarge_by_loss(o, errors_of(e, X, Y), 50, 50, True),
+                                    orders, eng)
+        loop = functools.partial(_per_replica_enlargement, params, X, Y, orders, 50, 50)
+        with one_thread():  # as a job chooses
+            if not torch.equal(batched()[:, :100].sort(1).values, loop()[:, :100].sort(1).values):
+                raise AssertionError("the batched enlargement chose other patterns than the per-replica loop")
+            batched, loop = median_seconds(batched, 3), median_seconds(loop, 3)
+            redraw = median_seconds(functools.partial(reselected_orders, X, seeds, 1, 2), 3)
+        print(f"select      loss_high   R={R:<5} batched {batched * 1e3:9.2f} ms  per-replica loop "
+              f"{loop * 1e3:9.2f} ms  x{loop / batched:.1f}   reselect draw {redraw * 1e3:8.2f} ms",
+              flush=True)
+    ok = True
+    with tempfile.TemporaryDirectory(prefix="selpres-bench-") as tmp:
+        for R in (30,) if quick else (30, 1000):
+            for order in ("stratified", "loss_high", "reselect"):
+                overrides = ["schedule=selective", "topology=6-13-2", f"replicas={R}",
+                             f"schedule.order={order}"]
+                out = Path(tmp) / f"{order}-R{R}"
+                try:
+                    run_job_process(configs, overrides, out)
+                    res = json.loads((out / "results.json").read_text())
+                except (RuntimeError, ValueError, json.JSONDecodeError) as exc:
+                    print(f"{order} R={R}: {exc}")
+                    ok = False
+                    continue
+                ws = res["wall_seconds"]
+                sel = ws.get("select", 0.0)
+                print(f"select job  {order:<11} R={R:<5} select {sel:7.3f} s  train {ws['train']:7.3f} s  "
+                      f"select/train {sel / ws['train']:6.1%}   "
+                      f"presentations {res['training_presentations']:,} trained + "
+                      f"{res['selection_presentations']:,} charged per replica", flush=True)
+    return ok
+
+
 # --------------------------------------------------------------------------------- build and data
 
 
@@ -422,6 +499,7 @@ def main(argv: list[str] | None = None) -> int:
     jobs_ok = bench_jobs(table, q, args.configs.resolve())
     bench_shuffles(q)
     bench_orders(q)
+    jobs_ok = bench_selection(q, args.configs.resolve()) and jobs_ok
     if native:
         bench_compile()
     bench_exemplar_generation(q, args.configs)

@@ -1,7 +1,9 @@
 """Checkpoints: what a killed job needs to resume exactly, written so that its cost stays flat.
 
-A checkpoint is the engine's state (weights, momentum buffers), the epoch reached (the sampler's only
-state: shuffles are counter-based), the presentations and seconds so far, and which replicas diverged.
+A checkpoint is the engine's state (weights, momentum buffers), the epoch reached (shuffles are
+counter-based, so a fixed priority order needs nothing more), the samplers' orders where they were chosen
+during training (``loss_high``/``loss_low`` ask the network at each enlargement, ``reselect`` redraws;
+None otherwise), the presentations (selection's share too) and seconds so far, and which replicas diverged.
 The logged history is not re-encoded each time: its records are appended once to ``history.jsonl``
 and the checkpoint remembers how many bytes of that file belong to it, so a kill between the append
 and the checkpoint's atomic rename loses nothing and duplicates nothing.
@@ -32,7 +34,9 @@ class Progress:
     history: list[dict]  # one record per scored epoch (epoch -1 = the untrained network)
     diverged_at: list[dict | None]  # per replica: None, or the epoch/presentations where it diverged
     epoch: int = 0  # epochs done
-    presentations: int = 0
+    presentations: int = 0  # the cost axis: training presentations plus selection's charge
+    selection_presentations: int = 0  # selection's charge (selpres.selection), per replica
+    orders: torch.Tensor | None = None  # [R, n] the samplers' orders once chosen during training
     seconds: dict = field(default_factory=dict)  # accumulated seconds per phase of the loop
     resumed_from: int | None = None  # the epoch a resume started from
     stale_checkpoint: str | None = None  # where a checkpoint of another config was moved
@@ -59,7 +63,7 @@ class Checkpoints:
             return Progress.fresh(replicas)
         try:
             ck = torch.load(self.path, weights_only=False)
-            ok = ck.get("config_hash") == self.hash and "history_bytes" in ck
+            ok = ck.get("config_hash") == self.hash and "orders" in ck
             why = (f"it belongs to another config or an older selpres (hash {ck.get('config_hash')}, "
                    f"this job {self.hash})")
         except Exception as exc:  # noqa: BLE001 - any unreadable file is set aside, never resumed
@@ -76,8 +80,9 @@ class Checkpoints:
             history = [json.loads(line) for line in f.read().splitlines()]
         self._saved = len(history)
         log.info("resuming from %s at epoch %d", self.path, ck["epoch"])
-        return Progress(history, ck["diverged_at"], ck["epoch"], ck["presentations"], ck["seconds"],
-                        resumed_from=ck["epoch"])
+        return Progress(history, ck["diverged_at"], epoch=ck["epoch"], presentations=ck["presentations"],
+                        selection_presentations=ck["selection_presentations"], orders=ck["orders"],
+                        seconds=ck["seconds"], resumed_from=ck["epoch"])
 
     def save(self, engine, progress: Progress) -> None:
         """Append the new history records, then write the checkpoint atomically (write, then rename)."""
@@ -87,7 +92,8 @@ class Checkpoints:
         self._saved = len(progress.history)
         state = {"config_hash": self.hash, "epoch": progress.epoch, "presentations": progress.presentations,
                  "seconds": progress.seconds, "engine": engine.state_dict(),
-                 "diverged_at": progress.diverged_at, "history_bytes": size}
+                 "diverged_at": progress.diverged_at, "history_bytes": size,
+                 "selection_presentations": progress.selection_presentations, "orders": progress.orders}
         atomic_write(self.path, lambda f: torch.save(state, f))
 
     def move_aside(self) -> Path:

@@ -71,6 +71,10 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         raise ConfigError("checkpoint.every", cfg.checkpoint.every, "0 (stage boundaries only) or a positive number of epochs")
     if cfg.schedule.strata_bins < 1:
         raise ConfigError("schedule.strata_bins", cfg.schedule.strata_bins, "a whole number >= 1")
+    if not 0 <= cfg.schedule.selection_cost <= 1:
+        raise ConfigError("schedule.selection_cost", cfg.schedule.selection_cost,
+                          "a fraction of a training presentation in [0, 1] charged per candidate scored "
+                          "(0 = choosing is free; default 1/3, a forward pass of forward + backward)")
     for k in ("m1", "m2", "l1", "l2", "g"):
         if not cfg.robot[k] > 0:
             raise ConfigError(f"robot.{k}", cfg.robot[k], "a positive number")

@@ -44,6 +44,9 @@ class Order(Enum):
     stratified = "stratified"  # the paper's uniform sampling: every prefix a proportional stratified sample
     random = "random"  # random growth (Wu, Dyer & Neyshabur 2021)
     coverage = "coverage"  # greedy farthest-point: every prefix a near-minimal-radius cover of U
+    loss_high = "loss_high"  # adaptive: each enlargement adds the patterns the current network errs most on
+    loss_low = "loss_low"  # adaptive: ... errs least on (easy first)
+    reselect = "reselect"  # each stage a fresh stratified draw of its size (not nested)
 
 
 class ScalingMode(Enum):
@@ -98,6 +101,7 @@ class ScheduleConfig:
     budget: Optional[int] = None  # total presentations for a one-stage, compute-matched schedule
     order: Order = MISSING
     strata_bins: int = MISSING
+    selection_cost: float = MISSING  # presentations charged per candidate scored (selpres.selection)
 
 
 @dataclass

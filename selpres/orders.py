@@ -13,6 +13,8 @@
   k-point cover's. It needs no network. Exact up to ``COVERAGE_EXACT_MAX`` patterns; above that the
   *two-level* approximation of ``coverage_order``.
 
+Orders chosen during training (by the network's error, or redrawn per stage) are in ``selpres.selection``.
+
 Every order is a deterministic function of (U, the generator's seed). Distances for ``coverage`` are
 Euclidean in U's unit cube (each input column mapped onto [0, 1] by U's own range, as for the strata):
 with the default ``exemplar`` scaling that is the network's scaled input space up to one common factor,

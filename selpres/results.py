@@ -59,6 +59,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
     reps = replica_results(prob.seeds, final, progress.diverged_at, progress.history[-1]["train_mse"])
     n_div = sum(d is not None for d in progress.diverged_at)
     heldout_n = int(prob.tests["heldout"][0].shape[0])
+    training = sum(ep.presentations for ep in prob.plan[: progress.epoch])
     return {
         "status": "diverged" if n_div == R else "complete",
         "diverged_replicas": n_div,
@@ -70,7 +71,10 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "engine_fallback": engine.fallback_reason,  # why "fast" did not run natively (None if it did)
         "replicas": R,
         "seeds": prob.seeds,
-        "presentations_done": progress.presentations,
+        "presentations_done": progress.presentations,  # the cost: training + selection presentations
+        "training_presentations": training,
+        "selection_presentations": progress.selection_presentations,  # forward passes (selpres.selection)
+        "selection_cost": cfg.schedule.selection_cost,  # the charge per candidate scored
         "tests": {"test10": {"n": int(prob.tests["test10"][0].shape[0])},
                   "heldout": {"n": heldout_n, "curve_n": min(cfg.eval.heldout_curve, heldout_n)},
                   "heldout_curve_every": cfg.eval.every},
@@ -79,7 +83,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "git_commit": _git_commit(),
         "wall_seconds": seconds,
-        "seconds_per_presentation": seconds["train"] / max(1, progress.presentations * R),
+        "seconds_per_presentation": seconds["train"] / max(1, training * R),
         "summary": summary(reps),
         "replica_results": reps,
         "curves": progress.history,

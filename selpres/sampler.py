@@ -1,12 +1,15 @@
 """Selective presentation as a ``torch.utils.data.Sampler``: the single source of presentation order.
 
 The nested training sets A1 ⊂ A2 ⊂ … ⊂ A_{p+1} = U are the prefixes of one *priority order* of the
-exemplar set (``selpres.orders``: stratified, random, coverage), so nesting holds by construction.
+exemplar set (``selpres.orders``: stratified, random, coverage), so nesting holds by construction. The
+stage-wise orders of ``selpres.selection`` (loss_high, loss_low, reselect) replace a sampler's ``order`` at
+each stage start; the sampler itself never changes it.
 
 Within an epoch the current set is reshuffled; ``set_epoch(e)`` picks the epoch (and so the stage),
 following ``DistributedSampler``'s convention. The shuffle of epoch e is a counter-based hash of
-(seed, e), so a resumed run needs no sampler state beyond the epoch number, and the shuffles of all
-replicas of a job are computed in one vectorised step (``epoch_orders``).
+(seed, e), so a resumed run needs no sampler state beyond the epoch number (and a stage-wise order, which
+the checkpoint keeps), and the shuffles of all replicas of a job are computed in one vectorised step
+(``epoch_orders``).
 """
 
 from __future__ import annotations

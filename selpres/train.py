@@ -35,6 +35,7 @@ from selpres.orders import priority_orders
 from selpres.sampler import SelectivePresentationSampler, epoch_orders
 from selpres.schedule import EpochPlan, Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
+from selpres.selection import StageSelection, initial_kind, stage_selection
 from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
 from selpres.task import load_task
 from selpres.tracking import Tracker
@@ -55,6 +56,7 @@ class Problem:
     tests: dict  # name -> (X scaled, Y in Nm)
     samplers: list[SelectivePresentationSampler]
     init_params: list[torch.Tensor]
+    selection: StageSelection | None = None  # loss_high/loss_low/reselect: A_k chosen at each stage start
 
     @functools.cached_property
     def plan(self) -> list[EpochPlan]:
@@ -83,13 +85,15 @@ def prepare(cfg: DictConfig) -> Problem:
     schedule = build_schedule(sch["sizes"], sch["epochs"], task.n, sch["budget"])
     seeds = [cfg.seed + r for r in range(cfg.replicas)]
     kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
-    orders = priority_orders(task.exemplar.X, kind, [generator(s, "subset") for s in seeds], bins)
+    gens = [generator(s, "subset") for s in seeds]
+    orders = priority_orders(task.exemplar.X, initial_kind(kind), gens, bins)
+    samplers = [SelectivePresentationSampler(order, schedule, s) for order, s in zip(orders, seeds)]
+    X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
     return Problem(
-        sizes=sizes, schedule=schedule, seeds=seeds, scaler=task.scaler,
-        X=task.scaler.transform_x(task.exemplar.X), Y=task.scaler.transform_y(task.exemplar.Y),
-        tests=task.scaled_tests(),
-        samplers=[SelectivePresentationSampler(order, schedule, s) for order, s in zip(orders, seeds)],
-        init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
+        sizes=sizes, schedule=schedule, seeds=seeds, scaler=task.scaler, X=X, Y=Y, tests=task.scaled_tests(),
+        samplers=samplers, init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
+        selection=stage_selection(kind, schedule, seeds, task.exemplar.X, bins, X, Y,
+                                  cfg.schedule.selection_cost, samplers),
     )
 
 
@@ -231,8 +235,12 @@ def record(job: Job, rec: dict) -> None:
 
 
 def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
-    """One epoch: every replica's shuffle of its current A_i, the engine's updates, then scoring."""
+    """One epoch: (at a stage start of a stage-wise order) the choice of A_i, every replica's shuffle of its
+    current A_i, the engine's updates, then scoring."""
     prob, progress = job.prob, job.progress
+    if prob.selection is not None:
+        with clock("select"):
+            prob.selection.begin_epoch(ep, job.engine, progress)
     with clock("shuffle"):
         for s in prob.samplers:
             s.set_epoch(ep.index)

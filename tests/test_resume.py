@@ -23,7 +23,12 @@ ENGINES = {
     "reference": ["engine=reference", "schedule.epochs=[1,1,2,3,3]", "replicas=1"],
     # the kernel is ~1000x faster: many replicas (two interleaved groups and a leftover) and more epochs
     "native": ["engine=native", "schedule.epochs=[2,2,4,6,200]", "replicas=61"],
+    # an adaptive order: A_k depends on the network at the enlargement, so the checkpoint carries the orders
+    # (killed mid stage 4, its A_4 chosen by loss; a resume that forgot it would train on the stratified one)
+    "loss_high": ["engine=reference", "schedule.epochs=[1,1,2,3,3]", "replicas=2",
+                  "schedule.order=loss_high"],
 }
+EPOCHS = {"reference": 10, "native": 214, "loss_high": 10}
 
 
 def run(out: Path, args: list[str], wait: bool = True) -> subprocess.Popen:
@@ -38,7 +43,8 @@ def run(out: Path, args: list[str], wait: bool = True) -> subprocess.Popen:
     return p
 
 
-@pytest.mark.parametrize("engine", [pytest.param("reference"), pytest.param("native", marks=requires_native)])
+@pytest.mark.parametrize("engine", [pytest.param("reference"), pytest.param("native", marks=requires_native),
+                                    pytest.param("loss_high")])
 def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
     args = ENGINES[engine]
     killed = tmp_path / "killed"
@@ -58,7 +64,7 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
     assert p.returncode == -signal.SIGKILL
     assert not (killed / "results.json").exists(), "the run finished before it could be killed"
     epoch_at_kill = torch.load(ckpt, weights_only=False)["epoch"]
-    assert 5 <= epoch_at_kill < {"reference": 10, "native": 214}[engine]
+    assert 5 <= epoch_at_kill < EPOCHS[engine]
 
     resumed = run(killed, args)
     assert f"resuming from {ckpt}" in resumed.stdout.read()
@@ -67,7 +73,8 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
 
     a = json.loads((killed / "results.json").read_text())
     b = json.loads((straight / "results.json").read_text())
-    for key in ("summary", "replica_results", "curves", "presentations_done", "config_hash"):
+    for key in ("summary", "replica_results", "curves", "presentations_done", "selection_presentations",
+                "config_hash"):
         assert a[key] == b[key], key
     wa = torch.load(killed / "weights.pt")["params"]
     wb = torch.load(straight / "weights.pt")["params"]

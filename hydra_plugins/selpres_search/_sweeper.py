@@ -1,0 +1,98 @@
+"""The Hydra Optuna sweeper, searching schedules by the few numbers of ``selpres.search``.
+
+``configs/experiment/search.yaml`` sets ``hydra.sweeper._target_`` to :class:`ShapedScheduleSweeper`. Optuna
+samples the search numbers (``search_p``, ``search_first``, ``search_growth``, ``search_tilt``; the budget
+``search_budget`` is fixed) like any sweeper parameter and stores them in the study; before each trial is
+launched they are replaced by the ``schedule.sizes / epochs / budget`` overrides they stand for, so every
+job is an ordinary selpres job (its folder, results.json, TensorBoard, report). It needs
+``hydra-optuna-sweeper==1.3.0`` (and ``sqlalchemy<2`` for the SQLite study) and hooks that version's
+``OptunaSweeperImpl._configure_trials``, which builds each trial's overrides.
+
+Resuming: the study lives in SQLite (``hydra.sweeper.storage``) and ``n_trials`` counts the study's
+finished trials, earlier runs included, so the same command after an interruption runs only what is
+missing (the plugin alone would run ``n_trials`` more each time), with the sampler seeded by its seed plus
+the finished trials (the same seed would propose the same first points again); a job interrupted
+mid-training resumes from its checkpoint in its own folder, and a schedule proposed twice is found done.
+A trial whose schedule its job refuses (rounding merged two stage sizes) fails alone: Optuna records it
+as failed, and ``max_failure_rate: 1.0`` keeps the study going.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import optuna
+from hydra.types import HydraContext, TaskFunction
+from hydra.utils import instantiate
+from hydra_plugins.hydra_optuna_sweeper.optuna_sweeper import OptunaSweeper
+from omegaconf import DictConfig
+
+from selpres.search import SEARCH_KEYS, schedule_overrides
+from selpres.task import load_task
+
+log = logging.getLogger("selpres")
+
+
+class ShapedScheduleSweeper(OptunaSweeper):
+    """Optuna over (p, first, growth, tilt) at a fixed budget, each trial run as its schedule's overrides."""
+
+    def setup(self, *, hydra_context: HydraContext, task_function: TaskFunction, config: DictConfig) -> None:
+        super().setup(hydra_context=hydra_context, task_function=task_function, config=config)
+        impl = self.sweeper
+        n = load_task(config.robot, config.data).n
+        sweep_order, cost = config.schedule.order.value, config.schedule.selection_cost
+        configure = impl._configure_trials
+
+        def translated(trials, distributions, fixed):
+            out = []
+            for overrides in configure(trials, distributions, fixed):
+                raw = dict(o.split("=", 1) for o in overrides if o.split("=", 1)[0] in SEARCH_KEYS)
+                missing = [k for k in SEARCH_KEYS if k not in raw]
+                if missing:
+                    raise ValueError(f"hydra.sweeper.params must give {list(SEARCH_KEYS)}; missing {missing}")
+                rest = [o for o in overrides if o.split("=", 1)[0] not in SEARCH_KEYS]
+                swept = [o.split("=", 1)[1] for o in rest if o.startswith("schedule.order=")]
+                order = swept[0] if swept else sweep_order
+                out.append((*rest, *schedule_overrides(raw, n, order, cost)))
+            return out
+
+        impl._configure_trials = translated
+        self._translate = lambda raw, order: schedule_overrides(raw, n, order, cost)
+        self._order = sweep_order
+        done = _finished_trials(impl.storage, impl.study_name)
+        if done:
+            log.info("study %s has %d finished trials; running %d more", impl.study_name, done,
+                     max(0, impl.n_trials - done))
+            impl.n_trials = max(0, impl.n_trials - done)
+            seed = config.hydra.sweeper.sampler.get("seed")
+            if seed is not None and isinstance(impl.sampler, optuna.samplers.BaseSampler):
+                # a seeded sampler would propose the same first points again: seed + finished trials
+                impl.sampler = instantiate(config.hydra.sweeper.sampler, seed=seed + done)
+                log.info("sampler seed %d (hydra.sweeper.sampler.seed %d + %d finished trials)", seed + done,
+                         seed, done)
+
+    def sweep(self, arguments: list[str]) -> None:
+        """The study's trials, then the best schedule as the overrides that confirm it."""
+        super().sweep(arguments)
+        impl = self.sweeper
+        if impl.storage is None:
+            return
+        best = optuna.load_study(study_name=impl.study_name, storage=impl.storage).best_trial
+        raw = {**best.user_attrs, **best.params}
+        order = raw.get("schedule.order", self._order)
+        overrides = " ".join(f"'{o}'" for o in self._translate(raw, order))
+        log.info("best schedule (validation RMS %.4f Nm): schedule.order=%s %s; confirm it on fresh seeds "
+                 "and the held-out set: python train.py -m name=confirm seed=0 replicas=30 "
+                 "schedule.order=%s %s", best.value, order, overrides, order, overrides)
+
+
+def _finished_trials(storage, study_name) -> int:
+    """Complete or failed trials of the stored study (0 if there is none yet)."""
+    if storage is None or study_name is None:
+        return 0
+    try:
+        study = optuna.load_study(study_name=study_name, storage=storage)
+    except KeyError:  # no such study yet
+        return 0
+    states = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.FAIL)
+    return sum(t.state in states for t in study.get_trials(deepcopy=False))

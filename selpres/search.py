@@ -1,0 +1,65 @@
+"""Schedules from a few numbers, for a search under a fixed presentation budget (issue 12 item 2).
+
+A search over every list of stage sizes n_i and epochs N_i is too wide and mostly breaks the constraints
+(sizes increasing, ending at n; the total within the budget). ``shaped_schedule`` maps four numbers onto a
+valid schedule instead:
+
+* ``p`` enlargements (p + 1 stages; p = 0 is conventional training cut to the budget, the compute-matched
+  baseline, so a search can find that choosing does not pay);
+* ``first`` = n_1 / n, and ``growth`` gamma: the fractions n_i / n = first + (1 - first) (i / p)^gamma,
+  i = 0..p (gamma = 1 linear, > 1 slow start, < 1 fast start), rounded half up to counts;
+* ``tilt``: stage i's share of the training presentations is proportional to exp(tilt i / p) (0: equal
+  presentations per stage, > 0: more on the larger sets), so N_i = round(share_i T / n_i), at least 1, and
+  the last stage takes what is left of T.
+
+T is the budget less the cost of choosing (``selpres.selection``): a loss-based order charges its
+forward passes at each enlargement, so every order spends the same total. The total lands within n/2
+presentations of the budget (the last stage's rounding), or above it where every stage's minimum of one
+epoch already exceeds it; results.json records the exact count either way.
+"""
+
+from __future__ import annotations
+
+import math
+
+from selpres.errors import ConfigError
+from selpres.selection import LOSS_ORDERS, selection_charge
+
+SEARCH_KEYS = ("search_p", "search_first", "search_growth", "search_tilt", "search_budget")
+
+
+def shaped_sizes(p: int, first: float, growth: float, n: int) -> list[int]:
+    """Stage sizes n_0 <= ... <= n_p = n from (p, first, growth). Where rounding merges two (small n, large
+    first), they are returned merged: the job refuses them (``schedule.sizes`` must grow) and fails alone."""
+    if p < 0 or not 0 < first <= 1 or not growth > 0:
+        raise ConfigError("search", {"p": p, "first": first, "growth": growth},
+                          "p >= 0 enlargements, first in (0, 1], growth > 0")
+    if p == 0:
+        return [n]
+    return [max(1, math.floor((first + (1 - first) * (i / p) ** growth) * n + 0.5)) for i in range(p + 1)]
+
+
+def shaped_schedule(p: int, first: float, growth: float, tilt: float, n: int, budget: int, order: str,
+                    selection_cost: float) -> dict:
+    """The schedule of (p, first, growth, tilt) at ``budget`` total presentations for ``order``, as
+    ``schedule.*`` config values: {"sizes": [...], "epochs": [...] or None, "budget": None or int}."""
+    sizes = shaped_sizes(p, first, growth, n)
+    charge = 0
+    if order in LOSS_ORDERS:
+        charge = sum(selection_charge(n - kept, selection_cost) for kept in sizes[:-1])
+    T = budget - charge
+    if p == 0:  # conventional training cut to the budget (schedule.budget: whole epochs + a partial one)
+        return {"sizes": [n], "epochs": None, "budget": T}
+    weights = [math.exp(tilt * i / p) for i in range(p + 1)]
+    shares = [w / sum(weights) * T for w in weights]
+    epochs = [max(1, round(s / size)) for s, size in zip(shares[:-1], sizes[:-1])]
+    rest = T - sum(e * size for e, size in zip(epochs, sizes))
+    return {"sizes": sizes, "epochs": [*epochs, max(1, round(rest / n))], "budget": None}
+
+
+def schedule_overrides(raw: dict, n: int, order: str, selection_cost: float) -> list[str]:
+    """Hydra overrides of the schedule that the search numbers ``raw`` (SEARCH_KEYS -> value) stand for."""
+    s = shaped_schedule(int(raw["search_p"]), float(raw["search_first"]), float(raw["search_growth"]),
+                        float(raw["search_tilt"]), n, int(raw["search_budget"]), order, selection_cost)
+    fmt = lambda v: "null" if v is None else str(v).replace(" ", "")  # noqa: E731
+    return [f"schedule.{k}={fmt(v)}" for k, v in s.items()]

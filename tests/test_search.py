@@ -1,0 +1,101 @@
+"""Schedule search (selpres.search, the Optuna sweeper plugin): schedules from a few numbers, worked out by
+hand; a real Optuna study in SQLite that resumes (needs hydra-optuna-sweeper, else skipped)."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from selpres.errors import ConfigError
+from selpres.schedule import build_schedule
+from selpres.search import schedule_overrides, shaped_schedule, shaped_sizes
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_schedule_worked_out_by_hand():
+    """p = 2, first 0.1, growth 1, n = 1000: fractions 0.1, 0.55, 1 -> sizes 100, 550, 1000. Tilt 0, budget
+    60,000: 20,000 presentations a stage, N = 200, round(36.4) = 36 (19,800), then round(20,200 / 1000) =
+    20 on U: 59,800 in all."""
+    s = shaped_schedule(2, 0.1, 1.0, 0.0, 1000, 60_000, "stratified", 1 / 3)
+    assert s == {"sizes": [100, 550, 1000], "epochs": [200, 36, 20], "budget": None}
+
+
+def test_a_loss_order_pays_for_its_choices_out_of_the_budget():
+    """As above with loss_high: the two enlargements score 900 and 450 candidates, charged 300 + 150, so
+    59,550 presentations are left to train: 19,850 a stage, N = round(198.5) = 198 (Python rounds half to
+    even), round(36.09) = 36, and round((59,550 - 19,800 - 19,800) / 1000) = round(19.95) = 20."""
+    s = shaped_schedule(2, 0.1, 1.0, 0.0, 1000, 60_000, "loss_high", 1 / 3)
+    assert s == {"sizes": [100, 550, 1000], "epochs": [198, 36, 20], "budget": None}
+
+
+def test_tilt_and_growth_move_the_presentations_and_the_sizes():
+    """growth 2 (slow start): 0.1 + 0.9 * (1/2)^2 = 0.325 -> 325. tilt 2 ln 2 at p = 2: shares 1 : 2 : 4 of
+    60,000, so 8,571.4 / 100 -> 86 epochs, 17,142.9 / 325 = 52.7 -> 53 (17,225), and (60,000 - 8,600 -
+    17,225) / 1000 = 34.2 -> 34."""
+    s = shaped_schedule(2, 0.1, 2.0, 2 * math.log(2), 1000, 60_000, "random", 0.0)
+    assert s == {"sizes": [100, 325, 1000], "epochs": [86, 53, 34], "budget": None}
+
+
+def test_p_zero_is_conventional_cut_to_the_budget():
+    assert shaped_schedule(0, 0.3, 1.0, 0.5, 1002, 70_560, "loss_high", 1 / 3) == \
+        {"sizes": [1002], "epochs": None, "budget": 70_560}
+    raw = {"search_p": "0", "search_first": "0.3", "search_growth": "1", "search_tilt": "0",
+           "search_budget": "70560"}
+    assert schedule_overrides(raw, 1002, "random", 0.0) == \
+        ["schedule.sizes=[1002]", "schedule.epochs=null", "schedule.budget=70560"]
+
+
+def test_sizes_merged_by_rounding_reach_the_job_which_refuses_them():
+    """0.99 of 100 growing by quarters: 99, 99.25, 99.5, 99.75, 100 round to 99, 99, 100, 100, 100; the
+    job's schedule check names schedule.sizes (in a search, that trial fails alone)."""
+    sizes = shaped_sizes(4, 0.99, 1.0, 100)
+    assert sizes == [99, 99, 100, 100, 100]
+    with pytest.raises(ConfigError, match=r"schedule\.sizes.*strictly increasing"):
+        build_schedule(sizes, [1] * 5, 100)
+    with pytest.raises(ConfigError, match="search"):
+        shaped_sizes(-1, 0.1, 1.0, 100)
+
+
+@settings(max_examples=200, deadline=None)
+@given(p=st.integers(1, 4), first=st.floats(0.02, 0.5), growth=st.floats(0.3, 3.0), tilt=st.floats(-1.0, 2.0),
+       order=st.sampled_from(["stratified", "loss_high", "reselect"]))
+def test_every_searched_schedule_builds_and_spends_the_budget(p, first, growth, tilt, order):
+    """Any point of the search space is a valid schedule (selpres.schedule accepts it) whose training and
+    selection presentations sum to the budget within n / 2, unless one epoch a stage already exceeds it."""
+    n, budget = 1002, 70_560
+    s = shaped_schedule(p, first, growth, tilt, n, budget, order, 1 / 3)
+    sch = build_schedule(s["sizes"], s["epochs"], n, s["budget"])  # sizes never merge at n = 1002 here
+    charge = sum(math.ceil(round((n - k) / 3, 9)) for k in s["sizes"][:-1]) if order == "loss_high" else 0
+    if sum(s["sizes"]) + charge <= budget - n:
+        assert abs(sch.presentations + charge - budget) <= n / 2
+    assert sch.sizes[-1] == n and len(sch.sizes) == p + 1
+
+
+@pytest.mark.slow
+def test_optuna_study_in_sqlite_runs_trials_as_jobs_and_resumes(tmp_path):
+    """Two trials, then the same command with n_trials = 3 runs one more (the study's total), each trial an
+    ordinary job folder with results.json."""
+    pytest.importorskip("hydra_plugins.hydra_optuna_sweeper", reason="needs hydra-optuna-sweeper==1.3.0")
+    optuna = pytest.importorskip("optuna")
+    db = tmp_path / "study.db"
+    args = [sys.executable, "train.py", "experiment=search", "replicas=2", "logging.progress=false",
+            "hydra.sweeper.params.search_budget=4000", f"hydra.sweeper.storage=sqlite:///{db}",
+            f"hydra.sweep.dir={tmp_path / 'sweep'}", "data.heldout=300", "eval.heldout_curve=300"]
+    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
+    for trials in (2, 3):
+        p = subprocess.run([*args, f"hydra.sweeper.n_trials={trials}"], cwd=ROOT, env=env,
+                           capture_output=True, text=True, timeout=600)
+        assert p.returncode == 0, p.stderr[-3000:]
+    study = optuna.load_study(study_name="schedule-search", storage=f"sqlite:///{db}")
+    assert len(study.trials) == 3 and all(t.state.name == "COMPLETE" for t in study.trials)
+    assert "finished trials; running 1 more" in p.stdout + p.stderr
+    jobs = list((tmp_path / "sweep").glob("*/results.json"))
+    assert 1 <= len(jobs) <= 3 and (tmp_path / "sweep" / "optimization_results.yaml").exists()
