@@ -189,7 +189,9 @@ def summary_table(results: dict) -> str:
         ("replicas", f"{results['replicas']} (seeds {results['seeds'][0]}..{results['seeds'][-1]}), "
                      f"{results['diverged_replicas']} diverged"),
         ("cost T/t", f"{sch['presentations']:,} presentations  (T_con/t at equal epochs "
-                     f"{sch['conventional_presentations']:,}; ratio {sch['cost_ratio']:.3f})"),
+                     f"{sch['conventional_presentations']:,}; ratio {sch['cost_ratio']:.3f})"
+                     + (f" + {results['selection_presentations']:,} charged for choosing A_i"
+                        if results.get("selection_presentations") else "")),
         ("engine", engine),
         ("wall time", f"{wall['total']:.2f} s total, {wall['train']:.2f} s in updates"),
         ("test-10 RMS", f"{fmt('test10_rms_nm_overall')} Nm   {fmt('test10_rms_scaled_overall')} scaled"),
