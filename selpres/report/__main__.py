@@ -51,6 +51,10 @@ def main(argv: list[str] | None = None) -> int:
             return _error(str(e))
     out = a.out if a.out is not None else a.dir / "report"
     report = Report.build(a.dir, options)
+    if a.readme is not None and not report.ctx.table1_like:
+        return _error(f"--readme {a.readme}: {a.dir} is not Table 1's grid of the paper's methods (its "
+                      "methods are labelled by swept settings), so it has no Table 1 block to write; run the "
+                      "report without --readme, or with it on a Table 1 sweep such as outputs/sweeps/table1")
     files = report.write(out)
     print(report.markdown, end="")
     print(f"report written to {out}/ ({', '.join(files)})", file=sys.stderr)

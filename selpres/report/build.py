@@ -20,6 +20,9 @@ from selpres.storage import atomic_write
 # a section that has nothing to show for a sweep returns None and is left out
 SECTIONS = [table1.section, verdict.section, selection.section, sensitivity.section, error_cost.section,
             time_to_target.section, plots.section, runs.section]
+# a study of parameters (not Table 1's grid): the sections it is about first, Table 1's (compact) last
+STUDY_SECTIONS = [sensitivity.section, error_cost.section, selection.section, time_to_target.section,
+                  plots.section, table1.section, verdict.section, runs.section]
 
 
 def write_text(path: Path, text: str) -> None:
@@ -36,11 +39,13 @@ class Report:
     @classmethod
     def build(cls, sweep: Path, options: Options | None = None) -> Report:
         ctx = Context.load(sweep, options)
-        return cls(ctx, [s for make in SECTIONS if (s := make(ctx)) is not None])
+        order = SECTIONS if ctx.table1_like else STUDY_SECTIONS
+        return cls(ctx, [s for make in order if (s := make(ctx)) is not None])
 
     @property
     def markdown(self) -> str:
-        return "\n\n".join([f"# Table 1 reproduction: `{self.ctx.sweep}`",
+        what = "Table 1 reproduction" if self.ctx.table1_like else "Sweep report"
+        return "\n\n".join([f"# {what}: `{self.ctx.sweep}`",
                             *(s.markdown() for s in self.sections)]) + "\n"
 
     def rows(self, csv_name: str) -> list[dict]:

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass, field
 
 from selpres.errors import ConfigError
+from selpres.report.families import paper_conventional, paper_run
 from selpres.report.groups import BASELINE, REFERENCE, SETS, Group, base
 from selpres.report.markdown import signed_interval
 from selpres.stats import holm, summarize, t_test, tost
@@ -195,16 +196,21 @@ def reach(curve: list, target: float, base_cost: float | None) -> dict:
 
 
 def time_to_target_rows(groups, topologies, methods) -> list[dict]:
-    """Presentations each method needs until its mean held-out curve first reaches a target: the
-    conventional run's final value (the issue's question), and each selective variant's final value (how
-    long the other methods take to get as far as selective presentation does: the speed-up in honest form)."""
+    """Presentations each method needs until its mean held-out curve first reaches a target: the final value
+    of the paper's conventional run (the issue's question; :func:`paper_conventional`, whatever its label),
+    and that of the paper's selective run, else of the run named "selective" (how long the other methods
+    take to get as far as selective presentation does: the speed-up in honest form). A target absent from
+    every topology gives no rows; absent from one, a "no target" row there."""
     rows = []
-    targets = ([BASELINE] if BASELINE in methods else []) + [m for m in methods if base(m) == REFERENCE]
-    for target_method in targets:
+    conventional = {t: paper_conventional(groups, t) for t in topologies}
+    selective = {t: paper_run(groups, t, REFERENCE) or groups.get((t, REFERENCE)) for t in topologies}
+    for kind, found in ((BASELINE, conventional), (REFERENCE, selective)):
+        if not any(found.values()):
+            continue
         for t in topologies:
-            tgt = groups.get((t, target_method))
+            tgt, base_group = found[t], conventional[t]
+            target_method = tgt.schedule if tgt else kind
             tgt_curve = mean_curve(tgt) if tgt else []
-            base_group = groups.get((t, BASELINE))
             base_curve = mean_curve(base_group) if base_group else []
             if not tgt_curve:
                 rows.append({"target_method": target_method, "topology": t, "method": "all",

@@ -9,6 +9,7 @@ from typing import Callable
 from selpres.report.compare import Options
 from selpres.report.groups import Group, aggregate
 from selpres.report.jobs import Job, load_jobs
+from selpres.report.paper import PAPER
 
 
 @dataclass
@@ -26,6 +27,13 @@ class Context:
     def load(cls, sweep: Path, options: Options | None = None) -> Context:
         jobs = load_jobs(sweep)
         return cls(sweep, jobs, *aggregate(jobs), options=options or Options())
+
+    @property
+    def table1_like(self) -> bool:
+        """Whether the sweep is Table 1's grid: the paper's methods (with our matched and random growth), one
+        setting each per topology. A sweep that labels its methods by swept settings (a study of parameters)
+        is not, and its report leads with the sections it is about."""
+        return any(m in PAPER for m in self.methods) and all(" " not in m for m in self.methods)
 
     @property
     def warnings(self) -> list[str]:

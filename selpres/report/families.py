@@ -10,7 +10,10 @@ set aside:
 
 One-stage families are also split by total presentations: a rival is tuned at a fixed cost (the paper's
 150,300 or selective's 70,560), and lr × momentum at two costs are two questions. Staged families are not
-split: N_i and n_i change the cost by design, and the spread of costs is printed beside them.
+split: N_i and n_i change the cost by design, and the spread of costs is printed beside them. A one-stage
+run that is alone at its cost and is the *budget-matched partner* of a staged run (the same presentations
+within 1 %, the same other settings) belongs to the family "<optimizer>, budget-matched": conventional
+training stopped at each staged run's cost is one method swept over its budget, not one family per cost.
 """
 
 from __future__ import annotations
@@ -22,28 +25,60 @@ from selpres.report.groups import Group, setting_text, settings, varying
 from selpres.report.paper import PAPER, PAPER_OPTIM
 
 SELECTIVE = "selective presentation"
+CONVENTIONAL_SGD = "conventional SGD"
+BUDGET_MATCHED = "budget-matched"
 PAPER_ORDER = "stratified"
 SCHEDULE = "schedule."  # the keys of p, n_i, N_i (and order, budget): selective presentation's parameters
+SGD = "sgd"  # optim.name of SGD with momentum (configs/optim/paper.yaml)
+# optim.name of SGD in results written before the optimizer group: "paper", or no name at all
+_SGD_NAMES = (SGD, "paper", None)
+BUDGET_TOLERANCE = 0.01  # a one-stage run within 1 % of a staged run's presentations is budget-matched
 
 
 def optimizer(g: Group) -> str:
-    """``optim.name`` of the group's jobs; "paper" (SGD with momentum) when the config has none."""
-    return ((g.used[0].results.get("config") or {}).get("optim") or {}).get("name") or "paper"
+    """``optim.name`` of the group's jobs; SGD with momentum is "sgd" whatever name older results gave it."""
+    name = ((g.used[0].results.get("config") or {}).get("optim") or {}).get("name")
+    return SGD if name in _SGD_NAMES else name
 
 
 def stages(g: Group) -> int:
     return len(g.sched["sizes"])
 
 
+def _method(g: Group) -> str:
+    """How one-stage training with the group's optimizer is named: "conventional SGD", "quickprop", ..."""
+    return CONVENTIONAL_SGD if optimizer(g) == SGD else optimizer(g)
+
+
 def family_name(g: Group) -> str:
-    """The family of a setting (see the module's docstring), e.g. "selective presentation",
-    "conventional SGD at 150,300 t", "quickprop at 70,560 t", "staged, random order"."""
-    opt = optimizer(g)
+    """The family of a setting (see the module's docstring) before budget-matched runs are gathered, e.g.
+    "selective presentation", "conventional SGD at 150,300 t", "quickprop at 70,560 t", "staged, random
+    order"."""
     if stages(g) == 1:
-        return f"{'conventional SGD' if opt == 'paper' else opt} at {g.sched['presentations']:,} t"
+        return f"{_method(g)} at {g.sched['presentations']:,} t"
     order = g.sched.get("order") or PAPER_ORDER
     name = SELECTIVE if order == PAPER_ORDER else f"staged, {order} order"
-    return name if opt == "paper" else f"{name} with {opt}"
+    return name if optimizer(g) == SGD else f"{name} with {optimizer(g)}"
+
+
+def _rest(g: Group) -> dict[str, str]:
+    """A setting's config outside ``schedule.*``: what a budget-matched partner must share."""
+    return {k: v for k, v in settings(g.used[0]).items() if not k.startswith(SCHEDULE)}
+
+
+def same_cost(a: float, b: float) -> bool:
+    """Whether two costs in presentations are one budget (within :data:`BUDGET_TOLERANCE`)."""
+    return abs(a / b - 1) <= BUDGET_TOLERANCE
+
+
+def matched_partner(groups: dict[tuple[str, str], Group], g: Group) -> Group | None:
+    """The one-stage run of the same topology and settings (outside the schedule) whose presentations are
+    closest to ``g``'s, if within 1 %; None if there is none."""
+    cost, rest = g.sched["presentations"], _rest(g)
+    candidates = [h for (t, _), h in groups.items()
+                  if t == g.topology and h.sched is not None and stages(h) == 1
+                  and same_cost(h.sched["presentations"], cost) and _rest(h) == rest]
+    return min(candidates, key=lambda h: (abs(h.sched["presentations"] - cost), h.schedule), default=None)
 
 
 @dataclass
@@ -75,12 +110,68 @@ class Family:
 
     def ranges_text(self) -> str:
         """"optim.lr ∈ {0.1, 0.15, 0.3}; schedule.sizes ∈ {…}": the ranges a verdict depends on."""
-        return "; ".join(f"{k} ∈ {{{', '.join(v.replace(chr(34), '') for v in vals)}}}"
-                         for k, vals in self.ranges().items())
+        return "; ".join(f"{k} ∈ {{{', '.join(map(_shown, vals))}}}" for k, vals in self.ranges().items())
+
+    def swept_text(self) -> str:
+        """The ranges in the paper's words: a staged family's schedules as p, n_1, the growth of n_i, the
+        profile of N_i and the total N = ΣN_i (the terms that vary), then its other swept keys; a one-stage
+        family's keys as :meth:`ranges_text`."""
+        if stages(self.members[0]) == 1:
+            return self.ranges_text()
+        terms = [schedule_terms(g.sched) for g in self.members]
+        parts = [f"{name} ∈ {{{', '.join(map(str, vals))}}}" for name in terms[0]
+                 if len(vals := sorted({t[name] for t in terms}, key=_term_rank)) > 1]
+        parts += [f"{k} ∈ {{{', '.join(_shown(v) for v in self.values(k))}}}"
+                  for k in self.keys if not k.startswith(SCHEDULE)]
+        return "; ".join(parts)
 
     def presentations(self) -> tuple[int, int]:
         costs = [g.sched["presentations"] for g in self.members]
         return min(costs), max(costs)
+
+
+def _shown(value: str) -> str:
+    """A config value as the report prints it: strings unquoted, null (the key not set) as "not set"."""
+    return "not set" if value == "null" else value.replace('"', "")
+
+
+def _term_rank(v) -> tuple:
+    return (0, v, "") if isinstance(v, (int, float)) else (1, 0, str(v))
+
+
+def _growth(sizes: list[int]) -> str:
+    """How the stage sizes n_i grow: the paper's (its n_2 … n_p after any n_1), geometric (a constant
+    ratio, to the rounding of whole patterns), linear (a constant step, to the rounding) or other."""
+    if len(sizes) == 2:
+        return "one step"
+    if sizes[1:] == PAPER["selective"]["sizes"][1:]:
+        return "the paper's"
+    ratios = [b / a for a, b in zip(sizes, sizes[1:])]
+    steps = [b - a for a, b in zip(sizes, sizes[1:])]
+    if max(ratios) / min(ratios) - 1 <= 0.02:
+        return "geometric"
+    if max(steps) - min(steps) <= 1:
+        return "linear"
+    return "other"
+
+
+def _profile(epochs: list[int]) -> str:
+    """The profile of the epochs per stage N_i: equal (to the rounding of a total that does not divide),
+    increasing, decreasing or mixed."""
+    if max(epochs) - min(epochs) <= 1:
+        return "equal"
+    if all(a <= b for a, b in zip(epochs, epochs[1:])):
+        return "increasing"
+    if all(a >= b for a, b in zip(epochs, epochs[1:])):
+        return "decreasing"
+    return "mixed"
+
+
+def schedule_terms(sched: dict) -> dict:
+    """A staged schedule in the paper's terms (section 3): p, n_1, the growth of n_i, the profile of N_i
+    and the total number of epochs N = ΣN_i."""
+    return {"p": sched["p"], "n_1": sched["sizes"][0], "n_i growth": _growth(sched["sizes"]),
+            "N_i profile": _profile(sched["epochs"]), "N = ΣN_i": sum(sched["epochs"])}
 
 
 def _sort_key(text: str) -> tuple:
@@ -96,20 +187,44 @@ def _sort_key(text: str) -> tuple:
 
 
 def family_rank(name: str) -> tuple:
-    """Selective presentation first, then conventional SGD, then the rest by name."""
-    return (not name.startswith(SELECTIVE), not name.startswith("conventional SGD"), name)
+    """Selective presentation first, then conventional SGD budget-matched to it, then conventional SGD at
+    fixed costs, then the rest by name."""
+    return (not name.startswith(SELECTIVE), name != f"{CONVENTIONAL_SGD}, {BUDGET_MATCHED}",
+            not name.startswith(CONVENTIONAL_SGD), name)
 
 
 def families(groups: dict[tuple[str, str], Group], topologies: list[str]) -> list[Family]:
-    """Every family of every topology, settings in method order; groups without results are left out."""
+    """Every family of every topology, settings in method order; groups without results are left out.
+    One-stage runs alone at their cost that are a staged run's budget-matched partner are gathered into
+    "<optimizer>, budget-matched" (see the module's docstring)."""
+    done = {k: g for k, g in groups.items() if g.sched is not None}
+    partners = {id(p) for g in done.values() if stages(g) > 1 and (p := matched_partner(done, g))}
+    by_name: dict[tuple[str, str], list[Group]] = {}
+    for (t, _), g in done.items():
+        by_name.setdefault((t, family_name(g)), []).append(g)
     out: dict[tuple[str, str], Family] = {}
-    for (t, m), g in groups.items():
-        if g.sched is None:
-            continue
-        fam = out.setdefault((t, family_name(g)), Family(family_name(g), t, []))
-        fam.members.append(g)
-        fam.settings[m] = settings(g.used[0])
+    for (t, name), members in by_name.items():
+        for g in members:
+            alone = len(members) == 1 and stages(g) == 1 and id(g) in partners
+            fam_name = f"{_method(g)}, {BUDGET_MATCHED}" if alone else name
+            fam = out.setdefault((t, fam_name), Family(fam_name, t, []))
+            fam.members.append(g)
+            fam.settings[g.schedule] = settings(g.used[0])
     return sorted(out.values(), key=lambda f: (topologies.index(f.topology), family_rank(f.name)))
+
+
+def at_paper_total_epochs(fam: Family) -> Family | None:
+    """A staged family whose total epochs N = ΣN_i vary, restricted to the paper's N (150): N changes the
+    cost, and a longer run is better for any method, so the spread over p, n_i and the profile of N_i is
+    also read at the paper's total. None unless two or more settings have it and some have another N."""
+    total = sum(PAPER["selective"]["epochs"])
+    if stages(fam.members[0]) == 1:
+        return None
+    at = [g for g in fam.members if sum(g.sched["epochs"]) == total]
+    if len(at) < 2 or len(at) == len(fam.members):
+        return None
+    return Family(f"{fam.name} at ΣN_i = {total}", fam.topology, at,
+                  {g.schedule: fam.settings[g.schedule] for g in at})
 
 
 def at_fixed_other_parameters(fam: Family) -> list[Family]:
@@ -131,18 +246,26 @@ def at_fixed_other_parameters(fam: Family) -> list[Family]:
 
 def _is_paper_optim(g: Group) -> bool:
     optim = (g.used[0].results.get("config") or {}).get("optim") or {}
-    return optimizer(g) == "paper" and all(optim.get(k) == v for k, v in PAPER_OPTIM.items() if k != "name")
+    return optimizer(g) == SGD and all(optim.get(k) == v for k, v in PAPER_OPTIM.items() if k != "name")
 
 
-def paper_conventional(groups: dict[tuple[str, str], Group], topology: str) -> Group | None:
-    """The run whose final error is the time-to-target target: the paper's conventional method (all n
-    patterns, 150 epochs, SGD with the paper's lr and momentum). Without one, the single one-stage SGD run
-    of 150 epochs, if there is exactly one; else None (no target: the report says so)."""
-    ref = PAPER["conventional"]
+def paper_run(groups: dict[tuple[str, str], Group], topology: str, method: str) -> Group | None:
+    """The paper's ``method`` ("conventional" or "selective") in one topology: its n_i and N_i (Table 1),
+    grown in the paper's order, trained by SGD with the paper's lr and momentum (Note 1 of Table 1). Without
+    one, the single SGD run with the paper's stages, if there is exactly one; else None."""
+    ref = PAPER[method]
     candidates = [g for (t, _), g in sorted(groups.items()) if t == topology and g.sched is not None
-                  and optimizer(g) == "paper" and g.sched["sizes"] == ref["sizes"]
-                  and g.sched["epochs"] == ref["epochs"] and g.sched["presentations"] == ref["presentations"]]
+                  and optimizer(g) == SGD and g.sched["sizes"] == ref["sizes"]
+                  and g.sched["epochs"] == ref["epochs"] and g.sched["presentations"] == ref["presentations"]
+                  and (stages(g) == 1 or (g.sched.get("order") or PAPER_ORDER) == PAPER_ORDER)]
     exact = [g for g in candidates if _is_paper_optim(g)]
     if len(exact) == 1:
         return exact[0]
     return candidates[0] if len(candidates) == 1 else None
+
+
+def paper_conventional(groups: dict[tuple[str, str], Group], topology: str) -> Group | None:
+    """The run whose final error is the time-to-target target and whose learning curve is the error–cost
+    plane's frontier: the paper's conventional method (all n patterns, 150 epochs, SGD with lr 0.15 and
+    momentum 0.9); else the single one-stage SGD run of 150 epochs; else None (the report says so)."""
+    return paper_run(groups, topology, "conventional")

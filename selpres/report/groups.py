@@ -143,9 +143,10 @@ def varying(members: list[dict[str, str]]) -> list[str]:
 
 
 def setting_text(f: dict[str, str], keys: list[str]) -> str:
-    """"k=v k=v" for ``keys`` present in ``f``; a key a config does not have is left out (an optimizer's
-    own parameter in another optimizer's job)."""
-    return " ".join(f"{k}={f[k]}".replace('"', "") for k in keys if k in f)
+    """"k=v k=v" for ``keys`` set in ``f``; a key a config does not have, or has as null (not set: an
+    optimizer's own parameter in another optimizer's job), is left out. Labels stay distinct: two settings
+    with the same text agree on every key set in either, and on the rest neither sets it."""
+    return " ".join(f"{k}={f[k]}".replace('"', "") for k in keys if f.get(k, "null") != "null")
 
 
 def label_methods(jobs: list[Job]) -> None:
@@ -158,8 +159,8 @@ def label_methods(jobs: list[Job]) -> None:
     for name, members in by_name.items():
         keys = varying([f for _, f in members])
         for j, f in members:
-            if keys:
-                j.schedule = name + " " + setting_text(f, keys)
+            if text := setting_text(f, keys):
+                j.schedule = name + " " + text
 
 
 def aggregate(jobs: list[Job]) -> tuple[dict[tuple[str, str], Group], list[str], list[str]]:

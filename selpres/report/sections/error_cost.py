@@ -18,24 +18,27 @@ from pathlib import Path
 from selpres.report.compare import mean_curve
 from selpres.report.context import Context, Section
 from selpres.report.families import Family, families, paper_conventional
-from selpres.report.sections.plots import pyplot, save_png
+from selpres.report.groups import Group
+from selpres.report.sections.plots import family_styles, pyplot, save_png
 from selpres.stats import summarize
 
 NOTE = (
     "Points: mean final held-out RMS over complete seeds (all held-out patterns), bars: its 95 % t-interval; "
-    "one point per configuration, coloured by family. Line: the mean held-out curve of the paper's "
+    "one point per configuration, colour and marker by family (one legend entry per family). Line: the mean "
+    "held-out curve of the paper's "
     "conventional run (scored every `eval.every` epochs on the first `eval.heldout_curve` held-out "
     "patterns), the frontier a method must get below to beat plain training stopped at the same cost. "
-    "Heat maps: mean final held-out RMS (Nm) of each setting of a family swept over two or more "
-    "parameters; the two with the most values are the axes, any others make one panel per value; "
+    "Heat maps: mean final held-out RMS (Nm) of each setting of a family swept over a grid of two or more "
+    "parameters (at least half its cells run); the two with the most values are the axes, any others make "
+    "one panel per value; "
     "a red box marks the family's best, a blank cell a setting not run (or with no complete seed)."
 )
 
 
-def plane_rows(groups, topologies) -> list[dict]:
+def plane_rows(groups, topologies, fams: list[Family] | None = None) -> list[dict]:
     """One row per configuration: its family, setting, cost and mean final held-out RMS with interval."""
     rows = []
-    for fam in families(groups, topologies):
+    for fam in fams if fams is not None else families(groups, topologies):
         for g in fam.members:
             st = summarize(g.values("heldout").values())
             rows.append({"topology": fam.topology, "family": fam.name, "method": g.schedule,
@@ -57,11 +60,16 @@ class Grid:
     panels: dict[str, dict[tuple[str, str], float | None]]  # panel label -> (x value, y value) -> mean
 
 
+GRID_FILL = 0.5  # a family's settings must fill at least half the cells to be drawn as a heat map
+
+
 def grid(fam: Family) -> Grid | None:
-    """The family's heat-map layout, or None when fewer than two parameters take two or more values.
+    """The family's heat-map layout, or None when fewer than two parameters take two or more values, or when
+    its settings fill less than half the cells (a design of one factor at a time, such as selective
+    presentation's, is a line through the grid: a mostly blank map; its settings are tabulated instead).
     Axes: the two parameters with the most values (ties by name); a mean is None without complete seeds."""
     keys = sorted(fam.keys, key=lambda k: (-len(fam.values(k)), k))
-    if len(keys) < 2:
+    if len(keys) < 2 or len(fam.members) < GRID_FILL * math.prod(len(fam.values(k)) for k in keys):
         return None
     x, y, rest = keys[0], keys[1], keys[2:]
     panels: dict[str, dict[tuple[str, str], float | None]] = {}
@@ -73,25 +81,29 @@ def grid(fam: Family) -> Grid | None:
     return Grid(fam, x, y, fam.values(x), fam.values(y), dict(sorted(panels.items())))
 
 
-def _colors(names: list[str]) -> dict[str, str]:
-    plt = pyplot()
-    cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    return {n: cycle[i % len(cycle)] for i, n in enumerate(names)}
+def frontier_label(ref: Group, fam: Family | None) -> str:
+    what = f"{fam.name},\n{fam.label(ref)}" if fam and len(fam.members) > 1 else ref.schedule
+    n = len(ref.complete_seeds)
+    return f"frontier: the paper's conventional run,\nits mean learning curve (n={n}):\n{what}"
 
 
-def plot_plane(rows: list[dict], groups, topologies: list[str], path: Path) -> None:
-    """One panel per topology: configurations with 95 % bars, and conventional's mean curve."""
+def draw_plane(rows: list[dict], groups, topologies: list[str], fams: list[Family]):
+    """The figure: one panel per topology, each family's configurations with 95 % bars in its own colour and
+    marker, the paper's conventional mean curve as the frontier, one legend for all outside the panels."""
     plt = pyplot()
     from matplotlib.ticker import FuncFormatter
 
-    colors = _colors(list(dict.fromkeys(r["family"] for r in rows)))
-    fig, axes = plt.subplots(1, len(topologies), figsize=(6 * len(topologies), 4.6), squeeze=False)
+    styles = family_styles(list(dict.fromkeys(r["family"] for r in rows)))
+    fig, axes = plt.subplots(1, len(topologies), figsize=(6 * len(topologies) + 4, 5.2), squeeze=False,
+                             layout="constrained")
+    legend: dict[str, object] = {}
     for ax, t in zip(axes[0], topologies):
         ref = paper_conventional(groups, t)
         curve = mean_curve(ref) if ref else []
         if curve:
-            ax.plot([p for p, _, _ in curve], [v for _, v, _ in curve], color="0.3", lw=1.2,
-                    label=f"frontier: {ref.schedule} mean curve (n={len(ref.complete_seeds)})")
+            home = next((f for f in fams if any(m is ref for m in f.members)), None)
+            (line,) = ax.plot([p for p, _, _ in curve], [v for _, v, _ in curve], color="0.3", lw=1.2)
+            legend.setdefault(frontier_label(ref, home), line)
         for fam in dict.fromkeys(r["family"] for r in rows if r["topology"] == t):
             pts = [r for r in rows if r["topology"] == t and r["family"] == fam and r["heldout_nm_mean"]]
             if not pts:
@@ -100,19 +112,25 @@ def plot_plane(rows: list[dict], groups, topologies: list[str], path: Path) -> N
             y = [r["heldout_nm_mean"] for r in pts]
             lo = [r["heldout_nm_mean"] - (r["heldout_nm_ci_lo"] or r["heldout_nm_mean"]) for r in pts]
             hi = [(r["heldout_nm_ci_hi"] or r["heldout_nm_mean"]) - r["heldout_nm_mean"] for r in pts]
-            ax.errorbar(x, y, yerr=[lo, hi], fmt="o", ms=4, capsize=2, color=colors[fam],
-                        label=f"{fam} ({len(pts)})")
+            color, marker = styles[fam]
+            handle = ax.errorbar(x, y, yerr=[lo, hi], fmt=marker, ms=5, capsize=2, color=color, mec="k",
+                                 mew=0.4, elinewidth=0.8, alpha=0.9)
+            legend.setdefault(f"{fam} ({len(pts)})", handle)
         ax.set_yscale("log")
         ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
         ax.set_title(t)
         ax.set_xlabel("presentations (units of t)")
         ax.set_ylabel("held-out RMS (Nm)")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+    fig.legend(list(legend.values()), list(legend), loc="outside right center", fontsize=7,
+               title="family (configurations)", title_fontsize=7)
     fig.suptitle("Error–cost plane: every configuration (mean final held-out RMS, 95 % interval)\n"
                  "over conventional training's mean learning curve", fontsize=9)
-    fig.tight_layout()
-    save_png(fig, path)
+    return fig
+
+
+def plot_plane(rows: list[dict], groups, topologies: list[str], fams: list[Family], path: Path) -> None:
+    save_png(draw_plane(rows, groups, topologies, fams), path)
 
 
 def plot_grid(gr: Grid, path: Path) -> None:
@@ -158,9 +176,9 @@ def section(ctx: Context) -> Section | None:
     fams = families(ctx.groups, ctx.topologies)
     if not any(len(f.members) > 1 for f in fams):
         return None
-    rows = plane_rows(ctx.groups, ctx.topologies)
+    rows = plane_rows(ctx.groups, ctx.topologies, fams)
     figures = {"error_cost.png": ("error–cost plane",
-                                  lambda p: plot_plane(rows, ctx.groups, ctx.topologies, p))}
+                                  lambda p: plot_plane(rows, ctx.groups, ctx.topologies, fams, p))}
     for gr in filter(None, (grid(f) for f in fams)):
         name = f"heatmap_{slug(gr.family.name)}_{gr.family.topology}.png"
         figures[name] = (f"{gr.family.name}, {gr.family.topology}: {gr.x} × {gr.y}",

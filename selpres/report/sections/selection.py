@@ -16,27 +16,13 @@ from __future__ import annotations
 from selpres.report.compare import (ALPHA, Options, adjust_family, mean_curve, paired, paired_columns, reach,
                                     reading)
 from selpres.report.context import Context, Section
-from selpres.report.families import PAPER_ORDER, SCHEDULE, paper_conventional, stages
-from selpres.report.groups import Group, settings
+from selpres.report.families import PAPER_ORDER, matched_partner, paper_conventional, stages
+from selpres.report.groups import Group
 from selpres.report.markdown import diff_text, fmt, pvalues_text, signed_interval, table
 
-BUDGET_TOLERANCE = 0.01  # a one-stage run within 1 % of the staged run's presentations is compute-matched
+__all__ = ["matched_partner", "section", "selection_rows"]  # matched_partner: see report.families
+
 TABLE1_ORDERS = (PAPER_ORDER, "random")  # what Table 1's verdicts already compare at one budget
-
-
-def _rest(g: Group) -> dict[str, str]:
-    """A setting's config outside ``schedule.*``: what a compute-matched partner must share."""
-    return {k: v for k, v in settings(g.used[0]).items() if not k.startswith(SCHEDULE)}
-
-
-def matched_partner(groups: dict[tuple[str, str], Group], g: Group) -> Group | None:
-    """The one-stage run of the same topology and settings (outside the schedule) whose presentations are
-    closest to ``g``'s, if within 1 %; None if there is none."""
-    cost, rest = g.sched["presentations"], _rest(g)
-    candidates = [h for (t, _), h in groups.items()
-                  if t == g.topology and h.sched is not None and stages(h) == 1
-                  and abs(h.sched["presentations"] / cost - 1) <= BUDGET_TOLERANCE and _rest(h) == rest]
-    return min(candidates, key=lambda h: (abs(h.sched["presentations"] - cost), h.schedule), default=None)
 
 
 def _order(g: Group) -> str:

@@ -113,6 +113,15 @@ def table1_markdown(rows: list[dict]) -> str:
 
 
 def section(ctx: Context) -> Section:
+    """Table 1 in the paper's layout for a Table-1-like sweep; for a study of parameters, whose methods
+    would make one column each, a pointer to the same numbers in table1.csv."""
     rows = table1_rows(ctx.groups, ctx.topologies, ctx.methods)
-    return Section("Table 1 (paper's layout, with the paper's numbers)", [table1_markdown(rows), FOOTNOTE],
-                   csv={"table1.csv": rows})
+    title = "Table 1 (paper's layout, with the paper's numbers)"
+    if ctx.table1_like:
+        return Section(title, [table1_markdown(rows), FOOTNOTE], csv={"table1.csv": rows})
+    tops = f"{len(ctx.topologies)} topolog{'ies' if len(ctx.topologies) > 1 else 'y'}"
+    note = (f"Not laid out: this sweep is a study of parameters, not Table 1's grid of the paper's methods "
+            f"({len(ctx.methods)} methods × {tops}, labelled by the settings they sweep), so Table 1's "
+            "layout would have one column each. `table1.csv` holds every column (schedule, cost, wall time, "
+            "replicas, mean / std / 95 % interval of each metric); the sections above read them.")
+    return Section(title, [note], csv={"table1.csv": rows})

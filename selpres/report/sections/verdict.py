@@ -3,7 +3,7 @@ and against the equivalence margin, and a reading in plain words."""
 
 from __future__ import annotations
 
-from selpres.report.compare import ALPHA, Options, verdict_rows
+from selpres.report.compare import ALPHA, Options, comparisons, verdict_rows
 from selpres.report.context import Context, Section
 from selpres.report.groups import REFERENCE, SETS
 from selpres.report.markdown import diff_text, fmt, pvalues_text, table
@@ -49,7 +49,18 @@ def verdict_markdown(rows: list[dict], options: Options = Options()) -> str:
 
 
 def section(ctx: Context) -> Section:
-    rows = verdict_rows(ctx.groups, ctx.topologies, ctx.methods, ctx.options)
+    """Every selective variant against every other method, for a Table-1-like sweep; for a study of
+    parameters that product (thousands of rows, most across different costs) is not computed, and the note
+    says where the comparisons the study is about are."""
     title = f"Verdict: {REFERENCE} − other, paired by seed (final RMS, Nm)"
+    if not ctx.table1_like:
+        n = len(comparisons(ctx.methods)) * len(ctx.topologies)
+        return Section(title, [
+            f"Not computed: this sweep is a study of parameters, where {REFERENCE} against every other "
+            f"method would be {n:,} comparisons across different settings and costs. The comparisons a study "
+            "is about are each staged setting against conventional training at the same cost (the selection "
+            "verdict, shown when the sweep has more than one budget) and each family's spread and level (the "
+            "sensitivity section, shown when a family has more than one setting)."])
+    rows = verdict_rows(ctx.groups, ctx.topologies, ctx.methods, ctx.options)
     return Section(title, [verdict_markdown(rows, ctx.options), method_note(rows, ctx.options), NOTE],
                    csv={"verdict.csv": rows})
