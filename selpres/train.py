@@ -36,7 +36,9 @@ from selpres.sampler import SelectivePresentationSampler, epoch_orders
 from selpres.schedule import EpochPlan, Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
 from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
-from selpres.task import load_task
+from selpres.datafile import DataFileError
+from selpres.proportions import fit_schedule, with_fraction_form
+from selpres.task import Task, load_task
 from selpres.tracking import Tracker
 
 log = logging.getLogger("selpres")
@@ -55,6 +57,8 @@ class Problem:
     tests: dict  # name -> (X scaled, Y in Nm)
     samplers: list[SelectivePresentationSampler]
     init_params: list[torch.Tensor]
+    task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
+    schedule_note: str | None = None  # how a named schedule's counts were applied to this n (None: as given)
 
     @functools.cached_property
     def plan(self) -> list[EpochPlan]:
@@ -69,8 +73,7 @@ def prepare(cfg: DictConfig) -> Problem:
     """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
     sizes = validate(cfg)
     task = load_task(cfg.robot, cfg.data)
-    sch = to_container(cfg.schedule)
-    schedule = build_schedule(sch["sizes"], sch["epochs"], task.n, sch["budget"])
+    schedule, note = task_schedule(cfg, task)
     seeds = [cfg.seed + r for r in range(cfg.replicas)]
     kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
     orders = priority_orders(task.exemplar.X, kind, [generator(s, "subset") for s in seeds], bins)
@@ -80,7 +83,26 @@ def prepare(cfg: DictConfig) -> Problem:
         tests=task.scaled_tests(),
         samplers=[SelectivePresentationSampler(order, schedule, s) for order, s in zip(orders, seeds)],
         init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
+        task=task, schedule_note=note,
     )
+
+
+def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
+    """The schedule on the task's n: the paper's counts by their proportions when n is not 1002
+    (``selpres.proportions``, logged), refusals with the fraction form, and a data file too short for
+    the schedule named as such."""
+    sch = to_container(cfg.schedule)
+    sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
+    if note:
+        log.info(note)
+    try:
+        return build_schedule(sizes, sch["epochs"], task.n, budget), note
+    except ConfigError as e:
+        if e.key == "schedule.sizes" and task.info.get("kind") == "file":
+            i = task.info
+            raise DataFileError(i["path"], "rows", f"{i['rows']:,} rows ({task.n:,} for training after holding "
+                                f"out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} ({e.allowed})") from None
+        raise with_fraction_form(e, sizes) from None
 
 
 def job_engine(cfg: DictConfig, prob: Problem):
