@@ -28,17 +28,21 @@ def _counts(sizes: Sequence) -> bool:
 
 def fit_schedule(sizes: Sequence, budget: int | None, n: int) -> tuple[list, int | None, str | None]:
     """(sizes, budget, what was applied or None) for an exemplar set of n patterns."""
-    if n == PAPER_N or not _counts(sizes) or sizes[-1] != PAPER_N:
+    if n == PAPER_N:
         return list(sizes), budget, None
-    fractions = [c / PAPER_N for c in sizes]
-    fractions[-1] = 1.0
-    note = (f"schedule.sizes={list(sizes)} are the paper's counts for n = {PAPER_N}; applied as fractions "
-            f"{[round(f, 4) for f in fractions]} of n = {n:,}")
-    if budget is not None and len(sizes) == 1 and isinstance(budget, int) and not isinstance(budget, bool):
+    notes = []
+    if _counts(sizes) and sizes[-1] == PAPER_N:
+        fractions = [c / PAPER_N for c in sizes]
+        fractions[-1] = 1.0
+        notes.append(f"schedule.sizes={list(sizes)} are the paper's counts for n = {PAPER_N}; applied as fractions "
+                     f"{[round(f, 4) for f in fractions]} of n = {n:,}")
+        sizes = fractions
+    if isinstance(budget, int) and not isinstance(budget, bool) and budget > 0:
         scaled = max(1, math.floor(budget * n / PAPER_N + 0.5))
-        note += f"; schedule.budget={budget:,} presentations scaled by n/{PAPER_N} to {scaled:,}"
+        notes.append(f"schedule.budget={budget:,} presentations (for the paper's n = {PAPER_N}) scaled by "
+                     f"n/{PAPER_N} to {scaled:,}")
         budget = scaled
-    return fractions, budget, note
+    return list(sizes), budget, "; ".join(notes) or None
 
 
 def with_fraction_form(e: ConfigError, sizes: Sequence) -> ConfigError:
