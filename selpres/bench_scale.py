@@ -52,7 +52,14 @@ def generation_rows(repeats: int) -> list[dict]:
     rows = []
     for robot, draw in (("puma560", "sobol"), ("puma560", "uniform"), ("two_link", "sobol")):
         arm = make_arm(OmegaConf.load(CONFIG_DIR / "robot" / f"{robot}.yaml"))
-        data = {"route": "inverse", "q": None, "dq": [-1.0, 1.0], "accel_limit": 2.0, "tau": None, "wrench": None}
+        data = {
+            "route": "inverse",
+            "q": None,
+            "dq": [-1.0, 1.0],
+            "accel_limit": 2.0,
+            "tau": None,
+            "wrench": None,
+        }
         box = S.boxes(arm, data)
         times = []
         for r in range(repeats):
@@ -60,7 +67,9 @@ def generation_rows(repeats: int) -> list[dict]:
             drawn = S.sample(arm, box, "inverse", S.Points(draw, 3 * arm.dof, r), GENERATION_N)
             times.append(time.perf_counter() - t0)
         assert drawn.tau.shape == (GENERATION_N, arm.dof)
-        rows.append({"arm": robot, "points": draw, "patterns": GENERATION_N, "seconds": statistics.median(times)})
+        rows.append(
+            {"arm": robot, "points": draw, "patterns": GENERATION_N, "seconds": statistics.median(times)}
+        )
     return rows
 
 
@@ -70,8 +79,13 @@ def engine_rows(repeats: int, presentations: int) -> list[dict]:
     from selpres.model import init_replica_params
 
     gen = torch.Generator().manual_seed(0)
-    sets = {n: (torch.rand(n, TOPOLOGY[0], dtype=torch.float64, generator=gen),
-                0.1 + 0.8 * torch.rand(n, TOPOLOGY[-1], dtype=torch.float64, generator=gen)) for n in ENGINE_SIZES}
+    sets = {
+        n: (
+            torch.rand(n, TOPOLOGY[0], dtype=torch.float64, generator=gen),
+            0.1 + 0.8 * torch.rand(n, TOPOLOGY[-1], dtype=torch.float64, generator=gen),
+        )
+        for n in ENGINE_SIZES
+    }
     orders = {n: torch.randint(n, (REPLICAS, presentations), generator=gen) for n in ENGINE_SIZES}
     params = init_replica_params(TOPOLOGY, list(range(REPLICAS)))
     times: dict[int, list[float]] = {n: [] for n in ENGINE_SIZES}
@@ -85,16 +99,27 @@ def engine_rows(repeats: int, presentations: int) -> list[dict]:
             engine.train_epoch(X, Y, orders[n])
             times[n].append(time.perf_counter() - t0)
     base = statistics.median(times[ENGINE_SIZES[0]])
-    return [{"n": n, "engine": name, "topology": "-".join(map(str, TOPOLOGY)), "replicas": REPLICAS,
-             "presentations": presentations * REPLICAS,
-             "presentations_per_s": presentations * REPLICAS / statistics.median(t),
-             "time_ratio_to_n_1e3": statistics.median(t) / base} for n, t in times.items()]
+    return [
+        {
+            "n": n,
+            "engine": name,
+            "topology": "-".join(map(str, TOPOLOGY)),
+            "replicas": REPLICAS,
+            "presentations": presentations * REPLICAS,
+            "presentations_per_s": presentations * REPLICAS / statistics.median(t),
+            "time_ratio_to_n_1e3": statistics.median(t) / base,
+        }
+        for n, t in times.items()
+    ]
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m selpres.bench_scale", description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter,
-                                 epilog=__doc__.split("\n\n", 2)[2])
+    ap = argparse.ArgumentParser(
+        prog="python -m selpres.bench_scale",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=__doc__.split("\n\n", 2)[2],
+    )
     ap.add_argument("--quick", action="store_true", help="fewer repeats and presentations")
     ap.add_argument("--json", type=Path, default=None, help="also write the rows to this JSON file")
     args = ap.parse_args(argv)
@@ -105,11 +130,16 @@ def main(argv: list[str] | None = None) -> int:
     for r in gen:
         print(f"  {r['arm']:9s} {r['points']:8s} {r['seconds']:6.2f} s")
     eng = engine_rows(repeats, presentations)
-    print(f"\nengine throughput, topology {eng[0]['topology']}, R = {REPLICAS}, engine {eng[0]['engine']}, "
-          f"{eng[0]['presentations']:,} presentations per measurement (target: n = 1e5, 1e6 within 25 % of 1e3):")
+    print(
+        f"\nengine throughput, topology {eng[0]['topology']}, R = {REPLICAS}, engine {eng[0]['engine']}, "
+        f"{eng[0]['presentations']:,} presentations per measurement "
+        "(target: n = 1e5, 1e6 within 25 % of 1e3):"
+    )
     for r in eng:
-        print(f"  n = {r['n']:>9,}  {r['presentations_per_s']:12,.0f} presentations/s  "
-              f"time x{r['time_ratio_to_n_1e3']:.2f} of n = 1e3")
+        print(
+            f"  n = {r['n']:>9,}  {r['presentations_per_s']:12,.0f} presentations/s  "
+            f"time x{r['time_ratio_to_n_1e3']:.2f} of n = 1e3"
+        )
     print(f"\nload average after: {_load()}")
     if args.json is not None:
         args.json.write_text(json.dumps({"generation": gen, "engine": eng, "load": _load()}, indent=1))

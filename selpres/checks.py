@@ -88,7 +88,8 @@ def check_task(cfg: DictConfig) -> Shape:
     for other in DATA_KEYS.values():
         for k in other:
             if k not in reads and d[k] is not None:
-                raise ConfigError(f"data.{k}", d[k], f"unset (null) for data.kind={kind}, which reads {list(reads)}")
+                raise ConfigError(f"data.{k}", d[k],
+                                  f"unset (null) for data.kind={kind}, which reads {list(reads)}")
     optional = ("q", "tau", "wrench")  # sampled: null = the joint limits, no torque box, no wrench
     for k in reads:
         if d[k] is None and k not in optional:
@@ -96,7 +97,8 @@ def check_task(cfg: DictConfig) -> Shape:
     if d.test_patterns < 1:
         raise ConfigError("data.test_patterns", d.test_patterns, "a whole number >= 1")
     if not 0 <= d.test_from_exemplar <= d.test_patterns:
-        raise ConfigError("data.test_from_exemplar", d.test_from_exemplar, f"a count in [0, data.test_patterns = {d.test_patterns}]")
+        raise ConfigError("data.test_from_exemplar", d.test_from_exemplar,
+                          f"a count in [0, data.test_patterns = {d.test_patterns}]")
     heldout_count(d.heldout, 1, "the patterns")  # type and range only: selpres.task counts a fraction
     s = d.scaling
     if not (0 <= s.lo < s.hi <= 1):
@@ -127,7 +129,8 @@ def _check_grid(d: DictConfig) -> None:
         try:
             points[k] = grid_points(r.lo, r.hi, r.step, f"data.{k}")
         except ValueError:
-            raise ConfigError(f"data.{k}.step", r.step, f"a step that divides hi - lo = {r.hi - r.lo:g} into whole steps") from None
+            raise ConfigError(f"data.{k}.step", r.step,
+                              f"a step that divides hi - lo = {r.hi - r.lo:g} into whole steps") from None
     candidates = points["theta"] ** 2 * points["dtheta"] ** 2 * points["tau1"] * points["tau2"]
     if candidates > MAX_GRID_CANDIDATES:
         finest = max(points, key=points.get)
@@ -137,7 +140,7 @@ def _check_grid(d: DictConfig) -> None:
 
 
 def check_topology(layers: str, shape: Shape) -> tuple[int, ...]:
-    """Layer widths that parse and fit the task: as many inputs and outputs as it has, named in the message."""
+    """Layer widths that parse and fit the task: its numbers of inputs and outputs, named in the message."""
     try:
         sizes = parse_topology(layers)
     except TopologyError as e:
@@ -145,8 +148,8 @@ def check_topology(layers: str, shape: Shape) -> tuple[int, ...]:
     n_in, n_out = len(shape.input_names), len(shape.output_names)
     if sizes[0] != n_in or sizes[-1] != n_out:
         hidden = "-".join(str(w) for w in sizes[1:-1]) or "13"
-        raise ConfigError("topology.layers", layers, f"a network that fits {shape.source}: {shape.describe()}, "
-                          f"e.g. {n_in}-{hidden}-{n_out}")
+        fits = f"a network that fits {shape.source}: {shape.describe()}"
+        raise ConfigError("topology.layers", layers, f"{fits}, e.g. {n_in}-{hidden}-{n_out}")
     if max(sizes) > MAX_LAYER_WIDTH:
         raise ConfigError("topology.layers", layers, f"layer widths of at most {MAX_LAYER_WIDTH} units")
     return sizes

@@ -94,7 +94,7 @@ class ScalingConfig:
 
 
 class DataKind(Enum):
-    grid = "grid"  # the paper's section 5.1 (robot.kind two_link): a grid of θ, θ̇, τ kept where |θ̈| <= limit
+    grid = "grid"  # the paper's section 5.1 (robot.kind two_link): a grid of θ, θ̇, τ kept if |θ̈| <= limit
     sampled = "sampled"  # any arm, any n: random or low-discrepancy draws (selpres.sampling)
     file = "file"  # the user's own table, CSV or .npz (selpres.datafile)
 
@@ -119,12 +119,12 @@ class DataConfig:
     dtheta: Optional[GridRange] = None
     tau1: Optional[GridRange] = None
     tau2: Optional[GridRange] = None
-    accel_limit: Optional[float] = None  # grid, sampled: |q̈| bound (rad/s²): filter (forward) or box (inverse)
+    accel_limit: Optional[float] = None  # grid, sampled: |q̈| bound (rad/s²): a filter or q̈'s box (inverse)
     n: Optional[int] = None  # sampled: exemplar set size
     route: Optional[Route] = None
     draw: Optional[Draw] = None
     seed: Optional[int] = None  # sampled: the exemplar set's draws (the test sets draw from test_seed)
-    q: Optional[List[Any]] = None  # sampled: [lo, hi] for every joint or one [lo, hi] per joint; q null: limits
+    q: Optional[List[Any]] = None  # sampled: [lo, hi] for every joint or one per joint; q null: joint limits
     dq: Optional[List[Any]] = None
     tau: Optional[List[Any]] = None  # sampled: torque box (forward: drawn from it; inverse: a filter)
     wrench: Optional[List[float]] = None  # sampled: constant k of eq. (4), base frame, (force, moment)

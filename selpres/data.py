@@ -84,7 +84,8 @@ def heldout_count(value: Any, total: int, what: str) -> int:
         raise ConfigError("data.heldout", value, "a whole number of patterns >= 1, or a fraction in (0, 1)")
     if isinstance(value, float):
         if not 0.0 < value < 1.0:
-            raise ConfigError("data.heldout", value, f"a fraction in (0, 1) of {what}, or a whole number >= 1")
+            raise ConfigError("data.heldout", value,
+                              f"a fraction in (0, 1) of {what}, or a whole number >= 1")
         return max(1, math.floor(value * total + 0.5))
     if value < 1:
         raise ConfigError("data.heldout", value, "a whole number of patterns >= 1, or a fraction in (0, 1)")
@@ -271,11 +272,13 @@ class Scaler:
     hi: float = 0.9
 
     @classmethod
-    def fit(cls, exemplar: Patterns, data_cfg: Any, commanded: tuple[torch.Tensor, ...] | None = None) -> "Scaler":
+    def fit(cls, exemplar: Patterns, data_cfg: Any,
+            commanded: tuple[torch.Tensor, ...] | None = None) -> Scaler:
         """Bounds from the exemplar set (mode exemplar) or the commanded boxes: ``commanded`` = (x lo, x hi,
         y lo, y hi) when given, else the grid route's θ, θ̇, ±accel_limit and τ boxes."""
         sc = cfg_get(data_cfg, "scaling")
-        mode, margin = str(getattr(cfg_get(sc, "mode"), "value", cfg_get(sc, "mode"))), float(cfg_get(sc, "margin"))
+        mode = str(getattr(cfg_get(sc, "mode"), "value", cfg_get(sc, "mode")))  # a typed config holds an enum
+        margin = float(cfg_get(sc, "margin"))
         if mode == "exemplar":
             x0, x1 = exemplar.X.min(0).values, exemplar.X.max(0).values
             y0, y1 = exemplar.Y.min(0).values, exemplar.Y.max(0).values
@@ -329,9 +332,9 @@ def metric_names(n_outputs: int) -> tuple[str, ...]:
 def rms_errors(pred_scaled: torch.Tensor, Y_true_Nm: torch.Tensor, scaler: Scaler) -> dict[str, torch.Tensor]:
     """The paper's criterion, RMS of (network output − actual output), in Nm and in scaled units.
 
-    ``pred_scaled`` is ``[..., N, K]`` (e.g. a leading replica dim R); every value has the leading shape ``[...]``.
-    Keys ``<name>_Nm`` and ``<name>_scaled`` for every name of ``metric_names(K)`` (tau1_Nm, …, overall_Nm, …);
-    overall = sqrt of the mean squared error over all outputs and all patterns.
+    ``pred_scaled`` is ``[..., N, K]`` (e.g. a leading replica dim R); every value has the leading shape
+    ``[...]``. Keys ``<name>_Nm`` and ``<name>_scaled`` for every name of ``metric_names(K)`` (tau1_Nm, …,
+    overall_Nm, …); overall = sqrt of the mean squared error over all outputs and all patterns.
     """
     Y_true_Nm = Y_true_Nm.to(pred_scaled)
     out: dict[str, torch.Tensor] = {}
@@ -405,14 +408,14 @@ def _table(p: Patterns, wrench: torch.Tensor | None) -> np.ndarray:
     return torch.cat(cols, 1).cpu().numpy().astype(np.float64)
 
 
-def export(path_stem: str | os.PathLike, exemplar: ExemplarSet, tests: TestSets, robot_cfg: Any, data_cfg: Any, *,
-           input_names: tuple[str, ...] = INPUT_NAMES, target_names: tuple[str, ...] = TARGET_NAMES,
-           arm: dict | None = None, wrench: torch.Tensor | None = None) -> dict[str, Path]:
-    """Write ``<stem>.npz`` and ``<stem>_{exemplar,test10,heldout}.csv`` (``%.17g``: exact float64 round trip).
-
-    The CSVs start with ``# config_hash=...`` and, when an arm made the data, ``# arm=<its to_config() as
-    JSON>``; then the header: the input names, the target names and, for a non-zero wrench k, its six
-    constant columns ``k_fx..k_mz`` (eq. 4's force, then moment, base frame)."""
+def export(path_stem: str | os.PathLike, exemplar: ExemplarSet, tests: TestSets, robot_cfg: Any,
+           data_cfg: Any, *, input_names: tuple[str, ...] = INPUT_NAMES,
+           target_names: tuple[str, ...] = TARGET_NAMES, arm: dict | None = None,
+           wrench: torch.Tensor | None = None) -> dict[str, Path]:
+    """Write ``<stem>.npz`` and ``<stem>_{exemplar,test10,heldout}.csv`` (``%.17g``: exact float64
+    round trip). The CSVs start with ``# config_hash=...`` and, when an arm made the data,
+    ``# arm=<its to_config() as JSON>``; then the header: the input names, the target names and, for a
+    non-zero wrench k, its six constant columns ``k_fx..k_mz`` (eq. 4's force, then moment, base frame)."""
     stem = Path(path_stem)
     h = config_hash(robot_cfg, data_cfg)
     if wrench is not None and not bool(wrench.ne(0).any()):
@@ -439,7 +442,8 @@ def export(path_stem: str | os.PathLike, exemplar: ExemplarSet, tests: TestSets,
 
     paths = {"npz": stem.with_name(stem.name + ".npz")}
     atomic_write(paths["npz"], lambda f: np.savez(f, **arrays))
-    header = f"# config_hash={h}\n" + (f"# arm={json.dumps(arm, sort_keys=True)}\n" if arm else "") + ",".join(columns)
+    arm_line = f"# arm={json.dumps(arm, sort_keys=True)}\n" if arm else ""
+    header = f"# config_hash={h}\n" + arm_line + ",".join(columns)
     for name, t in tables.items():
         paths[name] = stem.with_name(f"{stem.name}_{name}.csv")
         atomic_write(paths[name], lambda f, t=t: np.savetxt(f, t, fmt="%.17g", delimiter=",", header=header, comments=""))

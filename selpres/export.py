@@ -1,6 +1,7 @@
 """Export the exemplar and test sets (npz + full-precision CSVs), composed exactly as training composes them.
 
-    selpres-export [--out STEM] [--urdf PATH] [robot=NAME] [data=NAME] [robot.KEY=VALUE ...] [data.KEY=VALUE ...]
+    selpres-export [--out STEM] [--urdf PATH] [robot=NAME] [data=NAME] [robot.KEY=VALUE ...]
+                   [data.KEY=VALUE ...]
     python -m selpres.export --help
 
 The robot and data configs come from ``configs/train.yaml`` with the same schema and defaults as
@@ -65,7 +66,8 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
             print(f"  scaling.mode={mode:9s} not available: {e.allowed}")
             continue
         ys = s.transform_y(ex.Y)
-        rng = ", ".join(f"{n} [{ys[:, k].min():.3f}, {ys[:, k].max():.3f}]" for k, n in enumerate(task.output_names))
+        rng = ", ".join(f"{n} [{ys[:, k].min():.3f}, {ys[:, k].max():.3f}]"
+                        for k, n in enumerate(task.output_names))
         print(f"  scaling.mode={mode:9s} scaled exemplar targets: {rng}")
     paths = {}
     if urdf is not None:  # first: a refusal here leaves nothing written

@@ -37,8 +37,9 @@ _ROWS = 1 << 16  # patterns assigned per distance block
 SEED = 0  # the partition is part of the config's task, not of a replica
 
 
-def strata(X: torch.Tensor, bins: int = 2, *, clusters: int = CLUSTERS,
-           max_grid_cells: int = GRID_MAX_CELLS) -> torch.Tensor:
+def strata(
+    X: torch.Tensor, bins: int = 2, *, clusters: int = CLUSTERS, max_grid_cells: int = GRID_MAX_CELLS
+) -> torch.Tensor:
     """Stratum id of every pattern of ``X [n, inputs]`` (LongTensor ``[n]``): the equal-width grid when
     it has at most ``max_grid_cells`` cells, else ``clusters`` k-means cells (see the module docstring)."""
     if bins ** X.shape[1] <= max_grid_cells:
@@ -51,8 +52,8 @@ def _nearest(points: torch.Tensor, centres: torch.Tensor) -> torch.Tensor:
     c2 = centres.square().sum(1)
     out = torch.empty(points.shape[0], dtype=torch.long)
     for s in range(0, points.shape[0], _ROWS):
-        p = points[s:s + _ROWS]
-        out[s:s + _ROWS] = torch.addmm(c2, p, centres.T, alpha=-2.0).argmin(1)  # |p|² is common to a row
+        p = points[s : s + _ROWS]
+        out[s : s + _ROWS] = torch.addmm(c2, p, centres.T, alpha=-2.0).argmin(1)  # |p|² is common to a row
     return out
 
 
@@ -63,8 +64,11 @@ def _seed_centres(points: torch.Tensor, k: int, gen: torch.Generator) -> torch.T
     centres = [points[first]]
     d2 = (points - points[first]).square().sum(1)
     for _ in range(1, k):
-        pick = int(torch.multinomial(d2, 1, generator=gen)) if float(d2.sum()) > 0 else \
-            int(torch.randint(points.shape[0], (1,), generator=gen))
+        pick = (
+            int(torch.multinomial(d2, 1, generator=gen))
+            if float(d2.sum()) > 0
+            else int(torch.randint(points.shape[0], (1,), generator=gen))
+        )
         centres.append(points[pick])
         d2 = torch.minimum(d2, (points - points[pick]).square().sum(1))
     return torch.stack(centres)
@@ -82,7 +86,9 @@ def cluster_strata(X: torch.Tensor, clusters: int = CLUSTERS) -> torch.Tensor:
     for _ in range(ITERATIONS):
         member = torch.nn.functional.one_hot(cell, k).to(fit.dtype)  # [points, k]: a matmul, not a scatter
         sums, counts = member.T @ fit, member.sum(0).unsqueeze(1)
-        centres = torch.where(counts > 0, sums / counts.clamp(min=1), centres)  # an empty cell keeps its centre
+        centres = torch.where(
+            counts > 0, sums / counts.clamp(min=1), centres
+        )  # an empty cell keeps its centre
         moved = _nearest(fit, centres)
         if torch.equal(moved, cell):
             break

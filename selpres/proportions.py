@@ -34,13 +34,17 @@ def fit_schedule(sizes: Sequence, budget: int | None, n: int) -> tuple[list, int
     if _counts(sizes) and sizes[-1] == PAPER_N:
         fractions = [c / PAPER_N for c in sizes]
         fractions[-1] = 1.0
-        notes.append(f"schedule.sizes={list(sizes)} are the paper's counts for n = {PAPER_N}; applied as fractions "
-                     f"{[round(f, 4) for f in fractions]} of n = {n:,}")
+        notes.append(
+            f"schedule.sizes={list(sizes)} are the paper's counts for n = {PAPER_N}; applied as fractions "
+            f"{[round(f, 4) for f in fractions]} of n = {n:,}"
+        )
         sizes = fractions
     if isinstance(budget, int) and not isinstance(budget, bool) and budget > 0:
         scaled = max(1, math.floor(budget * n / PAPER_N + 0.5))
-        notes.append(f"schedule.budget={budget:,} presentations (for the paper's n = {PAPER_N}) scaled by "
-                     f"n/{PAPER_N} to {scaled:,}")
+        notes.append(
+            f"schedule.budget={budget:,} presentations (for the paper's n = {PAPER_N}) scaled by "
+            f"n/{PAPER_N} to {scaled:,}"
+        )
         budget = scaled
     return list(sizes), budget, "; ".join(notes) or None
 
@@ -50,5 +54,6 @@ def with_fraction_form(e: ConfigError, sizes: Sequence) -> ConfigError:
     if e.key != "schedule.sizes" or not _counts(sizes) or sizes[-1] <= 0:
         return e
     fractions = ",".join(f"{c / sizes[-1]:.4g}" for c in sizes[:-1]) + ",1.0"
-    return ConfigError(e.key, e.value, f"{e.allowed}; as fractions of n, which fit any n: "
-                       f"schedule.sizes=[{fractions}]")
+    return ConfigError(
+        e.key, e.value, f"{e.allowed}; as fractions of n, which fit any n: schedule.sizes=[{fractions}]"
+    )

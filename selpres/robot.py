@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
-from typing import Any, Union
+from typing import Any
 
 import torch
 
@@ -51,7 +51,7 @@ class TwoLinkArm:
     g: float = 9.81
 
     @classmethod
-    def from_config(cls, cfg: Any) -> "TwoLinkArm":
+    def from_config(cls, cfg: Any) -> TwoLinkArm:
         """Build from any mapping/attribute object holding m1, m2, l1, l2, g (e.g. an OmegaConf node)."""
         return cls(**{k: float(cfg_get(cfg, k)) for k in ROBOT_KEYS})
 
@@ -127,7 +127,7 @@ class TwoLinkArm:
         return torch.stack(((h22 * r1 - h12 * r2) / det, (h11 * r2 - h12 * r1) / det), -1)
 
 
-Arm = Union[TwoLinkArm, SerialArm]
+Arm = TwoLinkArm | SerialArm
 
 
 def _plain(cfg: Any) -> dict[str, Any]:
@@ -156,7 +156,8 @@ def make_arm(robot_cfg: Any) -> Arm:
     used = KIND_KEYS[kind]
     for k, v in c.items():
         if k != "kind" and k not in used and v is not None:
-            raise ConfigError(f"robot.{k}", v, f"unset (null) for robot.kind={kind}, which reads {list(used)}")
+            raise ConfigError(f"robot.{k}", v,
+                              f"unset (null) for robot.kind={kind}, which reads {list(used)}")
     if kind == "two_link":
         for k in ROBOT_KEYS:
             v = c.get(k)

@@ -85,8 +85,11 @@ def _box(value: Any, key: str, dof: int) -> torch.Tensor:
     out = []
     for i, row in enumerate(rows):
         where = key if rows is not value else f"{key}[{i}]"
-        ok = isinstance(row, (list, tuple)) and len(row) == 2 and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in row)
+        ok = (
+            isinstance(row, (list, tuple))
+            and len(row) == 2
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in row)
+        )
         if not ok or not row[0] <= row[1]:
             raise ConfigError(where, row, "[lo, hi]: two finite numbers with lo <= hi")
         out.append([float(row[0]), float(row[1])])
@@ -109,14 +112,24 @@ def boxes(arm: Arm, data_cfg: Any) -> Boxes:
         qbox = _box(list(q), "data.q", dof)
     dq = cfg_get(data_cfg, "dq")
     if dq is None:
-        raise ConfigError("data.dq", None, "[lo, hi] joint rates (rad/s) for every joint, or one pair per joint")
+        raise ConfigError(
+            "data.dq", None, "[lo, hi] joint rates (rad/s) for every joint, or one pair per joint"
+        )
     accel = cfg_get(data_cfg, "accel_limit")
-    if isinstance(accel, bool) or not isinstance(accel, (int, float)) or not (math.isfinite(accel) and accel > 0):
+    if (
+        isinstance(accel, bool)
+        or not isinstance(accel, (int, float))
+        or not (math.isfinite(accel) and accel > 0)
+    ):
         raise ConfigError("data.accel_limit", accel, "a positive acceleration bound in rad/s²")
     tau = cfg_get(data_cfg, "tau")
     if tau is None and route == "forward":
-        raise ConfigError("data.tau", None, "the torque box [lo, hi] (Nm) to draw τ from, for every joint or one "
-                          "pair per joint: route=forward simulates q̈ from drawn torques")
+        raise ConfigError(
+            "data.tau",
+            None,
+            "the torque box [lo, hi] (Nm) to draw τ from, for every joint or one "
+            "pair per joint: route=forward simulates q̈ from drawn torques",
+        )
     wrench = cfg_get(data_cfg, "wrench")
     k = None
     if wrench is not None:
@@ -124,11 +137,19 @@ def boxes(arm: Arm, data_cfg: Any) -> Boxes:
             raise ConfigError("data.wrench", list(wrench), "six finite numbers: force (N), then moment (Nm)")
         if any(v != 0 for v in wrench):
             if isinstance(arm, TwoLinkArm):
-                raise ConfigError("data.wrench", list(wrench), "null for robot.kind=two_link (eq. 6 has no "
-                                  "wrench term); a serial or urdf arm takes one")
+                raise ConfigError(
+                    "data.wrench",
+                    list(wrench),
+                    "null for robot.kind=two_link (eq. 6 has no wrench term); a serial or urdf arm takes one",
+                )
             k = torch.tensor([float(v) for v in wrench], dtype=DTYPE)
-    return Boxes(qbox, _box(list(dq), "data.dq", dof), float(accel),
-                 None if tau is None else _box(list(tau), "data.tau", dof), k)
+    return Boxes(
+        qbox,
+        _box(list(dq), "data.dq", dof),
+        float(accel),
+        None if tau is None else _box(list(tau), "data.tau", dof),
+        k,
+    )
 
 
 def _value(v: Any) -> Any:
@@ -196,7 +217,7 @@ def sample(arm: Arm, box: Boxes, route: str, points: Points, count: int) -> Draw
         else:
             m = int(min(max(math.ceil((count - have) * drawn / have * 1.1), FIRST_BATCH), MAX_BATCH))
         v = lo + width * points.take(m)
-        q, qd, x3 = v[:, :N], v[:, N:2 * N], v[:, 2 * N:]
+        q, qd, x3 = v[:, :N], v[:, N : 2 * N], v[:, 2 * N :]
         qdd, tau = _simulate(arm, route, q, qd, x3, box.wrench)
         if route == "forward":
             keep = (qdd.abs() <= box.accel).all(1)
@@ -219,11 +240,17 @@ def _check_feasible(route: str, have: int, drawn: int, count: int) -> None:
     need = drawn * count / have if have else math.inf
     if need > MAX_DRAWS or (have == 0 and drawn >= MAX_BATCH):
         rate = f"{have / drawn:.2e}" if have else f"0 (none of {drawn:,})"
-        key, fix = (("data.accel_limit", "widen the limit or the boxes, or use data.route=inverse")
-                    if route == "forward" else ("data.tau", "widen the torque box or set data.tau=null"))
-        raise ConfigError(f"data.route={route} {key}", f"acceptance {rate}",
-                          f"a filter that keeps enough: {count:,} patterns would need about {need:.2g} draws, "
-                          f"at most {MAX_DRAWS:,} are allowed ({fix})")
+        key, fix = (
+            ("data.accel_limit", "widen the limit or the boxes, or use data.route=inverse")
+            if route == "forward"
+            else ("data.tau", "widen the torque box or set data.tau=null")
+        )
+        raise ConfigError(
+            f"data.route={route} {key}",
+            f"acceptance {rate}",
+            f"a filter that keeps enough: {count:,} patterns would need about {need:.2g} draws, "
+            f"at most {MAX_DRAWS:,} are allowed ({fix})",
+        )
 
 
 def stream(data_cfg: Any, dof: int, purpose: str) -> Points:

@@ -93,8 +93,11 @@ class Task:
         commanded boxes and the task has none (a data file, a sampled set without a torque box)."""
         mode = str(getattr(data_cfg.scaling.mode, "value", data_cfg.scaling.mode))
         if mode == "commanded" and self.commanded is None:
-            why = ("a file has no commanded ranges" if self.info.get("kind") == "file"
-                   else "with data.tau=null there is no commanded torque box to scale the targets by")
+            why = (
+                "a file has no commanded ranges"
+                if self.info.get("kind") == "file"
+                else "with data.tau=null there is no commanded torque box to scale the targets by"
+            )
             raise ConfigError("data.scaling.mode", "commanded", f"exemplar: {why}")
         return D.Scaler.fit(self.exemplar, data_cfg, self.commanded)
 
@@ -120,13 +123,22 @@ def task_shape(robot_cfg, data_cfg) -> Shape:
     arm = make_arm(robot_cfg)
     if kind == "grid":
         if not isinstance(arm, TwoLinkArm):
-            raise ConfigError("data.kind", "grid", f"sampled (data=sampled) for robot={arm.name} ({arm.dof} joints): "
-                              "the paper's grid (data=paper) is defined for robot=two_link only")
+            raise ConfigError(
+                "data.kind",
+                "grid",
+                f"sampled (data=sampled) for robot={arm.name} ({arm.dof} joints): "
+                "the paper's grid (data=paper) is defined for robot=two_link only",
+            )
         return Shape(D.INPUT_NAMES, D.TARGET_NAMES, "robot=two_link (2 joints, data=paper)")
     N = arm.dof
     S.boxes(arm, data_cfg)  # data.q, dq, tau, wrench against the arm's joints
-    return Shape(S.input_names(N), S.output_names(N), f"robot={arm.name} ({N} joints)",
-                 f"q1..q{N}, dq1..dq{N}, ddq1..ddq{N}", f"tau1..tau{N}")
+    return Shape(
+        S.input_names(N),
+        S.output_names(N),
+        f"robot={arm.name} ({N} joints)",
+        f"q1..q{N}, dq1..dq{N}, ddq1..ddq{N}",
+        f"tau1..tau{N}",
+    )
 
 
 def load_task(robot_cfg: DictConfig, data_cfg: DictConfig) -> Task:
@@ -144,10 +156,19 @@ def _task(robot_json: str, data_json: str, files: str) -> Task:
     task = {"grid": _grid, "sampled": _sampled, "file": _file}[_kind(data_cfg)](robot_cfg, data_cfg)
     task.info["hash"] = D.config_hash(robot_cfg, data_cfg)
     i = task.info
-    kept = (f" kept of {i['candidates']:,} candidates (acceptance {i['acceptance_rate']:.3g})"
-            if "candidates" in i else "")
-    log.info("exemplar set: %s patterns%s, %s; test10 %d, held-out %d", f"{task.n:,}", kept, i["source"],
-             len(task.tests.test10), len(task.tests.heldout))
+    kept = (
+        f" kept of {i['candidates']:,} candidates (acceptance {i['acceptance_rate']:.3g})"
+        if "candidates" in i
+        else ""
+    )
+    log.info(
+        "exemplar set: %s patterns%s, %s; test10 %d, held-out %d",
+        f"{task.n:,}",
+        kept,
+        i["source"],
+        len(task.tests.test10),
+        len(task.tests.heldout),
+    )
     return task
 
 
@@ -178,8 +199,14 @@ def _grid(robot_cfg, data_cfg) -> Task:
         tests = D.make_test_sets(arm, data_cfg, exemplar, seed=data_cfg.test_seed)
     except ValueError as e:  # the continuous ranges leave nothing to draw test patterns from
         raise ConfigError("data", "theta/dtheta/tau1/tau2 ranges", str(e)) from None
-    info = {"kind": "grid", "source": "the paper's grid on robot=two_link", "candidates": exemplar.n_candidates,
-            "acceptance_rate": n / exemplar.n_candidates, "n": n, "arm": arm.to_config()}
+    info = {
+        "kind": "grid",
+        "source": "the paper's grid on robot=two_link",
+        "candidates": exemplar.n_candidates,
+        "acceptance_rate": n / exemplar.n_candidates,
+        "n": n,
+        "arm": arm.to_config(),
+    }
     task = Task(exemplar, tests, None, info=info, arm=arm.to_config(), commanded=D.grid_bounds(data_cfg))
     return replace(task, scaler=task.fit_scaler(data_cfg))
 
@@ -199,12 +226,29 @@ def _sampled(robot_cfg, data_cfg) -> Task:
     heldout = S.sample(arm, box, route, points, D.heldout_count(data_cfg.heldout, n, f"n = {n}"))
     test10 = D.Patterns(torch.cat((exemplar.X[idx], outside.X)), torch.cat((exemplar.Y[idx], outside.tau)))
     tests = D.TestSets(test10, torch.arange(n_test) < n_ex, D.Patterns(heldout.X, heldout.tau))
-    info = {"kind": "sampled", "source": f"robot={arm.name}, route {route}, {draw} points",
-            "route": route, "draw": draw, "n": n, "candidates": drawn.candidates,
-            "acceptance_rate": n / drawn.candidates, "heldout_candidates": heldout.candidates,
-            "arm": arm.to_config(), "wrench": None if box.wrench is None else box.wrench.tolist()}
-    task = Task(exemplar, tests, None, S.input_names(arm.dof), S.output_names(arm.dof), info, arm.to_config(),
-                box.wrench, S.commanded_bounds(box))
+    info = {
+        "kind": "sampled",
+        "source": f"robot={arm.name}, route {route}, {draw} points",
+        "route": route,
+        "draw": draw,
+        "n": n,
+        "candidates": drawn.candidates,
+        "acceptance_rate": n / drawn.candidates,
+        "heldout_candidates": heldout.candidates,
+        "arm": arm.to_config(),
+        "wrench": None if box.wrench is None else box.wrench.tolist(),
+    }
+    task = Task(
+        exemplar,
+        tests,
+        None,
+        S.input_names(arm.dof),
+        S.output_names(arm.dof),
+        info,
+        arm.to_config(),
+        box.wrench,
+        S.commanded_bounds(box),
+    )
     return replace(task, scaler=task.fit_scaler(data_cfg))
 
 
@@ -217,20 +261,39 @@ def _file(robot_cfg, data_cfg) -> Task:
     held_n = D.heldout_count(data_cfg.heldout, rows, f"the {rows} rows of {path}")
     n_test, n_ex = int(data_cfg.test_patterns), int(data_cfg.test_from_exemplar)
     if rows - held_n < max(1, n_ex) or held_n < n_test - n_ex:
-        raise F.DataFileError(path, "rows", f"{rows:,}: too few to hold out data.heldout={data_cfg.heldout} "
-                              f"({held_n} rows, at least {n_test - n_ex} for the test patterns) and train on "
-                              f"the rest (at least {max(1, n_ex)} rows)")
-    perm = torch.randperm(rows, generator=torch.Generator().manual_seed(derive_seed(int(data_cfg.test_seed), "split")))
+        raise F.DataFileError(
+            path,
+            "rows",
+            f"{rows:,}: too few to hold out data.heldout={data_cfg.heldout} "
+            f"({held_n} rows, at least {n_test - n_ex} for the test patterns) and train on "
+            f"the rest (at least {max(1, n_ex)} rows)",
+        )
+    perm = torch.randperm(
+        rows, generator=torch.Generator().manual_seed(derive_seed(int(data_cfg.test_seed), "split"))
+    )
     held, train = perm[:held_n].sort().values, perm[held_n:].sort().values
-    X, Y = table[:, :len(ins)], table[:, len(ins):]
+    X, Y = table[:, : len(ins)], table[:, len(ins) :]
     exemplar = D.ExemplarSet(X[train].contiguous(), Y[train].contiguous(), n_candidates=rows)
     n = len(exemplar)
     gen = torch.Generator().manual_seed(int(data_cfg.test_seed))
     idx_ex = torch.randperm(n, generator=gen)[:n_ex]
-    idx_out = held[torch.randperm(held_n, generator=gen)[:n_test - n_ex]]
-    test10 = D.Patterns(torch.cat((exemplar.X[idx_ex], X[idx_out])), torch.cat((exemplar.Y[idx_ex], Y[idx_out])))
-    tests = D.TestSets(test10, torch.arange(n_test) < n_ex, D.Patterns(X[held].contiguous(), Y[held].contiguous()))
-    info = {"kind": "file", "source": f"data=file {path}", "path": str(path), "sha256": F.file_digest(path),
-            "rows": rows, "heldout": held_n, "n": n, "inputs": list(ins), "outputs": list(outs)}
+    idx_out = held[torch.randperm(held_n, generator=gen)[: n_test - n_ex]]
+    test10 = D.Patterns(
+        torch.cat((exemplar.X[idx_ex], X[idx_out])), torch.cat((exemplar.Y[idx_ex], Y[idx_out]))
+    )
+    tests = D.TestSets(
+        test10, torch.arange(n_test) < n_ex, D.Patterns(X[held].contiguous(), Y[held].contiguous())
+    )
+    info = {
+        "kind": "file",
+        "source": f"data=file {path}",
+        "path": str(path),
+        "sha256": F.file_digest(path),
+        "rows": rows,
+        "heldout": held_n,
+        "n": n,
+        "inputs": list(ins),
+        "outputs": list(outs),
+    }
     task = Task(exemplar, tests, None, ins, outs, info)
     return replace(task, scaler=task.fit_scaler(data_cfg))

@@ -28,16 +28,16 @@ from selpres.batch_engine import BatchEngine
 from selpres.checkpoint import Checkpoints, Progress
 from selpres.checks import batch_mode, optim_hparams, validate
 from selpres.config import to_container
+from selpres.datafile import DataFileError
 from selpres.engine import make_engine
 from selpres.errors import ConfigError
 from selpres.model import forward_replicas, init_replica_params
 from selpres.orders import priority_orders
+from selpres.proportions import fit_schedule, with_fraction_form
 from selpres.sampler import SelectivePresentationSampler, epoch_orders
 from selpres.schedule import EpochPlan, Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
 from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
-from selpres.datafile import DataFileError
-from selpres.proportions import fit_schedule, with_fraction_form
 from selpres.task import Task, load_task
 from selpres.tracking import Tracker
 
@@ -100,8 +100,9 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
     except ConfigError as e:
         if e.key == "schedule.sizes" and task.info.get("kind") == "file":
             i = task.info
-            raise DataFileError(i["path"], "rows", f"{i['rows']:,} rows ({task.n:,} for training after holding "
-                                f"out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} ({e.allowed})") from None
+            raise DataFileError(i["path"], "rows", f"{i['rows']:,} rows ({task.n:,} for training after "
+                                f"holding out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} "
+                                f"({e.allowed})") from None
         raise with_fraction_form(e, sizes) from None
 
 

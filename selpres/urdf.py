@@ -24,7 +24,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from selpres.errors import ConfigError
-from selpres.storage import atomic_write
 from selpres.serial import (
     IDENTITY,
     ZERO3,
@@ -39,6 +38,7 @@ from selpres.serial import (
     matrix_rpy,
     rpy_matrix,
 )
+from selpres.storage import atomic_write
 
 log = logging.getLogger(__name__)
 MOVING = ("revolute", "continuous")

@@ -47,6 +47,7 @@ def test_defaults_are_the_paper_setup(compose_cfg):
 def user_files(tmp_path_factory):
     """A URDF (planar3 exported) for robot=urdf and a small CSV for data=file."""
     import numpy as np
+
     from selpres.robot import make_arm
     from selpres.urdf import to_urdf
 
@@ -109,7 +110,10 @@ def test_experiments_are_multirun_sweeps(compose_cfg, option):
     assert params, "an experiment should sweep something"
     for group, values in params.items():
         for v in str(values).split(","):
-            assert v in _options(group), f"experiment {option} sweeps unknown {group}={v}"
+            if (CONFIGS / group).is_dir():  # a group: its options
+                assert v in _options(group), f"experiment {option} sweeps unknown {group}={v}"
+            else:  # a key: every value composes and validates (the topology must fit the task)
+                validate(compose_cfg(f"experiment={option}", f"{group}={v}"))
     assert str(cfg.hydra.sweep.dir).startswith("outputs/")  # not Hydra's default multirun/
 
 

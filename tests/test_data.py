@@ -41,8 +41,8 @@ def _data(**over):
 
 def test_data_config_has_exactly_the_agreed_keys():
     assert set(DATA_CFG.keys()) == {
-        "kind", "theta", "dtheta", "tau1", "tau2", "accel_limit", "test_patterns", "test_from_exemplar", "heldout",
-        "test_seed", "scaling",
+        "kind", "theta", "dtheta", "tau1", "tau2", "accel_limit", "test_patterns", "test_from_exemplar",
+        "heldout", "test_seed", "scaling",
     }
     assert DATA_CFG.kind == "grid" and ROBOT_CFG.kind == "two_link"
     assert set(DATA_CFG.scaling.keys()) == {"mode", "margin", "lo", "hi"}

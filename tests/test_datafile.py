@@ -12,10 +12,11 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from conftest import CONFIGS, cfg_of
 from selpres.datafile import DataFileError, load_columns
 from selpres.errors import ConfigError
 from selpres.task import load_task
+
+from conftest import CONFIGS, cfg_of
 
 ROOT = Path(__file__).resolve().parents[1]
 INPUTS = [f"{p}{i}" for p in ("q", "dq", "ddq") for i in range(1, 8)]  # SARCOS: 7 joints, 21 inputs
@@ -42,8 +43,15 @@ def sarcos(tmp_path_factory) -> Path:
 
 def file_cfg(path: Path, *overrides: str, inputs=INPUTS, outputs=OUTPUTS):
     width = f"{len(inputs)}-10-{len(outputs)}"
-    return cfg_of("data=file", f"data.path={path}", f"data.inputs=[{','.join(inputs)}]",
-                  f"data.outputs=[{','.join(outputs)}]", f"topology.layers={width}", "data.heldout=0.2", *overrides)
+    return cfg_of(
+        "data=file",
+        f"data.path={path}",
+        f"data.inputs=[{','.join(inputs)}]",
+        f"data.outputs=[{','.join(outputs)}]",
+        f"topology.layers={width}",
+        "data.heldout=0.2",
+        *overrides,
+    )
 
 
 def test_split_by_seed_and_test_patterns_from_the_heldout_rows(sarcos):
@@ -52,13 +60,17 @@ def test_split_by_seed_and_test_patterns_from_the_heldout_rows(sarcos):
     table = torch.from_numpy(np.loadtxt(sarcos, delimiter=",", skiprows=1))
     assert len(task.tests.heldout) == 120 and task.n == 480  # data.heldout: 0.2 of 600 rows
     both = torch.cat((task.exemplar.X, task.tests.heldout.X))
-    assert torch.equal(both[both[:, 0].argsort()], table[table[:, 0].argsort(), :21])  # a partition of the rows
+    assert torch.equal(
+        both[both[:, 0].argsort()], table[table[:, 0].argsort(), :21]
+    )  # a partition of the rows
     ex_rows = task.exemplar.X[:, 0]
     assert torch.all(ex_rows[1:] != ex_rows[:-1])
     positions = [int((table[:, 0] == v).nonzero()) for v in ex_rows]
     assert positions == sorted(positions)  # the exemplar set keeps the file's order
     X10 = task.tests.test10.X
-    assert all(torch.isin(X10[:5, 0], task.exemplar.X[:, 0])) and all(torch.isin(X10[5:, 0], task.tests.heldout.X[:, 0]))
+    assert all(torch.isin(X10[:5, 0], task.exemplar.X[:, 0])) and all(
+        torch.isin(X10[5:, 0], task.tests.heldout.X[:, 0])
+    )
     assert task.input_names == tuple(INPUTS) and task.output_names == tuple(OUTPUTS)
     assert task.info["kind"] == "file" and len(task.info["sha256"]) == 64
     other = file_cfg(sarcos, "data.test_seed=1")
@@ -93,9 +105,12 @@ def _schedules() -> list[str]:
     return sorted(p.stem for p in (CONFIGS / "schedule").glob("*.yaml"))
 
 
-@pytest.mark.parametrize("variant", [f"schedule={s}" for s in _schedules()]
-                         + [f"optim={o}" for o in ("quickprop", "delta_bar_delta", "rprop", "adam")]
-                         + ["schedule.order=random", "schedule.order=coverage"])
+@pytest.mark.parametrize(
+    "variant",
+    [f"schedule={s}" for s in _schedules()]
+    + [f"optim={o}" for o in ("quickprop", "delta_bar_delta", "rprop", "adam")]
+    + ["schedule.order=random", "schedule.order=coverage"],
+)
 def test_every_schedule_order_and_optimizer_trains_on_it(sarcos, variant):
     from selpres.train import train
 
@@ -122,11 +137,20 @@ def _error(path: Path, *overrides: str, **kw) -> ConfigError:
 
 def test_missing_column_is_named_with_the_columns_there_are(sarcos):
     e = _error(sarcos, inputs=INPUTS[:-1] + ["ddq8"])
-    assert isinstance(e, DataFileError) and str(sarcos) in str(e) and "'ddq8'" in str(e) and "'tau7'" in str(e)
+    assert (
+        isinstance(e, DataFileError) and str(sarcos) in str(e) and "'ddq8'" in str(e) and "'tau7'" in str(e)
+    )
 
 
-@pytest.mark.parametrize("cell, problem", [("abc", "'abc' is not a number"), ("", "'' is not a number"),
-                                           ("nan", "NaN and inf"), ("-inf", "NaN and inf")])
+@pytest.mark.parametrize(
+    "cell, problem",
+    [
+        ("abc", "'abc' is not a number"),
+        ("", "'' is not a number"),
+        ("nan", "NaN and inf"),
+        ("-inf", "NaN and inf"),
+    ],
+)
 def test_bad_cell_names_file_column_and_line(tmp_path, cell, problem):
     lines = ["a,b,y"] + [f"{i},{i * 2},{i * 3}" for i in range(40)]
     lines[7] = f"6,{cell},18"  # line 8 of the file, column b
@@ -162,7 +186,11 @@ def test_npz_problems_are_named(tmp_path):
 def test_too_few_rows_for_the_schedule_names_the_file(tmp_path):
     path = write_csv(tmp_path / "tiny.csv", np.random.default_rng(0).uniform(size=(12, 2)), ["a", "y"])
     e = _error(path, "data.test_from_exemplar=1", "data.test_patterns=2", inputs=["a"], outputs=["y"])
-    assert isinstance(e, DataFileError) and str(e).startswith(f"{path}: rows: 12 rows") and "schedule.sizes" in str(e)
+    assert (
+        isinstance(e, DataFileError)
+        and str(e).startswith(f"{path}: rows: 12 rows")
+        and "schedule.sizes" in str(e)
+    )
 
 
 def test_too_few_rows_for_the_split(tmp_path):
@@ -171,12 +199,15 @@ def test_too_few_rows_for_the_split(tmp_path):
     assert str(e).startswith(f"{path}: rows: 3: too few")
 
 
-@pytest.mark.parametrize("overrides, key", [
-    (["data.path=null"], "data.path"),
-    (["data.outputs=[q1]"], "data.outputs"),  # an input too
-    (["data.scaling.mode=commanded"], "data.scaling.mode"),
-    (["data.n=5"], "data.n"),  # a key of another kind
-])
+@pytest.mark.parametrize(
+    "overrides, key",
+    [
+        (["data.path=null"], "data.path"),
+        (["data.outputs=[q1]"], "data.outputs"),  # an input too
+        (["data.scaling.mode=commanded"], "data.scaling.mode"),
+        (["data.n=5"], "data.n"),  # a key of another kind
+    ],
+)
 def test_config_errors_name_the_key(sarcos, overrides, key):
     from selpres.checks import validate
 
@@ -197,9 +228,25 @@ def test_command_line_exits_2_and_writes_nothing(tmp_path):
     path = tmp_path / "bad.csv"
     path.write_text("a,y\n1,2\n3,x\n" + "".join(f"{i},{i}\n" for i in range(40)))
     run = tmp_path / "run"
-    out = subprocess.run([sys.executable, str(ROOT / "train.py"), "data=file", f"data.path={path}",
-                          "data.inputs=[a]", "data.outputs=[y]", "topology.layers=1-4-1", f"hydra.run.dir={run}"],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    out = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "train.py"),
+            "data=file",
+            f"data.path={path}",
+            "data.inputs=[a]",
+            "data.outputs=[y]",
+            "topology.layers=1-4-1",
+            f"hydra.run.dir={run}",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 2, out.stderr
-    assert f"error: {path}: column 'y', line 3: 'x' is not a number" in out.stderr and "Traceback" not in out.stderr
+    assert (
+        f"error: {path}: column 'y', line 3: 'x' is not a number" in out.stderr
+        and "Traceback" not in out.stderr
+    )
     assert not run.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]

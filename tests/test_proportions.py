@@ -7,9 +7,10 @@ import logging
 
 import pytest
 
-from conftest import cfg_of
 from selpres.errors import ConfigError
 from selpres.proportions import fit_schedule
+
+from conftest import cfg_of
 
 SAMPLED = ("data=sampled", "data.n=10000")
 
@@ -19,7 +20,11 @@ def test_paper_counts_keep_their_proportions():
     sizes, budget, note = fit_schedule([50, 100, 400, 800, 1002], None, 10_000)
     assert [max(1, int(f * 10_000 + 0.5)) for f in sizes] == [499, 998, 3992, 7984, 10_000]
     assert budget is None and "applied as fractions" in note
-    assert fit_schedule([50, 100, 1002], 70560, 1002) == ([50, 100, 1002], 70560, None)  # the paper's n: as given
+    assert fit_schedule([50, 100, 1002], 70560, 1002) == (
+        [50, 100, 1002],
+        70560,
+        None,
+    )  # the paper's n: as given
     assert fit_schedule([100, 200, 500], None, 500) == ([100, 200, 500], None, None)  # the user's own counts
 
 
@@ -45,4 +50,6 @@ def test_other_counts_are_refused_with_the_fraction_form():
 
     with pytest.raises(ConfigError) as ei:
         prepare(cfg_of(*SAMPLED, "schedule.sizes=[100,200,5000]", "schedule.epochs=[1,1,1]"))
-    assert ei.value.key == "schedule.sizes" and "schedule.sizes=[0.02,0.04,1.0]" in str(ei.value), str(ei.value)
+    assert ei.value.key == "schedule.sizes" and "schedule.sizes=[0.02,0.04,1.0]" in str(ei.value), str(
+        ei.value
+    )

@@ -9,13 +9,18 @@ import math
 import pytest
 import torch
 
-from conftest import cfg_of
 from selpres.errors import ConfigError
 from selpres.robot import make_arm
 from selpres.task import _task, load_task
 
+from conftest import cfg_of
+
 F64 = torch.float64
-PAPER_BOX = ["data.q=[0.0,0.5]", "data.dq=[0.0,1.0]", "data.tau=[[14.0,18.0],[4.0,8.0]]"]  # the paper's ranges
+PAPER_BOX = [
+    "data.q=[0.0,0.5]",
+    "data.dq=[0.0,1.0]",
+    "data.tau=[[14.0,18.0],[4.0,8.0]]",
+]  # the paper's ranges
 
 
 def task_of(*overrides: str):
@@ -24,7 +29,7 @@ def task_of(*overrides: str):
 
 
 def split(X: torch.Tensor, dof: int):
-    return X[:, :dof], X[:, dof:2 * dof], X[:, 2 * dof:]
+    return X[:, :dof], X[:, dof : 2 * dof], X[:, 2 * dof :]
 
 
 def test_inverse_route_targets_are_eq4_and_simulate_back(tmp_path):
@@ -38,7 +43,11 @@ def test_inverse_route_targets_are_eq4_and_simulate_back(tmp_path):
     assert ((q >= limits[:, 0]) & (q <= limits[:, 1])).all()
     assert qd.abs().max() <= 1.0 and qdd.abs().max() <= 2.0
     assert task.info["candidates"] == 3000 and task.info["acceptance_rate"] == 1.0
-    assert task.input_names[:2] == ("q1", "q2") and task.input_names[6] == "dq1" and task.input_names[-1] == "ddq6"
+    assert (
+        task.input_names[:2] == ("q1", "q2")
+        and task.input_names[6] == "dq1"
+        and task.input_names[-1] == "ddq6"
+    )
     assert task.output_names == tuple(f"tau{i}" for i in range(1, 7))
 
 
@@ -47,7 +56,9 @@ def test_forward_route_acceptance_matches_change_of_variables():
     τ = Hq̈ + b maps the square |q̈| <= a onto a parallelogram of area (2a)² det H, so the acceptance rate is
     (2a)²/area(τ box) · E[det H(q) · 1(τ in box)] over q, q̇, q̈ uniform: estimated here from 10^6 draws of
     the closed form (eq. 6), independently of the route's simulation."""
-    task, cfg = task_of(*PAPER_BOX, "data.route=forward", "data.draw=uniform", "data.n=2000", "data.heldout=200")
+    task, cfg = task_of(
+        *PAPER_BOX, "data.route=forward", "data.draw=uniform", "data.n=2000", "data.heldout=200"
+    )
     arm = make_arm(cfg.robot)
     q, qd, qdd = split(task.exemplar.X, 2)
     assert qdd.abs().max() <= 2.0  # the filter
@@ -68,10 +79,15 @@ def test_forward_route_acceptance_matches_change_of_variables():
 
 
 def test_wrench_enters_as_jacobian_transpose():
-    """τ − ID(q, q̇, q̈) without the wrench = K(q)ᵀk (virtual work; K from the kinematics, not Newton-Euler)."""
+    """τ − ID(q, q̇, q̈) without the wrench = K(q)ᵀk (virtual work; K from the kinematics, not the RNEA)."""
     k = [3.0, -2.0, 0.0, 0.0, 0.0, 0.5]
-    task, cfg = task_of("robot=planar3", "data.n=500", "data.heldout=50", "topology.layers=9-5-3",
-                        f"data.wrench=[{','.join(map(str, k))}]")
+    task, cfg = task_of(
+        "robot=planar3",
+        "data.n=500",
+        "data.heldout=50",
+        "topology.layers=9-5-3",
+        f"data.wrench=[{','.join(map(str, k))}]",
+    )
     arm = make_arm(cfg.robot)
     q, qd, qdd = split(task.exemplar.X, 3)
     jt_k = (arm.jacobian(q).transpose(-1, -2) @ torch.tensor(k, dtype=F64)).squeeze(-1)
@@ -84,15 +100,27 @@ def test_sobol_points_cover_their_box_more_evenly_than_random():
     pseudo-random ones by O(1/sqrt n)."""
     errors = {}
     for draw in ("sobol", "uniform"):
-        task, _ = task_of("robot=puma560", "data.n=4096", "data.heldout=100", "topology.layers=18-40-6",
-                          f"data.draw={draw}", "data.q=[-1.0,1.0]")
+        task, _ = task_of(
+            "robot=puma560",
+            "data.n=4096",
+            "data.heldout=100",
+            "topology.layers=18-40-6",
+            f"data.draw={draw}",
+            "data.q=[-1.0,1.0]",
+        )
         errors[draw] = float(task.exemplar.X.mean(0).abs().max())  # every box is centred on 0 here
     assert errors["sobol"] < 2e-3 < errors["uniform"], errors
 
 
 def test_streams_are_independent_and_deterministic():
-    base = ("robot=planar3", "data.n=300", "data.heldout=100", "topology.layers=9-5-3", "data.seed=0",
-            "data.test_seed=0")
+    base = (
+        "robot=planar3",
+        "data.n=300",
+        "data.heldout=100",
+        "topology.layers=9-5-3",
+        "data.seed=0",
+        "data.test_seed=0",
+    )
     a, _ = task_of(*base)
     _task.cache_clear()
     b, _ = task_of(*base)
@@ -129,29 +157,44 @@ def test_joint_limits_or_a_full_turn():
 
 
 def test_commanded_scaling_uses_the_boxes():
-    task, _ = task_of(*PAPER_BOX, "data.n=500", "data.heldout=10", "data.scaling.mode=commanded",
-                      "data.scaling.margin=0")
+    task, _ = task_of(
+        *PAPER_BOX, "data.n=500", "data.heldout=10", "data.scaling.mode=commanded", "data.scaling.margin=0"
+    )
     s = task.scaler
-    assert s.x_min.tolist() == [0.0, 0.0, 0.0, 0.0, -2.0, -2.0] and s.x_max.tolist() == [0.5, 0.5, 1.0, 1.0, 2.0, 2.0]
+    assert s.x_min.tolist() == [0.0, 0.0, 0.0, 0.0, -2.0, -2.0] and s.x_max.tolist() == [
+        0.5,
+        0.5,
+        1.0,
+        1.0,
+        2.0,
+        2.0,
+    ]
     assert s.y_min.tolist() == [14.0, 4.0] and s.y_max.tolist() == [18.0, 8.0]
 
 
-@pytest.mark.parametrize("overrides, key, value", [
-    (["data.q=[1.0,0.0]"], "data.q", "[1.0, 0.0]"),
-    (["data.q=[[0.0,1.0],[0.0,1.0],[0.0,1.0]]"], "data.q", "[[0.0, 1.0]"),  # three pairs for two joints
-    (["data.dq=[0.0,nan]"], "data.dq", "nan"),
-    (["data.route=forward"], "data.tau", "None"),  # forward draws torques: it needs their box
-    (["data.wrench=[1.0,0.0,0.0,0.0,0.0,0.0]"], "data.wrench", "[1.0"),  # eq. 6 has no wrench
-    (["data.wrench=[1.0,0.0]", "robot=planar3", "topology.layers=9-5-3"], "data.wrench", "[1.0, 0.0]"),
-    (["data.n=0"], "data.n", "0"),
-    (["data.n=2000000"], "data.n", "2000000"),
-    (["data.accel_limit=0"], "data.accel_limit", "0.0"),
-    (["data.heldout=1.5"], "data.heldout", "1.5"),
-    (["data.path=x.csv"], "data.path", "x.csv"),  # a key of another kind
-    (["data.draw=null"], "data.draw", "None"),
-    (["data.scaling.mode=commanded"], "data.scaling.mode", "commanded"),  # no torque box
-    (["data.route=forward", "data.tau=[100.0,101.0]"], "data.route=forward data.accel_limit", "acceptance 0"),
-])
+@pytest.mark.parametrize(
+    "overrides, key, value",
+    [
+        (["data.q=[1.0,0.0]"], "data.q", "[1.0, 0.0]"),
+        (["data.q=[[0.0,1.0],[0.0,1.0],[0.0,1.0]]"], "data.q", "[[0.0, 1.0]"),  # three pairs for two joints
+        (["data.dq=[0.0,nan]"], "data.dq", "nan"),
+        (["data.route=forward"], "data.tau", "None"),  # forward draws torques: it needs their box
+        (["data.wrench=[1.0,0.0,0.0,0.0,0.0,0.0]"], "data.wrench", "[1.0"),  # eq. 6 has no wrench
+        (["data.wrench=[1.0,0.0]", "robot=planar3", "topology.layers=9-5-3"], "data.wrench", "[1.0, 0.0]"),
+        (["data.n=0"], "data.n", "0"),
+        (["data.n=2000000"], "data.n", "2000000"),
+        (["data.accel_limit=0"], "data.accel_limit", "0.0"),
+        (["data.heldout=1.5"], "data.heldout", "1.5"),
+        (["data.path=x.csv"], "data.path", "x.csv"),  # a key of another kind
+        (["data.draw=null"], "data.draw", "None"),
+        (["data.scaling.mode=commanded"], "data.scaling.mode", "commanded"),  # no torque box
+        (
+            ["data.route=forward", "data.tau=[100.0,101.0]"],
+            "data.route=forward data.accel_limit",
+            "acceptance 0",
+        ),
+    ],
+)
 def test_bad_sampled_configs_name_the_key(overrides, key, value):
     from selpres.train import prepare
 
@@ -176,4 +219,5 @@ def test_topology_that_does_not_fit_names_both():
         validate(cfg_of("robot=puma560", "data=sampled"))
     assert str(ei.value) == (
         "topology.layers='6-13-2' is not allowed: expected a network that fits robot=puma560 (6 joints): "
-        "18 inputs (q1..q6, dq1..dq6, ddq1..ddq6) and 6 outputs (tau1..tau6), e.g. 18-13-6")
+        "18 inputs (q1..q6, dq1..dq6, ddq1..ddq6) and 6 outputs (tau1..tau6), e.g. 18-13-6"
+    )
