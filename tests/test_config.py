@@ -73,7 +73,11 @@ def companions(group: str, option: str, files: dict) -> list[str]:
     }.get((group, option), [])
 
 
-@pytest.mark.parametrize("group, option", OPTIONS, ids=[f"{g}={o}" for g, o in OPTIONS])
+_HEAVY = {("robot", "puma560"), ("topology", "18-40-6")}  # draw a 6-joint arm's exemplar set
+_OPTIONS = [pytest.param(g, o, marks=pytest.mark.slow) if (g, o) in _HEAVY else (g, o) for g, o in OPTIONS]
+
+
+@pytest.mark.parametrize("group, option", _OPTIONS, ids=[f"{g}={o}" for g, o in OPTIONS])
 def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, group, option):
     from selpres.train import prepare
 

@@ -107,9 +107,10 @@ def _schedules() -> list[str]:
 
 @pytest.mark.parametrize(
     "variant",
-    [f"schedule={s}" for s in _schedules()]
-    + [f"optim={o}" for o in ("quickprop", "delta_bar_delta", "rprop", "adam")]
-    + ["schedule.order=random", "schedule.order=coverage"],
+    [f"schedule={s}" if s == "selective" else pytest.param(f"schedule={s}", marks=pytest.mark.slow)
+     for s in _schedules()]
+    + [pytest.param(f"optim={o}", marks=pytest.mark.slow) for o in ("quickprop", "delta_bar_delta", "rprop", "adam")]
+    + [pytest.param(f"schedule.order={o}", marks=pytest.mark.slow) for o in ("random", "coverage")],
 )
 def test_every_schedule_order_and_optimizer_trains_on_it(sarcos, variant):
     from selpres.train import train

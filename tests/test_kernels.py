@@ -49,6 +49,7 @@ def test_compiler_errors_point_at_real_lines_of_the_source(fresh_cache, monkeypa
 
 # ---------------------------------------------------------------- a bad cache never crashes; failures retried
 @requires_native
+@pytest.mark.slow  # builds the kernel afresh
 @pytest.mark.parametrize("damage", ["truncate", "flip"])
 def test_damaged_cached_library_is_rebuilt_not_loaded(fresh_cache, damage, caplog):
     path = _kernels.build(SIZES)
@@ -66,6 +67,7 @@ def test_damaged_cached_library_is_rebuilt_not_loaded(fresh_cache, damage, caplo
 
 
 @requires_native
+@pytest.mark.slow  # builds the kernel afresh
 def test_library_without_checksum_is_rebuilt(fresh_cache):
     """A library whose sidecar is missing was not finished (or predates the checksum): rebuilt."""
     path = _kernels.build(SIZES)
@@ -108,6 +110,7 @@ def test_cpu_flags_are_those_every_core_lists(monkeypatch, tmp_path):
 
 
 @requires_native
+@pytest.mark.slow  # builds the kernel afresh
 def test_failed_build_is_reported_then_retried(fresh_cache, monkeypatch):
     """A compiler failure or a time-out is not remembered for the process: the next load() builds."""
     cc = os.environ.get("CC")
