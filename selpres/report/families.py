@@ -55,7 +55,7 @@ def family_name(g: Group) -> str:
     "selective presentation", "conventional SGD at 150,300 t", "quickprop at 70,560 t", "staged, random
     order"."""
     if stages(g) == 1:
-        return f"{_method(g)} at {g.sched['presentations']:,} t"
+        return f"{_method(g)} at {g.cost:,} t"
     order = g.sched.get("order") or PAPER_ORDER
     name = SELECTIVE if order == PAPER_ORDER else f"staged, {order} order"
     return name if optimizer(g) == SGD else f"{name} with {optimizer(g)}"
@@ -74,11 +74,11 @@ def same_cost(a: float, b: float) -> bool:
 def matched_partner(groups: dict[tuple[str, str], Group], g: Group) -> Group | None:
     """The one-stage run of the same topology and settings (outside the schedule) whose presentations are
     closest to ``g``'s, if within 1 %; None if there is none."""
-    cost, rest = g.sched["presentations"], _rest(g)
+    cost, rest = g.cost, _rest(g)
     candidates = [h for (t, _), h in groups.items()
                   if t == g.topology and h.sched is not None and stages(h) == 1
-                  and same_cost(h.sched["presentations"], cost) and _rest(h) == rest]
-    return min(candidates, key=lambda h: (abs(h.sched["presentations"] - cost), h.schedule), default=None)
+                  and same_cost(h.cost, cost) and _rest(h) == rest]
+    return min(candidates, key=lambda h: (abs(h.cost - cost), h.schedule), default=None)
 
 
 @dataclass
@@ -126,7 +126,7 @@ class Family:
         return "; ".join(parts)
 
     def presentations(self) -> tuple[int, int]:
-        costs = [g.sched["presentations"] for g in self.members]
+        costs = [g.cost for g in self.members]
         return min(costs), max(costs)
 
 

@@ -42,6 +42,13 @@ class Group:
         return self.used[0].results["schedule"] if self.used else None
 
     @property
+    def cost(self) -> int | None:
+        """Presentations charged in all: training plus the forward passes spent choosing A_i (selpres.selection)."""
+        if self.sched is None:
+            return None
+        return self.sched["presentations"] + (self.used[0].results.get("selection_presentations") or 0)
+
+    @property
     def complete_seeds(self) -> list[int]:
         return sorted(s for s, r in self.by_seed.items() if r["status"] == "complete")
 

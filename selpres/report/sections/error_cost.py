@@ -42,7 +42,7 @@ def plane_rows(groups, topologies, fams: list[Family] | None = None) -> list[dic
         for g in fam.members:
             st = summarize(g.values("heldout").values())
             rows.append({"topology": fam.topology, "family": fam.name, "method": g.schedule,
-                         "setting": fam.label(g), "presentations": g.sched["presentations"], "n": st["n"],
+                         "setting": fam.label(g), "presentations": g.cost, "n": st["n"],
                          "diverged": g.n_diverged, "heldout_nm_mean": st["mean"],
                          "heldout_nm_ci_lo": st["ci95"][0], "heldout_nm_ci_hi": st["ci95"][1]})
     return rows

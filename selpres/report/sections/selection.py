@@ -57,11 +57,11 @@ def selection_rows(groups: dict[tuple[str, str], Group], topologies: list[str],
     comparisons form one family (its size recorded; Holm-adjusted with ``options.holm``)."""
     staged = sorted((g for g in groups.values() if g.sched is not None and stages(g) > 1),
                     key=lambda g: (topologies.index(g.topology), order_rank(_order(g)),
-                                   g.sched["presentations"], g.schedule))
+                                   g.cost, g.schedule))
     rows, found = [], []
     for g in staged:
         order = _order(g)
-        row = {"topology": g.topology, "order": order, "budget": g.sched["presentations"],
+        row = {"topology": g.topology, "order": order, "budget": g.cost,
                "method": g.schedule}
         rows.append(row)
         partner = matched_partner(groups, g)
@@ -71,7 +71,7 @@ def selection_rows(groups: dict[tuple[str, str], Group], topologies: list[str],
             continue
         v = paired(g.values("heldout"), partner.values("heldout"), options.margin)
         row.update(matched=partner.schedule,
-                   cost_ratio=g.sched["presentations"] / partner.sched["presentations"],
+                   cost_ratio=g.cost / partner.cost,
                    **paired_columns("heldout", v))
         found.append((row, v))
         conv = paper_conventional(groups, g.topology)
