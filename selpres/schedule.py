@@ -9,6 +9,7 @@ that epoch's shuffled order, so the total equals the budget exactly.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Sequence
@@ -74,12 +75,9 @@ class Schedule:
         (a one-stage schedule's partial epoch counts as the fraction of an epoch it is)."""
         return self.n * sum(s.epochs for s in self.stages) + sum(s.extra for s in self.stages)
 
-    def plan(self) -> list[EpochPlan]:
-        out: list[EpochPlan] = []
-        for k, st in enumerate(self.stages):
-            counts = [st.size] * st.epochs + ([st.extra] if st.extra else [])
-            out += [EpochPlan(len(out) + j, k, st.size, c) for j, c in enumerate(counts)]
-        return out
+    def plan(self) -> tuple[EpochPlan, ...]:
+        """Every epoch in order (computed once per schedule: every replica's sampler shares it)."""
+        return _plan(self.stages)
 
     def stage_ends(self) -> list[int]:
         """Global index of each stage's last epoch (where the loop scores, reports and checkpoints)."""
@@ -100,6 +98,15 @@ class Schedule:
             "conventional_presentations": self.conventional_presentations,
             "cost_ratio": self.presentations / self.conventional_presentations,
         }
+
+
+@functools.lru_cache(maxsize=64)
+def _plan(stages: tuple[Stage, ...]) -> tuple[EpochPlan, ...]:
+    out: list[EpochPlan] = []
+    for k, st in enumerate(stages):
+        counts = [st.size] * st.epochs + ([st.extra] if st.extra else [])
+        out += [EpochPlan(len(out) + j, k, st.size, c) for j, c in enumerate(counts)]
+    return tuple(out)
 
 
 def _is_fraction(v) -> bool:
