@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 
 from selpres.errors import ConfigError
-from selpres.selection import LOSS_ORDERS, selection_charge
+from selpres.selection import planned_charge
 
 SEARCH_KEYS = ("search_p", "search_first", "search_growth", "search_tilt", "search_budget")
 
@@ -44,10 +44,7 @@ def shaped_schedule(p: int, first: float, growth: float, tilt: float, n: int, bu
     """The schedule of (p, first, growth, tilt) at ``budget`` total presentations for ``order``, as
     ``schedule.*`` config values: {"sizes": [...], "epochs": [...] or None, "budget": None or int}."""
     sizes = shaped_sizes(p, first, growth, n)
-    charge = 0
-    if order in LOSS_ORDERS:
-        charge = sum(selection_charge(n - kept, selection_cost) for kept in sizes[:-1])
-    T = budget - charge
+    T = budget - planned_charge(order, sizes, selection_cost)
     if p == 0:  # conventional training cut to the budget (schedule.budget: whole epochs + a partial one)
         return {"sizes": [n], "epochs": None, "budget": T}
     weights = [math.exp(tilt * i / p) for i in range(p + 1)]
