@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 
 from selpres.errors import ConfigError
+from selpres.schedule import build_schedule
 from selpres.selection import planned_charge
 
 SEARCH_KEYS = ("search_p", "search_first", "search_growth", "search_tilt", "search_budget")
@@ -54,9 +55,40 @@ def shaped_schedule(p: int, first: float, growth: float, tilt: float, n: int, bu
     return {"sizes": sizes, "epochs": [*epochs, max(1, round(rest / n))], "budget": None}
 
 
+def raw_schedule(raw: dict, n: int, order: str, selection_cost: float) -> dict:
+    """The schedule (as ``shaped_schedule`` gives it) that the search numbers ``raw`` (SEARCH_KEYS ->
+    value, as Optuna stores them) stand for."""
+    return shaped_schedule(int(raw["search_p"]), float(raw["search_first"]), float(raw["search_growth"]),
+                           float(raw["search_tilt"]), n, int(raw["search_budget"]), order, selection_cost)
+
+
 def schedule_overrides(raw: dict, n: int, order: str, selection_cost: float) -> list[str]:
-    """Hydra overrides of the schedule that the search numbers ``raw`` (SEARCH_KEYS -> value) stand for."""
-    s = shaped_schedule(int(raw["search_p"]), float(raw["search_first"]), float(raw["search_growth"]),
-                        float(raw["search_tilt"]), n, int(raw["search_budget"]), order, selection_cost)
+    """Hydra overrides of the schedule that the search numbers ``raw`` stand for."""
     fmt = lambda v: "null" if v is None else str(v).replace(" ", "")  # noqa: E731
-    return [f"schedule.{k}={fmt(v)}" for k, v in s.items()]
+    return [f"schedule.{k}={fmt(v)}" for k, v in raw_schedule(raw, n, order, selection_cost).items()]
+
+
+def total_cost(schedule: dict, n: int, order: str, selection_cost: float) -> int:
+    """What a run of ``schedule`` ({"sizes", "epochs", "budget"}) spends in all: its training presentations
+    plus the charge for choosing. A compute-matched partner is conventional training stopped there."""
+    sch = build_schedule(schedule["sizes"], schedule["epochs"], n, schedule["budget"])
+    return sch.presentations + planned_charge(order, sch.sizes, selection_cost)
+
+
+CONFIRM = "search-confirm"  # the sweep (outputs/sweeps/<name>) where the best schedule meets its partner
+CONFIRM_SEEDS = (0, 30)  # seed, replicas: seeds 0..29, apart from the search seeds (experiment/search.yaml)
+
+
+def confirmation_commands(raw: dict, n: int, order: str, selection_cost: float) -> list[str]:
+    """Shell commands that confirm the schedule ``raw`` stands for on fresh seeds and the held-out set
+    (the default ``data.test_seed``): the schedule, conventional training stopped at its total cost (the
+    compute-matched partner), the paper's conventional run (the time-to-target target), then the report.
+    Every curve is scored each epoch. p = 0 (conventional cut to the budget) is its own partner."""
+    seed, replicas = CONFIRM_SEEDS
+    run = f"python train.py -m name={CONFIRM} seed={seed} replicas={replicas} eval.every=1"
+    sched = raw_schedule(raw, n, order, selection_cost)
+    staged = " ".join(f"'{o}'" for o in schedule_overrides(raw, n, order, selection_cost))
+    cmds = [f"{run} schedule.name=search schedule.order={order} {staged}"]
+    if len(sched["sizes"]) > 1:
+        cmds.append(f"{run} schedule=matched schedule.budget={total_cost(sched, n, order, selection_cost)}")
+    return [*cmds, f"{run} schedule=conventional", f"python -m selpres.report outputs/sweeps/{CONFIRM}"]

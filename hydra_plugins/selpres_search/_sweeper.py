@@ -15,11 +15,16 @@ the finished trials (the same seed would propose the same first points again); a
 mid-training resumes from its checkpoint in its own folder, and a schedule proposed twice is found done.
 A trial whose schedule its job refuses (rounding merged two stage sizes) fails alone: Optuna records it
 as failed, and ``max_failure_rate: 1.0`` keeps the study going.
+
+At the end the best trial's confirmation (``selpres.search.confirmation_commands``: the schedule on fresh
+seeds and the held-out set, beside conventional training stopped at its total cost) is logged and written
+to ``confirm.sh`` in the sweep folder.
 """
 
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 import optuna
 from hydra.types import HydraContext, TaskFunction
@@ -27,7 +32,7 @@ from hydra.utils import instantiate
 from hydra_plugins.hydra_optuna_sweeper.optuna_sweeper import OptunaSweeper
 from omegaconf import DictConfig
 
-from selpres.search import SEARCH_KEYS, schedule_overrides
+from selpres.search import SEARCH_KEYS, confirmation_commands, schedule_overrides
 from selpres.task import load_task
 
 log = logging.getLogger("selpres")
@@ -57,7 +62,7 @@ class ShapedScheduleSweeper(OptunaSweeper):
             return out
 
         impl._configure_trials = translated
-        self._translate = lambda raw, order: schedule_overrides(raw, n, order, cost)
+        self._confirm = lambda raw, order: confirmation_commands(raw, n, order, cost)
         self._order = sweep_order
         done = _finished_trials(impl.storage, impl.study_name)
         if done:
@@ -72,7 +77,8 @@ class ShapedScheduleSweeper(OptunaSweeper):
                          seed, done)
 
     def sweep(self, arguments: list[str]) -> None:
-        """The study's trials, then the best schedule as the overrides that confirm it."""
+        """The study's trials, then the commands that confirm the best schedule, logged and written to
+        ``confirm.sh`` in the sweep folder (``bash outputs/sweeps/search/confirm.sh``)."""
         super().sweep(arguments)
         impl = self.sweeper
         if impl.storage is None:
@@ -80,10 +86,14 @@ class ShapedScheduleSweeper(OptunaSweeper):
         best = optuna.load_study(study_name=impl.study_name, storage=impl.storage).best_trial
         raw = {**best.user_attrs, **best.params}
         order = raw.get("schedule.order", self._order)
-        overrides = " ".join(f"'{o}'" for o in self._translate(raw, order))
-        log.info("best schedule (validation RMS %.4f Nm): schedule.order=%s %s; confirm it on fresh seeds "
-                 "and the held-out set: python train.py -m name=confirm seed=0 replicas=30 "
-                 "schedule.order=%s %s", best.value, order, overrides, order, overrides)
+        commands = self._confirm(raw, order)
+        script = Path(impl.config.hydra.sweep.dir) / "confirm.sh"
+        script.write_text(f"# best of study {impl.study_name} (trial {best.number}, validation RMS "
+                          f"{best.value:.6f} Nm): confirm on fresh seeds and the held-out set\n"
+                          "set -e\n" + "\n".join(commands) + "\n")
+        log.info("best schedule (trial %d, validation RMS %.4f Nm); confirm it on fresh seeds and the "
+                 "held-out set against compute-matched conventional training (also in %s):\n%s",
+                 best.number, best.value, script, "\n".join(commands))
 
 
 def _finished_trials(storage, study_name) -> int:
