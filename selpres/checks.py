@@ -1,8 +1,9 @@
 """Checks a type cannot express, run before any training or output: each failure is one ConfigError
 naming the key, the bad value and what is allowed (exit code 2 from ``python train.py``).
 
-``validate`` checks values against each other (ranges, grid steps, topology widths); the checks that
-need the exemplar set (stage sizes against n, filters that keep nothing) run in
+``validate`` checks values against each other (ranges, grid steps, the robot and data configs of each
+kind, topology widths against the task's inputs and outputs); the checks that need the exemplar set
+(stage sizes against n, filters that keep nothing, a data file's cells) run in
 ``selpres.train.prepare``, still before anything is written.
 """
 
@@ -15,13 +16,17 @@ from omegaconf import DictConfig
 
 from selpres.batch_engine import check_batch_options
 from selpres.config import to_container
-from selpres.data import grid_points
+from selpres.data import grid_points, heldout_count
 from selpres.errors import ConfigError
 from selpres.model import TopologyError, parse_topology
 from selpres.optim import HPARAM_KEYS, make_optimizer
+from selpres.sampling import MAX_N
+from selpres.task import DATA_KEYS, Shape, task_shape
 
 MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
 MAX_LAYER_WIDTH = 4096  # wider layers are refused: a guard against typos such as 6-13000-2
+
+
 def _walk(node, prefix=""):
     """(dotted key, value) for every leaf of a plain container."""
     if isinstance(node, dict):
@@ -75,10 +80,49 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         raise ConfigError("schedule.selection_cost", cfg.schedule.selection_cost,
                           "a fraction of a training presentation in [0, 1] charged per candidate scored "
                           "(0 = choosing is free; default 1/3, a forward pass of forward + backward)")
-    for k in ("m1", "m2", "l1", "l2", "g"):
-        if not cfg.robot[k] > 0:
-            raise ConfigError(f"robot.{k}", cfg.robot[k], "a positive number")
+    return check_topology(cfg.topology.layers, check_task(cfg))
+
+
+def check_task(cfg: DictConfig) -> Shape:
+    """The robot and data configs: keys each kind reads set, the others unset, values in range; returns
+    the shape of the task (``selpres.task.task_shape``: builds the arm or reads a data file's header)."""
     d = cfg.data
+    kind = d.kind.value
+    reads = DATA_KEYS[kind]
+    for other in DATA_KEYS.values():
+        for k in other:
+            if k not in reads and d[k] is not None:
+                raise ConfigError(f"data.{k}", d[k],
+                                  f"unset (null) for data.kind={kind}, which reads {list(reads)}")
+    optional = ("q", "tau", "wrench")  # sampled: null = the joint limits, no torque box, no wrench
+    for k in reads:
+        if d[k] is None and k not in optional:
+            raise ConfigError(f"data.{k}", None, f"a value: data.kind={kind} reads it")
+    if d.test_patterns < 1:
+        raise ConfigError("data.test_patterns", d.test_patterns, "a whole number >= 1")
+    if not 0 <= d.test_from_exemplar <= d.test_patterns:
+        raise ConfigError("data.test_from_exemplar", d.test_from_exemplar,
+                          f"a count in [0, data.test_patterns = {d.test_patterns}]")
+    heldout_count(d.heldout, 1, "the patterns")  # type and range only: selpres.task counts a fraction
+    s = d.scaling
+    if not (0 <= s.lo < s.hi <= 1):
+        raise ConfigError("data.scaling.lo", s.lo, f"0 <= lo < hi <= 1 (the sigmoid's range); hi = {s.hi}")
+    if s.margin < 0:
+        raise ConfigError("data.scaling.margin", s.margin, "a margin >= 0 (fraction of each column's range)")
+    if kind != "file" and not d.accel_limit > 0:
+        raise ConfigError("data.accel_limit", d.accel_limit, "a positive acceleration bound in rad/s²")
+    if kind == "grid":
+        _check_grid(d)
+    if kind == "sampled":
+        if not 1 <= d.n <= MAX_N:
+            raise ConfigError("data.n", d.n, f"a whole number of patterns in [1, {MAX_N:,}]")
+        if isinstance(d.heldout, int) and d.heldout > MAX_N:
+            raise ConfigError("data.heldout", d.heldout, f"at most {MAX_N:,} held-out patterns")
+    return task_shape(cfg.robot, d)
+
+
+def _check_grid(d: DictConfig) -> None:
+    """The paper's grid: whole steps, and not so many candidates that building it would exhaust memory."""
     points = {}
     for k in ("theta", "dtheta", "tau1", "tau2"):
         r = d[k]
@@ -89,32 +133,27 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         try:
             points[k] = grid_points(r.lo, r.hi, r.step, f"data.{k}")
         except ValueError:
-            raise ConfigError(f"data.{k}.step", r.step, f"a step that divides hi - lo = {r.hi - r.lo:g} into whole steps") from None
+            raise ConfigError(f"data.{k}.step", r.step,
+                              f"a step that divides hi - lo = {r.hi - r.lo:g} into whole steps") from None
     candidates = points["theta"] ** 2 * points["dtheta"] ** 2 * points["tau1"] * points["tau2"]
     if candidates > MAX_GRID_CANDIDATES:
         finest = max(points, key=points.get)
         raise ConfigError(f"data.{finest}.step", d[finest].step,
                           f"a coarser step: the grid (θ² × θ̇² × τ1 × τ2 points) would have {candidates:,} candidates, "
                           f"at most {MAX_GRID_CANDIDATES:,} are allowed (the paper's has 1,050,625)")
-    if not d.accel_limit > 0:
-        raise ConfigError("data.accel_limit", d.accel_limit, "a positive acceleration bound in rad/s²")
-    if d.test_patterns < 1:
-        raise ConfigError("data.test_patterns", d.test_patterns, "a whole number >= 1")
-    if not 0 <= d.test_from_exemplar <= d.test_patterns:
-        raise ConfigError("data.test_from_exemplar", d.test_from_exemplar, f"a count in [0, data.test_patterns = {d.test_patterns}]")
-    if d.heldout < 1:
-        raise ConfigError("data.heldout", d.heldout, "a whole number >= 1")
-    s = d.scaling
-    if not (0 <= s.lo < s.hi <= 1):
-        raise ConfigError("data.scaling.lo", s.lo, f"0 <= lo < hi <= 1 (the sigmoid's range); hi = {s.hi}")
-    if s.margin < 0:
-        raise ConfigError("data.scaling.margin", s.margin, "a margin >= 0 (fraction of each column's range)")
+
+
+def check_topology(layers: str, shape: Shape) -> tuple[int, ...]:
+    """Layer widths that parse and fit the task: its numbers of inputs and outputs, named in the message."""
     try:
-        sizes = parse_topology(cfg.topology.layers, n_inputs=6, n_outputs=2)
+        sizes = parse_topology(layers)
     except TopologyError as e:
-        raise ConfigError("topology.layers", cfg.topology.layers, e.allowed) from None
+        raise ConfigError("topology.layers", layers, e.allowed) from None
+    n_in, n_out = len(shape.input_names), len(shape.output_names)
+    if sizes[0] != n_in or sizes[-1] != n_out:
+        hidden = "-".join(str(w) for w in sizes[1:-1]) or "13"
+        fits = f"a network that fits {shape.source}: {shape.describe()}"
+        raise ConfigError("topology.layers", layers, f"{fits}, e.g. {n_in}-{hidden}-{n_out}")
     if max(sizes) > MAX_LAYER_WIDTH:
-        raise ConfigError("topology.layers", cfg.topology.layers, f"layer widths of at most {MAX_LAYER_WIDTH} units")
+        raise ConfigError("topology.layers", layers, f"layer widths of at most {MAX_LAYER_WIDTH} units")
     return sizes
-
-

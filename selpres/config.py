@@ -54,13 +54,31 @@ class ScalingMode(Enum):
     commanded = "commanded"
 
 
+class RobotKind(Enum):
+    two_link = "two_link"  # the paper's arm, closed form of eq. (6) (selpres.robot.TwoLinkArm)
+    serial = "serial"  # N revolute joints from links or DH rows in the YAML (selpres.serial.SerialArm)
+    urdf = "urdf"  # a serial chain of revolute joints read from robot.path (selpres.urdf.load_urdf)
+
+
 @dataclass
 class RobotConfig:
-    m1: float = MISSING
-    m2: float = MISSING
-    l1: float = MISSING
-    l2: float = MISSING
-    g: float = MISSING
+    """One schema for every arm: ``kind`` says which fields a robot file sets; the others stay None
+    (``selpres.robot.make_arm`` refuses a missing one, naming it)."""
+
+    kind: RobotKind = MISSING
+    m1: Optional[float] = None  # two_link: point masses (kg), link lengths (m)
+    m2: Optional[float] = None
+    l1: Optional[float] = None
+    l2: Optional[float] = None
+    g: Optional[float] = None  # two_link, urdf: gravity's magnitude (m/s²)
+    name: Optional[str] = None  # serial: the spec of selpres.serial (links from the base outwards)
+    convention: Optional[str] = None
+    gravity: Optional[List[float]] = None
+    end_point: Optional[List[float]] = None
+    base: Optional[str] = None
+    tip: Optional[str] = None  # serial, urdf: the link whose origin is the wrench's end point
+    links: Optional[List[Any]] = None
+    path: Optional[str] = None  # urdf: the file
 
 
 @dataclass
@@ -78,16 +96,47 @@ class ScalingConfig:
     hi: float = MISSING
 
 
+class DataKind(Enum):
+    grid = "grid"  # the paper's section 5.1 (robot.kind two_link): a grid of θ, θ̇, τ kept if |θ̈| <= limit
+    sampled = "sampled"  # any arm, any n: random or low-discrepancy draws (selpres.sampling)
+    file = "file"  # the user's own table, CSV or .npz (selpres.datafile)
+
+
+class Route(Enum):
+    forward = "forward"  # the paper's route: q, q̇, τ drawn, q̈ simulated (eq. 5), |q̈| > accel_limit dropped
+    inverse = "inverse"  # q, q̇, q̈ drawn, τ from eq. (4); kept unless data.tau bounds it
+
+
+class Draw(Enum):
+    uniform = "uniform"  # pseudo-random points (a seeded torch.Generator)
+    sobol = "sobol"  # scrambled Sobol points (torch.quasirandom.SobolEngine): every prefix low-discrepancy
+
+
 @dataclass
 class DataConfig:
-    theta: GridRange = field(default_factory=GridRange)
-    dtheta: GridRange = field(default_factory=GridRange)
-    tau1: GridRange = field(default_factory=GridRange)
-    tau2: GridRange = field(default_factory=GridRange)
-    accel_limit: float = MISSING
+    """One schema for every data kind: the group file sets ``kind`` and its keys; the others stay None
+    (``selpres.checks`` refuses a key a kind does not read, naming it)."""
+
+    kind: DataKind = MISSING
+    theta: Optional[GridRange] = None  # grid: both joints' angles (rad) and rates (rad/s), the torque boxes
+    dtheta: Optional[GridRange] = None
+    tau1: Optional[GridRange] = None
+    tau2: Optional[GridRange] = None
+    accel_limit: Optional[float] = None  # grid, sampled: |q̈| bound (rad/s²): a filter or q̈'s box (inverse)
+    n: Optional[int] = None  # sampled: exemplar set size
+    route: Optional[Route] = None
+    draw: Optional[Draw] = None
+    seed: Optional[int] = None  # sampled: the exemplar set's draws (the test sets draw from test_seed)
+    q: Optional[List[Any]] = None  # sampled: [lo, hi] for every joint or one per joint; q null: joint limits
+    dq: Optional[List[Any]] = None
+    tau: Optional[List[Any]] = None  # sampled: torque box (forward: drawn from it; inverse: a filter)
+    wrench: Optional[List[float]] = None  # sampled: constant k of eq. (4), base frame, (force, moment)
+    path: Optional[str] = None  # file: a CSV with a header row, or an .npz
+    inputs: Optional[List[str]] = None  # file: the columns the network reads, in this order
+    outputs: Optional[List[str]] = None  # file: the columns it predicts
     test_patterns: int = MISSING
     test_from_exemplar: int = MISSING
-    heldout: int = MISSING
+    heldout: Any = MISSING  # a count, or a fraction (float in (0, 1)) of all patterns (file: of the rows)
     test_seed: int = MISSING
     scaling: ScalingConfig = field(default_factory=ScalingConfig)
 

@@ -1,8 +1,10 @@
 """Exemplar set, test sets, sigmoid-range scaling and export (paper section 5.1).
 
-Network input is (θ1, θ̇1, θ̈1, θ2, θ̇2, θ̈2) and target (τ1, τ2): the network learns inverse dynamics from
-patterns that the forward simulator (eq. 5) generated. All functions are pure in their arguments;
-randomness comes only from an explicit ``torch.Generator`` or seed.
+The paper's grid route: network input (θ1, θ̇1, θ̈1, θ2, θ̇2, θ̈2) and target (τ1, τ2), patterns that the
+forward simulator (eq. 5) generated on a grid. Other arms and sizes are drawn by ``selpres.sampling``,
+users' tables read by ``selpres.datafile``; scaling, the RMS metric and export here serve all of them
+(any number of inputs and outputs). All functions are pure in their arguments; randomness comes only from
+an explicit ``torch.Generator`` or seed.
 """
 
 from __future__ import annotations
@@ -19,7 +21,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from selpres.robot import TwoLinkArm, cfg_get
+from selpres.datafile import file_digest
+from selpres.errors import ConfigError
+from selpres.robot import TwoLinkArm, cfg_get, make_arm
 from selpres.storage import atomic_write, stable_hash
 
 INPUT_NAMES = ("theta1", "dtheta1", "ddtheta1", "theta2", "dtheta2", "ddtheta2")
@@ -42,7 +46,8 @@ def _range(data_cfg: Any, key: str) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class Patterns:
-    """Input rows ``X [n, 6]`` (INPUT_NAMES order) and targets ``Y [n, 2]`` in Nm, float64."""
+    """Input rows ``X [n, inputs]`` and targets ``Y [n, outputs]`` (Nm for an arm), float64; the grid
+    route's columns are INPUT_NAMES and TARGET_NAMES."""
 
     X: torch.Tensor
     Y: torch.Tensor
@@ -56,7 +61,8 @@ class Patterns:
 
 @dataclass(frozen=True)
 class ExemplarSet(Patterns):
-    """The paper's exemplar set U (1002 patterns with the default robot) and how many grid candidates it came from."""
+    """The exemplar set U (the paper's 1002 patterns with the default robot) and how many candidates (grid
+    points, draws or file rows) it came from."""
 
     n_candidates: int = 0
 
@@ -69,6 +75,21 @@ class TestSets:
     test10: Patterns
     test10_from_exemplar: torch.Tensor
     heldout: Patterns
+
+
+def heldout_count(value: Any, total: int, what: str) -> int:
+    """``data.heldout`` as a count: a whole number as it is, a float in (0, 1) as that fraction of
+    ``total`` (rounded half up, at least 1). ``what`` names ``total`` in the message."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError("data.heldout", value, "a whole number of patterns >= 1, or a fraction in (0, 1)")
+    if isinstance(value, float):
+        if not 0.0 < value < 1.0:
+            raise ConfigError("data.heldout", value,
+                              f"a fraction in (0, 1) of {what}, or a whole number >= 1")
+        return max(1, math.floor(value * total + 0.5))
+    if value < 1:
+        raise ConfigError("data.heldout", value, "a whole number of patterns >= 1, or a fraction in (0, 1)")
+    return int(value)
 
 
 def _rows(q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor, tau: torch.Tensor) -> Patterns:
@@ -221,6 +242,16 @@ def make_test_sets(arm: TwoLinkArm, data_cfg: Any, exemplar: ExemplarSet, seed: 
 # ------------------------------------------------------------------------------------------ scaling
 
 
+def grid_bounds(data_cfg: Any) -> tuple[torch.Tensor, ...]:
+    """(x lo, x hi, τ lo, τ hi) the grid route commands: its θ, θ̇ ranges, ±accel_limit and τ boxes."""
+    th, w = _range(data_cfg, "theta"), _range(data_cfg, "dtheta")
+    a = float(cfg_get(data_cfg, "accel_limit"))
+    x0 = torch.tensor([th[0], w[0], -a, th[0], w[0], -a], dtype=DTYPE)
+    x1 = torch.tensor([th[1], w[1], a, th[1], w[1], a], dtype=DTYPE)
+    t1, t2 = _range(data_cfg, "tau1"), _range(data_cfg, "tau2")
+    return x0, x1, torch.tensor([t1[0], t2[0]], dtype=DTYPE), torch.tensor([t1[1], t2[1]], dtype=DTYPE)
+
+
 @dataclass(frozen=True)
 class Scaler:
     """Per-column affine map of [min − margin·range, max + margin·range] onto [lo, hi] ⊂ (0, 1).
@@ -233,28 +264,26 @@ class Scaler:
     and shrinks the targets' spread by 2–3.5×. scripts/export_data.py prints both.
     """
 
-    x_min: torch.Tensor  # data-side bounds (margin already applied), [6]
+    x_min: torch.Tensor  # data-side bounds (margin already applied), [inputs]
     x_max: torch.Tensor
-    y_min: torch.Tensor  # [2]
+    y_min: torch.Tensor  # [outputs]
     y_max: torch.Tensor
     lo: float = 0.1
     hi: float = 0.9
 
     @classmethod
-    def fit(cls, exemplar: Patterns, data_cfg: Any) -> "Scaler":
+    def fit(cls, exemplar: Patterns, data_cfg: Any,
+            commanded: tuple[torch.Tensor, ...] | None = None) -> Scaler:
+        """Bounds from the exemplar set (mode exemplar) or the commanded boxes: ``commanded`` = (x lo, x hi,
+        y lo, y hi) when given, else the grid route's θ, θ̇, ±accel_limit and τ boxes."""
         sc = cfg_get(data_cfg, "scaling")
-        mode, margin = str(cfg_get(sc, "mode")), float(cfg_get(sc, "margin"))
+        mode = str(getattr(cfg_get(sc, "mode"), "value", cfg_get(sc, "mode")))  # a typed config holds an enum
+        margin = float(cfg_get(sc, "margin"))
         if mode == "exemplar":
             x0, x1 = exemplar.X.min(0).values, exemplar.X.max(0).values
             y0, y1 = exemplar.Y.min(0).values, exemplar.Y.max(0).values
         elif mode == "commanded":
-            th, w = _range(data_cfg, "theta"), _range(data_cfg, "dtheta")
-            a = float(cfg_get(data_cfg, "accel_limit"))
-            x0 = torch.tensor([th[0], w[0], -a, th[0], w[0], -a], dtype=DTYPE)
-            x1 = torch.tensor([th[1], w[1], a, th[1], w[1], a], dtype=DTYPE)
-            t1, t2 = _range(data_cfg, "tau1"), _range(data_cfg, "tau2")
-            y0 = torch.tensor([t1[0], t2[0]], dtype=DTYPE)
-            y1 = torch.tensor([t1[1], t2[1]], dtype=DTYPE)
+            x0, x1, y0, y1 = grid_bounds(data_cfg) if commanded is None else commanded
         else:
             raise ValueError(f"scaling.mode: expected 'exemplar' or 'commanded', got {mode!r}")
 
@@ -294,12 +323,18 @@ def rms_overall_nm(pred_scaled: torch.Tensor, Y_true_Nm: torch.Tensor, scaler: S
     return (scaler.inverse_y(pred_scaled) - Y_true_Nm.to(pred_scaled)).square().mean((-2, -1)).sqrt()
 
 
+def metric_names(n_outputs: int) -> tuple[str, ...]:
+    """``overall, tau1..tauK``: the per-output keys of ``rms_errors`` (output k is "tau<k>" whatever its
+    column is called, so results.json reads alike for every arm and data file)."""
+    return ("overall", *(f"tau{k}" for k in range(1, n_outputs + 1)))
+
+
 def rms_errors(pred_scaled: torch.Tensor, Y_true_Nm: torch.Tensor, scaler: Scaler) -> dict[str, torch.Tensor]:
     """The paper's criterion, RMS of (network output − actual output), in Nm and in scaled units.
 
-    ``pred_scaled`` is ``[..., N, 2]`` (e.g. a leading replica dim R); every value has the leading shape ``[...]``.
-    Keys: tau1_Nm, tau2_Nm, overall_Nm, tau1_scaled, tau2_scaled, overall_scaled; overall = sqrt of the mean
-    squared error over both joints and all patterns.
+    ``pred_scaled`` is ``[..., N, K]`` (e.g. a leading replica dim R); every value has the leading shape
+    ``[...]``. Keys ``<name>_Nm`` and ``<name>_scaled`` for every name of ``metric_names(K)`` (tau1_Nm, …,
+    overall_Nm, …); overall = sqrt of the mean squared error over all outputs and all patterns.
     """
     Y_true_Nm = Y_true_Nm.to(pred_scaled)
     out: dict[str, torch.Tensor] = {}
@@ -308,8 +343,8 @@ def rms_errors(pred_scaled: torch.Tensor, Y_true_Nm: torch.Tensor, scaler: Scale
         ("scaled", pred_scaled - scaler.transform_y(Y_true_Nm)),
     ):
         sq = err.square()
-        per_joint = sq.mean(-2).sqrt()  # [..., 2]
-        for k, name in enumerate(TARGET_NAMES):
+        per_joint = sq.mean(-2).sqrt()  # [..., K]
+        for k, name in enumerate(metric_names(per_joint.shape[-1])[1:]):
             out[f"{name}_{unit}"] = per_joint[..., k]
         out[f"overall_{unit}"] = sq.mean((-2, -1)).sqrt()
     return out
@@ -338,33 +373,77 @@ def _plain(cfg: Any) -> Any:
     return cfg
 
 
+def data_kind(data_cfg: Any) -> str:
+    """grid, sampled or file (a data config without ``kind`` is the paper's grid)."""
+    try:
+        kind = cfg_get(data_cfg, "kind")
+    except (KeyError, AttributeError):
+        return "grid"
+    return str(getattr(kind, "value", kind))
+
+
+def _set_keys(node: Any) -> Any:
+    """Drop unset (None) keys: the keys another kind uses, which a composed config holds and a YAML lacks."""
+    if isinstance(node, dict):
+        return {k: _set_keys(v) for k, v in node.items() if v is not None}
+    return node
+
+
 def config_hash(robot_cfg: Any, data_cfg: Any) -> str:
-    """Identity of the data: a stable hash of both resolved configs (ints folded into floats)."""
-    return stable_hash(_plain({"robot": robot_cfg, "data": data_cfg}))
+    """Identity of the data: a stable hash of what made it. The arm enters canonically, by
+    ``make_arm(robot).to_config()`` (a URDF's content, not its path; no arm for a data file); a data
+    file by the sha256 of its bytes instead of its path; unset keys are left out and ints folded into
+    floats, so a composed config, its YAML and ``m2: 3`` vs ``3.0`` hash alike."""
+    data = _set_keys(_plain(data_cfg))
+    if data_kind(data_cfg) == "file":
+        data["path"] = file_digest(cfg_get(data_cfg, "path"))
+        robot = None
+    else:
+        robot = _plain(make_arm(robot_cfg).to_config())
+    return stable_hash({"robot": robot, "data": data})
 
 
-def _table(p: Patterns) -> np.ndarray:
-    return torch.cat((p.X, p.Y), 1).cpu().numpy().astype(np.float64)
+def _table(p: Patterns, wrench: torch.Tensor | None) -> np.ndarray:
+    cols = [p.X, p.Y] + ([] if wrench is None else [wrench.expand(len(p), -1)])
+    return torch.cat(cols, 1).cpu().numpy().astype(np.float64)
 
 
-def export(path_stem: str | os.PathLike, exemplar: ExemplarSet, tests: TestSets, robot_cfg: Any, data_cfg: Any) -> dict[str, Path]:
-    """Write ``<stem>.npz`` and ``<stem>_{exemplar,test10,heldout}.csv`` (``%.17g``: exact float64 round trip)."""
+def export(path_stem: str | os.PathLike, exemplar: ExemplarSet, tests: TestSets, robot_cfg: Any,
+           data_cfg: Any, *, input_names: tuple[str, ...] = INPUT_NAMES,
+           target_names: tuple[str, ...] = TARGET_NAMES, arm: dict | None = None,
+           wrench: torch.Tensor | None = None) -> dict[str, Path]:
+    """Write ``<stem>.npz`` and ``<stem>_{exemplar,test10,heldout}.csv`` (``%.17g``: exact float64
+    round trip). The CSVs start with ``# config_hash=...`` and, when an arm made the data,
+    ``# arm=<its to_config() as JSON>``; then the header: the input names, the target names and, for a
+    non-zero wrench k, its six constant columns ``k_fx..k_mz`` (eq. 4's force, then moment, base frame)."""
     stem = Path(path_stem)
     h = config_hash(robot_cfg, data_cfg)
-    tables = {"exemplar": _table(exemplar), "test10": _table(tests.test10), "heldout": _table(tests.heldout)}
+    if wrench is not None and not bool(wrench.ne(0).any()):
+        wrench = None
+    from selpres.sampling import WRENCH_NAMES  # the wrench's column names belong to the sampled routes
+
+    columns = tuple(input_names) + tuple(target_names) + (WRENCH_NAMES if wrench is not None else ())
+    n_in = len(input_names)
+    tables = {name: _table(p, wrench) for name, p in
+              (("exemplar", exemplar), ("test10", tests.test10), ("heldout", tests.heldout))}
     arrays: dict[str, np.ndarray] = {}
     for name, t in tables.items():
-        arrays[f"{name}_X"], arrays[f"{name}_Y"] = t[:, :6], t[:, 6:]
+        arrays[f"{name}_X"], arrays[f"{name}_Y"] = t[:, :n_in], t[:, n_in:n_in + len(target_names)]
     arrays["test10_from_exemplar"] = tests.test10_from_exemplar.cpu().numpy().astype(bool)
-    arrays["input_names"] = np.array(INPUT_NAMES)
-    arrays["target_names"] = np.array(TARGET_NAMES)
+    arrays["input_names"] = np.array(input_names)
+    arrays["target_names"] = np.array(target_names)
     arrays["config_hash"] = np.array(h)
     arrays["robot_config"] = np.array(json.dumps(_plain(robot_cfg), sort_keys=True))
     arrays["data_config"] = np.array(json.dumps(_plain(data_cfg), sort_keys=True))
+    if arm is not None:
+        arrays["arm"] = np.array(json.dumps(arm, sort_keys=True))
+    if wrench is not None:
+        arrays["wrench"] = wrench.cpu().numpy()
 
     paths = {"npz": stem.with_name(stem.name + ".npz")}
     atomic_write(paths["npz"], lambda f: np.savez(f, **arrays))
-    header = f"# config_hash={h}\n" + ",".join(COLUMN_NAMES)
+    arm_line = f"# arm={json.dumps(arm, sort_keys=True)}\n" if arm else ""
+    header = f"# config_hash={h}\n" + arm_line + ",".join(columns)
     for name, t in tables.items():
         paths[name] = stem.with_name(f"{stem.name}_{name}.csv")
         atomic_write(paths[name], lambda f, t=t: np.savetxt(f, t, fmt="%.17g", delimiter=",", header=header, comments=""))
@@ -390,12 +469,17 @@ def load_exported(path_npz: str | os.PathLike, robot_cfg: Any, data_cfg: Any) ->
 
 def load_csv(path: str | os.PathLike, robot_cfg: Any = None, data_cfg: Any = None) -> tuple[str, tuple[str, ...], np.ndarray]:
     """(config_hash, column names, float64 table) of an exported CSV; checks the hash when configs are given."""
+    comments = []
     with open(path) as f:
-        first, names = f.readline().strip(), tuple(f.readline().strip().split(","))
-    if not first.startswith("# config_hash="):
-        raise ValueError(f"{path}: first line should be '# config_hash=...', got {first!r}")
-    h = first.split("=", 1)[1]
+        line = f.readline().strip()
+        while line.startswith("#"):
+            comments.append(line)
+            line = f.readline().strip()
+    names = tuple(line.split(","))
+    if not comments or not comments[0].startswith("# config_hash="):
+        raise ValueError(f"{path}: first line should be '# config_hash=...', got {(comments or [line])[0]!r}")
+    h = comments[0].split("=", 1)[1]
     if robot_cfg is not None or data_cfg is not None:
         _check_hash(h, robot_cfg, data_cfg, path)
-    table = np.loadtxt(path, delimiter=",", skiprows=2, dtype=np.float64, ndmin=2)
+    table = np.loadtxt(path, delimiter=",", skiprows=len(comments) + 1, dtype=np.float64, ndmin=2)
     return h, names, table

@@ -1,12 +1,17 @@
 """Export the exemplar and test sets (npz + full-precision CSVs), composed exactly as training composes them.
 
-    selpres-export [--out STEM] [robot.KEY=VALUE ...] [data.KEY=VALUE ...]
+    selpres-export [--out STEM] [--urdf PATH] [robot=NAME] [data=NAME] [robot.KEY=VALUE ...]
+                   [data.KEY=VALUE ...]
     python -m selpres.export --help
 
 The robot and data configs come from ``configs/train.yaml`` with the same schema and defaults as
 ``python train.py`` (``data.test_seed`` included), so ``selpres.data.load_exported(path, cfg.robot,
-cfg.data)`` of a training config accepts the files it matches and refuses any other. Also prints the
-scaled target ranges of both scaling modes (why ``exemplar`` is the default).
+cfg.data)`` of a training config accepts the files it matches and refuses any other. The CSVs name
+their columns (``q1..qN, dq1..dqN, ddq1..ddqN, tau1..tauN`` for a sampled arm, ``k_fx..k_mz`` for a
+non-zero wrench; the paper's theta1, dtheta1, ... for its grid) and carry the arm (``# arm=`` its
+canonical description). ``--urdf PATH`` also writes the arm as a URDF, so other tools (Pinocchio, MuJoCo,
+``robot=urdf``) load exactly the dynamics selpres simulates. Also prints the scaled target ranges of both
+scaling modes (why ``exemplar`` is the default).
 """
 
 from __future__ import annotations
@@ -20,41 +25,61 @@ import torch
 from omegaconf import OmegaConf
 
 from selpres import data as D
-from selpres.checks import validate
+from selpres.checks import check_task
 from selpres.config import CONFIG_DIR, to_container
 from selpres.errors import ConfigError
-from selpres.robot import TwoLinkArm
+from selpres.robot import TwoLinkArm, make_arm
+from selpres.task import load_task
+from selpres.urdf import to_urdf
 
 
 def compose_data_config(overrides: list[str]):
-    """(robot, data) of train.py's config with ``robot.*`` / ``data.*`` overrides, validated."""
+    """(robot, data) of train.py's config with ``robot``/``data`` overrides, checked (not the topology)."""
     from hydra import compose, initialize_config_dir
 
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         cfg = compose("train", overrides=overrides)
-    validate(cfg)
+    check_task(cfg)
     return OmegaConf.create(to_container(cfg.robot)), OmegaConf.create(to_container(cfg.data))
 
 
-def export_data(stem: Path, robot_cfg, data_cfg) -> dict[str, Path]:
-    arm = TwoLinkArm.from_config(robot_cfg)
+def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> dict[str, Path]:
+    """Write the task's sets (and, with ``urdf``, the arm) and print what was written."""
     t0 = time.perf_counter()
-    ex = D.build_exemplar_set(arm, data_cfg)
+    task = load_task(robot_cfg, data_cfg)
     t1 = time.perf_counter()
-    tests = D.make_test_sets(arm, data_cfg, ex, data_cfg.test_seed)
-    t2 = time.perf_counter()
-    G = arm.gravity(torch.zeros(2, dtype=torch.float64))
-    print(f"robot {OmegaConf.to_container(robot_cfg)}  G(θ=0) = ({G[0]:.3f}, {G[1]:.3f}) Nm")
-    print(f"exemplar set: {len(ex)} of {ex.n_candidates} candidates ({t1 - t0:.3f} s); "
-          f"test10: {len(tests.test10)}, heldout: {len(tests.heldout)} ({t2 - t1:.3f} s)")
-    for k, name in enumerate(D.TARGET_NAMES):
-        print(f"  exemplar {name}: {ex.Y[:, k].min():.3f} .. {ex.Y[:, k].max():.3f} Nm")
+    ex, tests = task.exemplar, task.tests
+    if task.arm is not None:
+        arm = make_arm(robot_cfg)
+        G = arm.gravity(torch.zeros(arm.dof, dtype=torch.float64))
+        print(f"robot {arm.name} ({arm.dof} joints)  G(q=0) = ({', '.join(f'{g:.3f}' for g in G)}) Nm")
+    info = task.info
+    kept = f" of {info['candidates']:,} candidates" if "candidates" in info else ""
+    print(f"exemplar set: {len(ex):,}{kept} ({info['source']}; {t1 - t0:.3f} s); "
+          f"test10: {len(tests.test10)}, heldout: {len(tests.heldout):,}")
+    for k, name in enumerate(task.output_names):
+        print(f"  exemplar {name}: {ex.Y[:, k].min():.3f} .. {ex.Y[:, k].max():.3f}")
     for mode in ("exemplar", "commanded"):
-        s = D.Scaler.fit(ex, OmegaConf.merge(data_cfg, {"scaling": {"mode": mode}}))
+        try:
+            s = task.fit_scaler(OmegaConf.merge(data_cfg, {"scaling": {"mode": mode}}))
+        except ConfigError as e:
+            print(f"  scaling.mode={mode:9s} not available: {e.allowed}")
+            continue
         ys = s.transform_y(ex.Y)
-        rng = ", ".join(f"{n} [{ys[:, k].min():.3f}, {ys[:, k].max():.3f}]" for k, n in enumerate(D.TARGET_NAMES))
+        rng = ", ".join(f"{n} [{ys[:, k].min():.3f}, {ys[:, k].max():.3f}]"
+                        for k, n in enumerate(task.output_names))
         print(f"  scaling.mode={mode:9s} scaled exemplar targets: {rng}")
-    paths = D.export(stem, ex, tests, robot_cfg, data_cfg)
+    paths = {}
+    if urdf is not None:  # first: a refusal here leaves nothing written
+        if task.arm is None:
+            raise ConfigError("--urdf", str(urdf), "an arm to write: data=file has none")
+        arm = make_arm(robot_cfg)
+        try:
+            paths["urdf"] = to_urdf(arm.as_serial() if isinstance(arm, TwoLinkArm) else arm, urdf)
+        except ValueError as e:
+            raise ConfigError("--urdf", str(urdf), f"an arm URDF can name: {e}") from None
+    paths.update(D.export(stem, ex, tests, robot_cfg, data_cfg, input_names=task.input_names,
+                          target_names=task.output_names, arm=task.arm, wrench=task.wrench))
     print(f"config_hash={D.config_hash(robot_cfg, data_cfg)}  (robot + data, test_seed={data_cfg.test_seed})")
     for p in paths.values():
         print(f"  wrote {p}")
@@ -62,8 +87,10 @@ def export_data(stem: Path, robot_cfg, data_cfg) -> dict[str, Path]:
 
 
 def _override(text: str) -> str:
-    if "=" not in text or not text.startswith(("robot.", "data.")):
-        raise argparse.ArgumentTypeError(f"{text!r} is not allowed here: expected robot.KEY=VALUE or data.KEY=VALUE")
+    key = text.split("=", 1)[0]
+    if "=" not in text or not (key in ("robot", "data") or key.startswith(("robot.", "data."))):
+        raise argparse.ArgumentTypeError(f"{text!r} is not allowed here: expected robot=NAME, data=NAME, "
+                                         "robot.KEY=VALUE or data.KEY=VALUE")
     return text
 
 
@@ -72,10 +99,12 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog=__doc__.split("\n\n", 2)[2])
     ap.add_argument("overrides", nargs="*", type=_override, metavar="KEY=VALUE",
-                    help="robot.* or data.* overrides, as for train.py")
+                    help="robot=NAME, data=NAME, robot.* or data.* overrides, as for train.py")
     ap.add_argument("--out", type=Path, default=Path("outputs/data/exemplar"),
                     help="output stem: writes STEM.npz and STEM_{exemplar,test10,heldout}.csv "
                          "(default: %(default)s)")
+    ap.add_argument("--urdf", type=Path, default=None, metavar="PATH",
+                    help="also write the arm as a URDF file (load it with robot=urdf robot.path=PATH)")
     args = ap.parse_args(argv)
     try:
         robot_cfg, data_cfg = compose_data_config(args.overrides)
@@ -83,7 +112,10 @@ def main(argv: list[str] | None = None) -> int:
         ap.exit(2, f"error: {e}\n")
     except Exception as e:  # noqa: BLE001  Hydra's own message (unknown key, wrong type), without a traceback
         ap.exit(2, f"error: {e}\n")
-    export_data(args.out, robot_cfg, data_cfg)
+    try:
+        export_data(args.out, robot_cfg, data_cfg, args.urdf)
+    except ConfigError as e:  # raised while making the data, before anything is written
+        ap.exit(2, f"error: {e}\n")
     return 0
 
 

@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from selpres.errors import ConfigError
+from selpres.partition import strata, unit_cube
 
 ORDERS = ("stratified", "random", "coverage")
 COVERAGE_EXACT_MAX = 20_000  # exact greedy up to here: O(n^2) time (~a few s at 2e4), O(n) memory
@@ -39,20 +40,6 @@ LEVEL1_WORK = 10**8  # two-level approximation: first-level centres K = max(sqrt
 _MATRIX_MAX = 2048  # up to here the exact greedy looks distances up in the n x n matrix (<= 32 MB)
 _BATCH = 2**20  # replicas ordered together: about this many distances per step ([replicas, n] float64)
 _CHUNK = 2**16  # second level: cells run in lockstep, about this many padded points per chunk
-
-
-def unit_cube(X: torch.Tensor) -> torch.Tensor:
-    """Every input column mapped onto [0, 1] by U's own range (a constant column onto 0)."""
-    lo, hi = X.min(0).values, X.max(0).values
-    width = torch.where(hi > lo, hi - lo, torch.ones_like(hi))
-    return (X - lo) / width
-
-
-def strata(X: torch.Tensor, bins: int) -> torch.Tensor:
-    """Stratum id of every pattern: ``bins`` equal-width bins per input column over U's own range."""
-    cell = (unit_cube(X) * bins).floor().clamp_(0, bins - 1).long()
-    radix = bins ** torch.arange(X.shape[1] - 1, -1, -1)
-    return (cell * radix).sum(1)
 
 
 def priority_order(X: torch.Tensor, kind: str, gen: torch.Generator, bins: int = 2) -> torch.Tensor:

@@ -14,20 +14,23 @@ from pathlib import Path
 from omegaconf import DictConfig
 
 from selpres.config import to_container
+from selpres.datafile import file_digest
 from selpres.stats import summarize
 from selpres.storage import stable_hash
 
 NOT_IDENTITY = ("logging", "overwrite", "threads", "checkpoint", "name")
 SETS = ("test10", "heldout")
 UNITS = ("nm", "scaled")
-JOINTS = ("overall", "tau1", "tau2")
 
 
 def job_hash(cfg: DictConfig) -> str:
-    """Identity of a job's numbers: everything but the knobs that cannot change them."""
+    """Identity of a job's numbers: everything but the knobs that cannot change them, and the contents of the
+    files it reads (``robot.path``, ``data.path``), so an edited URDF or CSV is not taken for the finished job."""
     c = to_container(cfg)
     for k in NOT_IDENTITY:
         c.pop(k, None)
+    files = [c[g].get("path") for g in ("robot", "data")]
+    c["file_sha256"] = [file_digest(p) if isinstance(p, str) and Path(p).is_file() else None for p in files]
     return stable_hash(c)
 
 
@@ -46,10 +49,11 @@ def replica_results(seeds: list[int], final: dict, diverged_at: list, last_train
 
 
 def summary(replicas: list[dict]) -> dict:
-    """mean / std / 95 % interval over complete replicas of every final metric."""
+    """mean / std / 95 % interval over complete replicas of every final metric (overall, tau1..tauK)."""
+    joints = list(replicas[0]["final"]["heldout"]["nm"]) if replicas else []
     return {
         f"{name}_rms_{unit}_{joint}": summarize(rep["final"][name][unit][joint] for rep in replicas)
-        for name in SETS for unit in UNITS for joint in JOINTS
+        for name in SETS for unit in UNITS for joint in joints
     }
 
 
@@ -78,6 +82,8 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "tests": {"test10": {"n": int(prob.tests["test10"][0].shape[0])},
                   "heldout": {"n": heldout_n, "curve_n": min(cfg.eval.heldout_curve, heldout_n)},
                   "heldout_curve_every": cfg.eval.every},
+        "data": prob.task.info if prob.task is not None else None,  # what data was made, how, its hash
+        "schedule_note": prob.schedule_note,  # how a named schedule's counts were applied to this n
         "resumed_from_epoch": progress.resumed_from,
         "stale_checkpoint": progress.stale_checkpoint,
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),

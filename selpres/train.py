@@ -28,16 +28,18 @@ from selpres.batch_engine import BatchEngine
 from selpres.checkpoint import Checkpoints, Progress
 from selpres.checks import batch_mode, optim_hparams, validate
 from selpres.config import to_container
+from selpres.datafile import DataFileError
 from selpres.engine import make_engine
 from selpres.errors import ConfigError
 from selpres.model import init_replica_params
 from selpres.orders import priority_orders
+from selpres.proportions import fit_schedule, with_fraction_form
 from selpres.sampler import SelectivePresentationSampler, epoch_orders
 from selpres.schedule import EpochPlan, Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
 from selpres.selection import StageSelection, initial_kind, stage_selection
 from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
-from selpres.task import load_task
+from selpres.task import Task, load_task
 from selpres.tracking import Tracker
 
 log = logging.getLogger("selpres")
@@ -57,6 +59,8 @@ class Problem:
     samplers: list[SelectivePresentationSampler]
     init_params: list[torch.Tensor]
     selection: StageSelection | None = None  # loss_high/loss_low/reselect: A_k chosen at each stage start
+    task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
+    schedule_note: str | None = None  # how a named schedule's counts were applied to this n (None: as given)
 
     @functools.cached_property
     def plan(self) -> list[EpochPlan]:
@@ -81,8 +85,7 @@ def prepare(cfg: DictConfig) -> Problem:
     """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
     sizes = validate(cfg)
     task = load_task(cfg.robot, cfg.data)
-    sch = to_container(cfg.schedule)
-    schedule = build_schedule(sch["sizes"], sch["epochs"], task.n, sch["budget"])
+    schedule, note = task_schedule(cfg, task)
     seeds = [cfg.seed + r for r in range(cfg.replicas)]
     kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
     gens = [generator(s, "subset") for s in seeds]
@@ -94,7 +97,27 @@ def prepare(cfg: DictConfig) -> Problem:
         samplers=samplers, init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
         selection=stage_selection(kind, schedule, seeds, task.exemplar.X, bins, X, Y,
                                   cfg.schedule.selection_cost, samplers),
+        task=task, schedule_note=note,
     )
+
+
+def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
+    """The schedule on the task's n: the paper's counts by their proportions when n is not 1002
+    (``selpres.proportions``, logged), refusals with the fraction form, and a data file too short for
+    the schedule named as such."""
+    sch = to_container(cfg.schedule)
+    sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
+    if note:
+        log.info(note)
+    try:
+        return build_schedule(sizes, sch["epochs"], task.n, budget), note
+    except ConfigError as e:
+        if e.key == "schedule.sizes" and task.info.get("kind") == "file":
+            i = task.info
+            raise DataFileError(i["path"], "rows", f"{i['rows']:,} rows ({task.n:,} for training after "
+                                f"holding out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} "
+                                f"({e.allowed})") from None
+        raise with_fraction_form(e, sizes) from None
 
 
 def job_engine(cfg: DictConfig, prob: Problem):
@@ -182,7 +205,7 @@ def final_scores(engine, prob: Problem) -> dict:
         for unit, weight in (("nm", prob.nm_per_scaled.square()), ("scaled", torch.ones_like(prob.nm_per_scaled))):
             per_joint = (sums * weight).div(n).sqrt()
             scores[unit] = {"overall": (sums * weight).sum(1).div(n * sums.shape[1]).sqrt(),
-                            **{joint: per_joint[:, k] for k, joint in enumerate(results_json.JOINTS[1:])}}
+                            **{joint: per_joint[:, k] for k, joint in enumerate(D.metric_names(sums.shape[1])[1:])}}
         out[name] = scores
     return out
 

@@ -38,6 +38,7 @@ from selpres.serial import (
     matrix_rpy,
     rpy_matrix,
 )
+from selpres.storage import atomic_write
 
 log = logging.getLogger(__name__)
 MOVING = ("revolute", "continuous")
@@ -388,5 +389,5 @@ def to_urdf(arm: SerialArm, path: str | Path) -> Path:
         joint(f"{parent}_to_{arm.tip}", "fixed", parent, arm.tip, arm.end_point, ZERO3)
         ET.SubElement(robot, "link", name=arm.tip)
     ET.indent(robot)
-    ET.ElementTree(robot).write(path, encoding="utf-8", xml_declaration=True)
+    atomic_write(path, lambda f: ET.ElementTree(robot).write(f, encoding="utf-8", xml_declaration=True))
     return path

@@ -12,7 +12,10 @@ CONFIGS = REPO / "configs"
 
 
 def load_group(group: str, option: str):
-    return OmegaConf.load(CONFIGS / group / f"{option}.yaml")
+    """A group file's own values (its Hydra ``defaults`` list, which picks other groups, left out)."""
+    cfg = OmegaConf.load(CONFIGS / group / f"{option}.yaml")
+    cfg.pop("defaults", None)
+    return cfg
 
 
 @pytest.fixture(scope="session")

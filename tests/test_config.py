@@ -11,7 +11,7 @@ from selpres.checks import validate
 from selpres.config import EngineName, TrainConfig
 from selpres.errors import ConfigError
 
-from conftest import CONFIGS
+from conftest import CONFIGS, compose
 
 SMALL = ("data.heldout=200",)  # held-out set size does not change what is checked; keeps prepare() fast
 # (SMALL goes first in every override list, so a test's own data.heldout=... wins)
@@ -44,17 +44,49 @@ def test_defaults_are_the_paper_setup(compose_cfg):
     assert validate(cfg) == (6, 13, 2)
 
 
+@pytest.fixture(scope="module")
+def user_files(tmp_path_factory):
+    """A URDF (planar3 exported) for robot=urdf and a small CSV for data=file."""
+    import numpy as np
+
+    from selpres.robot import make_arm
+    from selpres.urdf import to_urdf
+
+    folder = tmp_path_factory.mktemp("user")
+    to_urdf(make_arm(compose("robot=planar3", "topology.layers=9-13-3").robot), folder / "arm.urdf")
+    rows = np.random.default_rng(0).uniform(-1, 1, (1500, 4))
+    np.savetxt(folder / "data.csv", rows, delimiter=",", header="a,b,c,y", comments="")
+    return {"urdf": folder / "arm.urdf", "csv": folder / "data.csv"}
+
+
+def companions(group: str, option: str, files: dict) -> list[str]:
+    """Overrides an option needs to run: an arm other than the paper's samples its data and takes a
+    network of its width; a user file needs its path and columns."""
+    return {
+        ("robot", "planar3"): ["data=sampled", "topology.layers=9-13-3"],
+        ("topology", "9-13-3"): ["robot=planar3"],  # its file picks data=sampled
+        ("topology", "18-40-6"): ["robot=puma560", "data.n=2000"],
+        ("robot", "puma560"): ["data=sampled", "topology.layers=18-40-6"],
+        ("robot", "urdf"): [f"robot.path={files['urdf']}", "data=sampled", "topology.layers=9-13-3"],
+        ("data", "file"): [f"data.path={files['csv']}", "data.inputs=[a,b,c]", "data.outputs=[y]",
+                           "topology.layers=3-5-1"],
+    }.get((group, option), [])
+
+
 @pytest.mark.parametrize("group, option", OPTIONS, ids=[f"{g}={o}" for g, o in OPTIONS])
-def test_every_option_composes_validates_and_prepares(compose_cfg, group, option):
+def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, group, option):
     from selpres.train import prepare
 
-    cfg = compose_cfg(*SMALL, f"{group}={option}")
+    extra = companions(group, option, user_files)
+    cfg = compose_cfg(*SMALL, f"{group}={option}", *extra)
     assert isinstance(cfg, DictConfig)
     sizes = validate(cfg)
-    assert sizes[0] == 6 and sizes[-1] == 2
     prob = prepare(cfg)
     n = prob.X.shape[0]
-    assert n == 1002  # every shipped option keeps the paper's exemplar set
+    assert (sizes[0], sizes[-1]) == (len(prob.task.input_names), len(prob.task.output_names)) == \
+        (prob.X.shape[1], prob.Y.shape[1])
+    if cfg.data.kind.value == "grid":
+        assert n == 1002 and sizes[0] == 6 and sizes[-1] == 2  # the paper's exemplar set
     assert prob.schedule.n == n and prob.schedule.sizes[-1] == n
     assert len(prob.samplers) == len(prob.seeds) == cfg.replicas
     if group == "schedule":
@@ -79,9 +111,14 @@ def test_experiments_are_multirun_sweeps(compose_cfg, option):
     assert cfg.hydra.mode == RunMode.MULTIRUN
     params = cfg.hydra.sweeper.params
     assert params, "an experiment should sweep something"
+    if "BasicSweeper" not in str(cfg.hydra.sweeper.get("_target_", "")):
+        return  # an Optuna search space (interval, choice): tests/test_search.py checks experiment=search
     for group, values in params.items():
         for v in str(values).split(","):
-            assert v in _options(group), f"experiment {option} sweeps unknown {group}={v}"
+            if (CONFIGS / group).is_dir():  # a group: its options
+                assert v in _options(group), f"experiment {option} sweeps unknown {group}={v}"
+            else:  # a key: every value composes and validates (the topology must fit the task)
+                validate(compose_cfg(f"experiment={option}", f"{group}={v}"))
     assert str(cfg.hydra.sweep.dir).startswith("outputs/")  # not Hydra's default multirun/
 
 

@@ -41,10 +41,12 @@ def _data(**over):
 
 def test_data_config_has_exactly_the_agreed_keys():
     assert set(DATA_CFG.keys()) == {
-        "theta", "dtheta", "tau1", "tau2", "accel_limit", "test_patterns", "test_from_exemplar", "heldout", "test_seed", "scaling",
+        "kind", "theta", "dtheta", "tau1", "tau2", "accel_limit", "test_patterns", "test_from_exemplar",
+        "heldout", "test_seed", "scaling",
     }
+    assert DATA_CFG.kind == "grid" and ROBOT_CFG.kind == "two_link"
     assert set(DATA_CFG.scaling.keys()) == {"mode", "margin", "lo", "hi"}
-    assert set(ROBOT_CFG.keys()) == {"m1", "m2", "l1", "l2", "g"}
+    assert set(ROBOT_CFG.keys()) == {"kind", "m1", "m2", "l1", "l2", "g"}
 
 
 # ------------------------------------------------------------------------------------------ grid

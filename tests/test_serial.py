@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import pytest
 import torch
@@ -21,13 +20,14 @@ from selpres.errors import ConfigError
 from selpres.robot import TwoLinkArm
 from selpres.serial import Link, SerialArm
 
+from conftest import load_group
+
 D = torch.float64
-CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "robot"
 PAPER = dict(m1=0.42, m2=3.0, l1=0.2, l2=0.26, g=9.81)
 
 
 def load(name: str) -> SerialArm:
-    return SerialArm.from_config(OmegaConf.load(CONFIGS / f"{name}.yaml"))
+    return SerialArm.from_config(load_group("robot", name))
 
 
 # ----------------------------------------------------------------------------------- independent reference
@@ -183,10 +183,10 @@ def test_two_link_comparison_detects_a_different_arm():
 
 def test_planar3_without_its_hand_is_the_papers_arm():
     """planar3's links 1-2 are configs/robot/two_link.yaml: with m3 = 0 its first two torques are eq. (6)."""
-    spec = OmegaConf.to_container(OmegaConf.load(CONFIGS / "planar3.yaml"))
+    spec = OmegaConf.to_container(load_group("robot", "planar3"))
     spec["links"][2]["mass"] = 0.0
     arm = SerialArm.from_config(spec)
-    paper = TwoLinkArm.from_config(OmegaConf.load(CONFIGS / "two_link.yaml"))
+    paper = TwoLinkArm.from_config(load_group("robot", "two_link"))
     q, qd, qdd, _ = states(512, 3, seed=3)
     tau = arm.inverse_dynamics(q, qd, qdd)
     assert (tau[:, :2] - paper.inverse_dynamics(q[:, :2], qd[:, :2], qdd[:, :2])).abs().max() <= 1e-12
@@ -380,7 +380,7 @@ def test_config_round_trip():
 
 
 def _planar3_with(path: tuple, value):
-    spec = OmegaConf.to_container(OmegaConf.load(CONFIGS / "planar3.yaml"))
+    spec = OmegaConf.to_container(load_group("robot", "planar3"))
     node = spec
     for key in path[:-1]:
         node = node[key]

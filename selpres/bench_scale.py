@@ -1,0 +1,150 @@
+"""Speed at scale (issue 11, item 9), every row measured side by side in one run.
+
+    python -m selpres.bench_scale            # about a minute on an idle 2-core machine
+    python -m selpres.bench_scale --quick    # fewer repeats and presentations
+
+Rows:
+
+* exemplar generation: 10^6 patterns of the PUMA 560 (the 6-joint arm of ``configs/robot/puma560.yaml``)
+  through ``selpres.sampling`` (route inverse: q, q̇, q̈ drawn, τ by Newton-Euler), Sobol and uniform
+  points, and the two-link arm for comparison. Target: <= 5 s.
+* engine throughput: presentations per second of the training engine (``engine=fast``) for one topology
+  and R, on exemplar sets of n = 10^3, 10^5 and 10^6 patterns, the same number of presentations each
+  (random indices into the set, as a shuffled epoch presents them). Large sets leave the caches, so the
+  ratio to n = 10^3 is the figure of merit. Target: within 25 %. The sizes are interleaved over the
+  repeats (ABCABC...) and the median taken, so a load change on a shared machine hits every size alike.
+
+The load average before and after is printed: on a busy machine every row is slower, the ratios less so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from selpres.config import CONFIG_DIR
+
+GENERATION_N = 1_000_000
+ENGINE_SIZES = (1_000, 100_000, 1_000_000)
+TOPOLOGY, REPLICAS = (18, 40, 6), 4
+
+
+def _load() -> str:
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:  # pragma: no cover
+        return "n/a"
+
+
+def generation_rows(repeats: int) -> list[dict]:
+    """Seconds to draw 10^6 patterns (median of ``repeats``), per arm and kind of points."""
+    from selpres import sampling as S
+    from selpres.bench import compose_train
+    from selpres.robot import make_arm
+
+    rows = []
+    for robot, draw in (("puma560", "sobol"), ("puma560", "uniform"), ("two_link", "sobol")):
+        arm = make_arm(compose_train(CONFIG_DIR, [f"robot={robot}"]).robot)
+        data = {
+            "route": "inverse",
+            "q": None,
+            "dq": [-1.0, 1.0],
+            "accel_limit": 2.0,
+            "tau": None,
+            "wrench": None,
+        }
+        box = S.boxes(arm, data)
+        times = []
+        for r in range(repeats):
+            t0 = time.perf_counter()
+            drawn = S.sample(arm, box, "inverse", S.Points(draw, 3 * arm.dof, r), GENERATION_N)
+            times.append(time.perf_counter() - t0)
+        assert drawn.tau.shape == (GENERATION_N, arm.dof)
+        rows.append(
+            {"arm": robot, "points": draw, "patterns": GENERATION_N, "seconds": statistics.median(times)}
+        )
+    return rows
+
+
+def engine_rows(repeats: int, presentations: int) -> list[dict]:
+    """Presentations per second of engine=fast at each n (same topology, R and number of presentations)."""
+    from selpres.engine import make_engine
+    from selpres.model import init_replica_params
+
+    gen = torch.Generator().manual_seed(0)
+    sets = {
+        n: (
+            torch.rand(n, TOPOLOGY[0], dtype=torch.float64, generator=gen),
+            0.1 + 0.8 * torch.rand(n, TOPOLOGY[-1], dtype=torch.float64, generator=gen),
+        )
+        for n in ENGINE_SIZES
+    }
+    orders = {n: torch.randint(n, (REPLICAS, presentations), generator=gen) for n in ENGINE_SIZES}
+    params = init_replica_params(TOPOLOGY, list(range(REPLICAS)))
+    times: dict[int, list[float]] = {n: [] for n in ENGINE_SIZES}
+    name = None
+    for _ in range(repeats):
+        for n in ENGINE_SIZES:  # interleaved: a load change hits every size alike
+            engine = make_engine("fast", TOPOLOGY, [p.clone() for p in params], 0.01, 0.9, 1)
+            name = engine.name
+            X, Y = sets[n]
+            t0 = time.perf_counter()
+            engine.train_epoch(X, Y, orders[n])
+            times[n].append(time.perf_counter() - t0)
+    base = statistics.median(times[ENGINE_SIZES[0]])
+    return [
+        {
+            "n": n,
+            "engine": name,
+            "topology": "-".join(map(str, TOPOLOGY)),
+            "replicas": REPLICAS,
+            "presentations": presentations * REPLICAS,
+            "presentations_per_s": presentations * REPLICAS / statistics.median(t),
+            "time_ratio_to_n_1e3": statistics.median(t) / base,
+        }
+        for n, t in times.items()
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m selpres.bench_scale",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=__doc__.split("\n\n", 2)[2],
+    )
+    ap.add_argument("--quick", action="store_true", help="fewer repeats and presentations")
+    ap.add_argument("--json", type=Path, default=None, help="also write the rows to this JSON file")
+    args = ap.parse_args(argv)
+    repeats, presentations = (2, 100_000) if args.quick else (5, 400_000)
+    print(f"load average before: {_load()}  (torch threads {torch.get_num_threads()})")
+    gen = generation_rows(max(1, repeats - 2))
+    print(f"\nexemplar generation, {GENERATION_N:,} patterns (route inverse; target <= 5 s):")
+    for r in gen:
+        print(f"  {r['arm']:9s} {r['points']:8s} {r['seconds']:6.2f} s")
+    eng = engine_rows(repeats, presentations)
+    print(
+        f"\nengine throughput, topology {eng[0]['topology']}, R = {REPLICAS}, engine {eng[0]['engine']}, "
+        f"{eng[0]['presentations']:,} presentations per measurement "
+        "(target: n = 1e5, 1e6 within 25 % of 1e3):"
+    )
+    for r in eng:
+        print(
+            f"  n = {r['n']:>9,}  {r['presentations_per_s']:12,.0f} presentations/s  "
+            f"time x{r['time_ratio_to_n_1e3']:.2f} of n = 1e3"
+        )
+    print(f"\nload average after: {_load()}")
+    if args.json is not None:
+        args.json.write_text(json.dumps({"generation": gen, "engine": eng, "load": _load()}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,230 @@
+"""The user's own data (issue 11, item 7): a table of patterns in a CSV or ``.npz`` file.
+
+    python train.py data=file data.path=my.csv 'data.inputs=[q1,dq1,ddq1]' 'data.outputs=[tau1]'
+
+CSV: comma-separated, one header row naming the columns (names unique), then one pattern per line;
+lines starting with ``#`` before the header are skipped (so ``selpres-export``'s own CSVs load as they
+are). ``.npz``: one 1-D numeric array per column, named by the column; or a 2-D array ``table`` with a
+string array ``columns`` naming its columns. ``data.inputs`` and ``data.outputs`` pick columns, in the
+order the network reads and predicts them.
+
+Every problem is a :class:`DataFileError` (a ConfigError: ``python train.py`` prints one line and exits 2
+before writing anything) naming the file, the column and the row: a missing column (the columns the
+file has are listed), a duplicate header name, a cell that is not a number, NaN or ±inf, a row with too
+few or too many cells, too few rows for the held-out split or the schedule. CSV rows are named by
+their line number in the file, so an editor finds them.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from selpres.errors import ConfigError
+
+NPZ_TABLE, NPZ_COLUMNS = "table", "columns"
+
+
+class DataFileError(ConfigError):
+    """A data file selpres cannot train on: one line naming the file, where (column, row) and the problem."""
+
+    def __init__(self, path: str | Path, where: str, problem: str):
+        self.path, self.where, self.problem = str(path), where, problem
+        self.key, self.value, self.allowed = f"{path}: {where}", None, problem
+        ValueError.__init__(self, f"{path}: {where}: {problem}")
+
+    def __reduce__(self):
+        return type(self), (self.path, self.where, self.problem)
+
+
+def _path(path: str | Path | None) -> Path:
+    if not isinstance(path, (str, Path)) or not str(path) or str(path) == "???":
+        raise ConfigError("data.path", path, "the CSV or .npz file to train on (data=file data.path=my.csv)")
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise DataFileError(p, "file", "not found (data.path must name a CSV or .npz file)")
+    return p
+
+
+def file_digest(path: str | Path) -> str:
+    """sha256 of the file's bytes: a data file's identity (its path is not)."""
+    h = hashlib.sha256()
+    with open(_path(path), "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+# ------------------------------------------------------------------------------------------------- CSV
+def _csv_header(path: Path) -> tuple[int, list[str]]:
+    """(1-based line number of the header, its names)."""
+    with open(path, newline="") as f:
+        for number, line in enumerate(f, 1):
+            if line.strip() and not line.lstrip().startswith("#"):
+                return number, [c.strip() for c in next(csv.reader([line]))]
+    raise DataFileError(
+        path, "header", "no header row (the first line that is not a '#' comment names the columns)"
+    )
+
+
+def _npz_columns(path: Path) -> dict[str, np.ndarray]:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError) as e:
+        raise DataFileError(path, "file", f"not a readable .npz ({e})") from None
+    if NPZ_TABLE in arrays:
+        table, names = arrays[NPZ_TABLE], arrays.get(NPZ_COLUMNS)
+        if names is None or names.ndim != 1 or table.ndim != 2 or len(names) != table.shape[1]:
+            raise DataFileError(
+                path,
+                f"array {NPZ_TABLE!r}",
+                f"a 2-D table needs a 1-D string array {NPZ_COLUMNS!r} naming each of its columns",
+            )
+        names = [str(n) for n in names]
+        _no_duplicates(path, names)
+        return {n: table[:, i] for i, n in enumerate(names)}
+    for k, v in arrays.items():
+        if v.ndim != 1:
+            raise DataFileError(
+                path,
+                f"array {k!r}",
+                f"has shape {v.shape}: expected one 1-D array per column "
+                f"(or a 2-D {NPZ_TABLE!r} with {NPZ_COLUMNS!r})",
+            )
+    return arrays
+
+
+def _no_duplicates(path: Path, names: list[str]) -> None:
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if name in seen:
+            raise DataFileError(
+                path,
+                f"column {name!r}",
+                f"named twice in the header (columns {seen[name] + 1} "
+                f"and {i + 1}): every column needs its own name",
+            )
+        seen[name] = i
+
+
+def columns(path: str | Path | None) -> tuple[str, ...]:
+    """The column names a data file holds (reads only its header for a CSV)."""
+    p = _path(path)
+    if p.suffix.lower() == ".npz":
+        return tuple(_npz_columns(p))
+    _, names = _csv_header(p)
+    _no_duplicates(p, names)
+    return tuple(names)
+
+
+def check_columns(path: str | Path | None, inputs, outputs) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(inputs, outputs) checked against the file's header: present, not empty, not overlapping."""
+    have = columns(path)
+    picked = {}
+    for key, names in (("data.inputs", inputs), ("data.outputs", outputs)):
+        if not names or not all(isinstance(n, str) for n in names):
+            raise ConfigError(
+                key,
+                None if names is None else list(names),
+                f"a non-empty list of column names of {path} (it has {list(have)})",
+            )
+        for n in names:
+            if n not in have:
+                raise DataFileError(
+                    path, f"column {n!r} ({key})", f"not in the file: its columns are {list(have)}"
+                )
+        dup = sorted({n for n in names if list(names).count(n) > 1})
+        if dup:
+            raise ConfigError(key, list(names), f"each column once ({dup[0]!r} is listed twice)")
+        picked[key] = tuple(names)
+    both = sorted(set(picked["data.inputs"]) & set(picked["data.outputs"]))
+    if both:
+        raise ConfigError(
+            "data.outputs", list(outputs), f"columns that are not also inputs ({both[0]!r} is both)"
+        )
+    return picked["data.inputs"], picked["data.outputs"]
+
+
+def _parse_csv(path: Path, wanted: list[str]) -> np.ndarray:
+    """The wanted columns as float64 ``[rows, len(wanted)]``; errors name the column and the line."""
+    header_line, names = _csv_header(path)
+    index = [names.index(n) for n in wanted]
+    with open(path, newline="") as f:
+        body = [line for line in f.read().splitlines()[header_line:] if line.strip()]
+    if not body:
+        return np.empty((0, len(wanted)))
+    commas = len(names) - 1
+    if all(line.count(",") == commas for line in body) and not any('"' in line for line in body):
+        try:  # fast path: numpy's parser; on any complaint, the careful pass below says where
+            table = np.loadtxt(body, delimiter=",", usecols=index, dtype=np.float64, ndmin=2, comments=None)
+            if np.isfinite(table).all():
+                return table.reshape(-1, len(wanted))
+        except ValueError:
+            pass
+    out = np.empty((0, len(wanted)))
+    values: list[list[float]] = []
+    with open(path, newline="") as f:
+        for number, row in enumerate(csv.reader(f), 1):
+            if number <= header_line or not any(cell.strip() for cell in row):
+                continue
+            if len(row) != len(names):
+                raise DataFileError(
+                    path, f"line {number}", f"has {len(row)} cells, the header names {len(names)}"
+                )
+            parsed = []
+            for col, i in zip(wanted, index):
+                cell = row[i].strip()
+                try:
+                    v = float(cell)
+                except ValueError:
+                    raise DataFileError(
+                        path, f"column {col!r}, line {number}", f"{cell!r} is not a number"
+                    ) from None
+                if not math.isfinite(v):
+                    raise DataFileError(
+                        path,
+                        f"column {col!r}, line {number}",
+                        f"{cell!r}: NaN and inf are not allowed (drop or repair the row)",
+                    )
+                parsed.append(v)
+            values.append(parsed)
+    return np.array(values, dtype=np.float64).reshape(-1, len(wanted)) if values else out
+
+
+def _parse_npz(path: Path, wanted: list[str]) -> np.ndarray:
+    arrays = _npz_columns(path)
+    length = None
+    cols = []
+    for name in wanted:
+        a = arrays[name]
+        if a.dtype.kind not in "biuf":
+            raise DataFileError(path, f"column {name!r}", f"has dtype {a.dtype}: expected numbers")
+        if length is not None and len(a) != length:
+            raise DataFileError(
+                path, f"column {name!r}", f"has {len(a)} rows, column {wanted[0]!r} has {length}"
+            )
+        length = len(a)
+        bad = np.flatnonzero(~np.isfinite(a.astype(np.float64)))
+        if bad.size:
+            raise DataFileError(
+                path,
+                f"column {name!r}, row {int(bad[0])} (0-based)",
+                f"{a[bad[0]]!r}: NaN and inf are not allowed (drop or repair the row)",
+            )
+        cols.append(a.astype(np.float64))
+    return np.stack(cols, 1)
+
+
+def load_columns(path: str | Path, wanted: list[str]) -> torch.Tensor:
+    """The ``wanted`` columns of a CSV or .npz data file as float64 ``[rows, len(wanted)]``."""
+    p = _path(path)
+    table = _parse_npz(p, wanted) if p.suffix.lower() == ".npz" else _parse_csv(p, wanted)
+    if table.shape[0] == 0:
+        raise DataFileError(p, "rows", "none: the file has a header but no patterns")
+    return torch.from_numpy(np.ascontiguousarray(table))
