@@ -78,16 +78,26 @@ def test_total_cost_and_the_partner_of_the_confirmation_worked_by_hand():
     s = shaped_schedule(2, 0.1, 1.0, 0.0, 1000, 60_000, "loss_high", 1 / 3)
     assert search.total_cost(s, 1000, "loss_high", 1 / 3) == 60_050
     assert search.total_cost(s, 1000, "stratified", 1 / 3) == 59_600
-    staged, partner, target, report = search.confirmation_commands(HAND, 1000, "loss_high", 1 / 3)
+    commands = search.confirmation_commands([(HAND, "loss_high")], 1000, 1 / 3)
+    staged, partner, paper, paper_partner, target, report = commands
     run = "python train.py -m name=search-confirm seed=0 replicas=30 eval.every=1"
     assert staged == (f"{run} schedule.name=search schedule.order=loss_high 'schedule.sizes=[100,550,1000]' "
                       "'schedule.epochs=[198,36,20]' 'schedule.budget=null'")
     assert partner == f"{run} schedule=matched schedule.budget=60050"
+    assert paper == f"{run} schedule=selective"  # the paper's schedule and its partner, the reference
+    assert paper_partner == f"{run} schedule=matched schedule.budget=70560"
     assert target == f"{run} schedule=conventional"
     assert report == "python -m selpres.report outputs/sweeps/search-confirm"
     # p = 0 is conventional training cut to the budget: its own compute-matched partner
-    cut = search.confirmation_commands({**HAND, "search_p": "0"}, 1000, "random", 1 / 3)
-    assert len(cut) == 3 and "schedule=matched" not in " ".join(cut)
+    cut = search.confirmation_commands([({**HAND, "search_p": "0"}, "random")], 1000, 1 / 3)
+    assert "'schedule.budget=60000'" in cut[0] and cut[1:] == commands[2:]
+    # several schedules: loss_low's is loss_high's, so is its partner (run once); random pays no charge, so
+    # its epochs are those of test_a_schedule_worked_out_by_hand (200, 36, 20: 59,800 presentations)
+    best = [(HAND, "loss_high"), (HAND, "loss_low"), (HAND, "random")]
+    three = search.confirmation_commands(best, 1000, 1 / 3)
+    assert three[:3] == [staged, partner, staged.replace("loss_high", "loss_low")]
+    assert "schedule.order=random" in three[3] and "'schedule.epochs=[200,36,20]'" in three[3]
+    assert three[4] == f"{run} schedule=matched schedule.budget=59800" and three[5:] == commands[2:]
 
 
 def test_the_search_is_scored_on_a_validation_draw_and_confirmed_on_other_seeds():
@@ -164,8 +174,8 @@ def test_optuna_study_in_sqlite_runs_trials_as_jobs_and_resumes(tmp_path):
     assert 1 <= len(jobs) <= 3 and (tmp_path / "sweep" / "optimization_results.yaml").exists()
     # the confirmation: the best schedule's job, run as confirm.sh says, spends what its partner is given
     lines = (tmp_path / "sweep" / "confirm.sh").read_text().splitlines()
-    staged = next(x for x in lines if "schedule.name=search" in x)
-    partner = next((x for x in lines if "schedule=matched" in x), None)
+    at = next(i for i, x in enumerate(lines) if "schedule.name=search" in x)  # the best trial's schedule
+    staged, after = lines[at], lines[at + 1]
     best = study.best_trial
     assert f"schedule.order={best.params['schedule.order']}" in staged
     small = ["replicas=2", "data.heldout=300", "eval.heldout_curve=300", "logging.progress=false",
@@ -176,7 +186,7 @@ def test_optuna_study_in_sqlite_runs_trials_as_jobs_and_resumes(tmp_path):
     assert p.returncode == 0, p.stderr[-3000:]
     (res,) = [json.loads(f.read_text()) for f in (tmp_path / "confirm").glob("*/results.json")]
     assert res["seeds"] == [0, 1] and res["config"]["data"]["test_seed"] == 0
-    if partner is not None:
-        assert partner.endswith(f"schedule.budget={res['presentations_done']}")
-    else:
-        assert len(res["schedule"]["sizes"]) == 1
+    if len(res["schedule"]["sizes"]) > 1:  # its partner follows it, at what the job spent in all
+        assert after.endswith(f"schedule=matched schedule.budget={res['presentations_done']}")
+    else:  # p = 0: conventional cut to the budget, its own partner
+        assert "schedule=matched" not in after
