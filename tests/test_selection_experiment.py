@@ -36,31 +36,32 @@ CHARGE = 318 + 301 + 201 + 68  # 888
 
 
 def point_files() -> list[str]:
-    return sorted(f"selection/{p.stem}" for p in POINTS_DIR.glob("*.yaml"))
+    return sorted(p.stem for p in POINTS_DIR.glob("*.yaml"))
 
 
 def swept_points() -> list[str]:
     """The design points the experiment sweeps, as Hydra's override parser reads its list."""
-    value = OmegaConf.load(EXPERIMENT).hydra.sweeper.params.design
-    return list(OverridesParser.create().parse_overrides([f"design={value}"])[0].sweep_string_iterator())
+    value = OmegaConf.load(EXPERIMENT).hydra.sweeper.params["design/selection"]
+    override = OverridesParser.create().parse_overrides([f"design/selection={value}"])[0]
+    return list(override.sweep_string_iterator())
 
 
 def stated_cost(point: str) -> int:
     """The cost a point's file states on its line "# cost: N presentations"."""
-    text = (POINTS_DIR / f"{point.split('/', 1)[1]}.yaml").read_text()
+    text = (POINTS_DIR / f"{point}.yaml").read_text()
     (cost,) = re.findall(r"^# cost: ([\d,]+) presentations$", text, re.M)
     return int(cost.replace(",", ""))
 
 
 @functools.cache
 def composed(point: str):
-    return cfg_of("experiment=selection", f"design={point}")
+    return cfg_of("experiment=selection", f"design/selection={point}")
 
 
 def kind(point: str) -> str:
-    """What a point runs: an order, matched, matched_charged, or conventional ("selection/b25_loss_high" ->
+    """What a point runs: an order, matched, matched_charged, or conventional ("b25_loss_high" ->
     "loss_high")."""
-    return point.split("/")[1].split("_", 1)[-1]
+    return point.split("_", 1)[-1]
 
 
 POINTS = swept_points()
@@ -79,7 +80,7 @@ def test_every_point_file_is_swept_once_and_the_job_count_is_the_documented_one(
     assert sorted(POINTS) == point_files(), f"unswept: {sorted(set(point_files()) - set(POINTS))}"
     (documented,) = re.findall(r"^# Jobs: .* = (\d+)\.$", EXPERIMENT.read_text(), re.M)
     assert len(POINTS) * 3 == int(documented) == 75
-    staged = {p.split("/")[1] for p in POINTS if kind(p) in ORDERS}
+    staged = {p for p in POINTS if kind(p) in ORDERS}
     assert staged == {f"{b}_{o}" for b in TRAINING for o in ORDERS}  # every order at every budget
 
 
@@ -93,11 +94,10 @@ def test_the_budgets_are_a_quarter_47_and_75_percent_of_conventional_and_the_cha
 def expected_cost(point: str) -> int:
     """A point's cost worked out from its name alone: training by hand, plus 888 where a loss order (or its
     partner) pays for choosing; the paper's conventional run 150,300."""
-    name = point.split("/")[1]
-    if name == "conventional":
+    if point == "conventional":
         return CONVENTIONAL
-    budget, kind = name.split("_", 1)
-    return TRAINING[budget] + (CHARGE if kind in ("loss_high", "loss_low", "matched_charged") else 0)
+    budget, what = point.split("_", 1)
+    return TRAINING[budget] + (CHARGE if what in ("loss_high", "loss_low", "matched_charged") else 0)
 
 
 @pytest.mark.parametrize("point", POINTS)
@@ -143,13 +143,12 @@ def tiny(tmp_path_factory):
     picked = ["b25_stratified", "b25_matched", "b25_loss_high", "b25_matched_charged"]
     env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
     run = subprocess.run(
-        [sys.executable, "train.py", "experiment=selection",
-         "design=" + ",".join(f"selection/{p}" for p in picked),
+        [sys.executable, "train.py", "experiment=selection", "design/selection=" + ",".join(picked),
          "topology=6-4-2", "replicas=2", "data.heldout=200", "eval.heldout_curve=200",
          "logging.progress=false", f"hydra.sweep.dir={out / 'sweep'}"],
         cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-3000:]
-    jobs = {re.search(r"design=selection_([^,]+)", p.parent.name).group(1): json.loads(p.read_text())
+    jobs = {re.search(r"design_selection=([^,]+)", p.parent.name).group(1): json.loads(p.read_text())
             for p in (out / "sweep").glob("*/results.json")}
     report = subprocess.run([sys.executable, "-m", "selpres.report", str(out / "sweep"), "--out",
                              str(out / "report")],
@@ -164,7 +163,7 @@ def test_a_tiny_selection_run_spends_what_each_point_states(tiny):
     assert sorted(jobs) == sorted(picked)
     for name, res in jobs.items():
         assert res["status"] == "complete" and res["seeds"] == [0, 1] and res["config"]["eval"]["every"] == 1
-        assert res["presentations_done"] == stated_cost(f"selection/{name}")
+        assert res["presentations_done"] == stated_cost(name)
         assert res["selection_presentations"] == (CHARGE if name == "b25_loss_high" else 0)
         assert res["training_presentations"] == res["schedule"]["presentations"]
     # the loss order and its partner spent the same, and 888 more than the stratified run and its partner
