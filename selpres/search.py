@@ -23,7 +23,8 @@ from __future__ import annotations
 import math
 
 from selpres.errors import ConfigError
-from selpres.selection import LOSS_ORDERS, selection_charge
+from selpres.schedule import build_schedule
+from selpres.selection import planned_charge
 
 SEARCH_KEYS = ("search_p", "search_first", "search_growth", "search_tilt", "search_budget")
 
@@ -44,10 +45,7 @@ def shaped_schedule(p: int, first: float, growth: float, tilt: float, n: int, bu
     """The schedule of (p, first, growth, tilt) at ``budget`` total presentations for ``order``, as
     ``schedule.*`` config values: {"sizes": [...], "epochs": [...] or None, "budget": None or int}."""
     sizes = shaped_sizes(p, first, growth, n)
-    charge = 0
-    if order in LOSS_ORDERS:
-        charge = sum(selection_charge(n - kept, selection_cost) for kept in sizes[:-1])
-    T = budget - charge
+    T = budget - planned_charge(order, sizes, selection_cost)
     if p == 0:  # conventional training cut to the budget (schedule.budget: whole epochs + a partial one)
         return {"sizes": [n], "epochs": None, "budget": T}
     weights = [math.exp(tilt * i / p) for i in range(p + 1)]
@@ -57,9 +55,48 @@ def shaped_schedule(p: int, first: float, growth: float, tilt: float, n: int, bu
     return {"sizes": sizes, "epochs": [*epochs, max(1, round(rest / n))], "budget": None}
 
 
+def raw_schedule(raw: dict, n: int, order: str, selection_cost: float) -> dict:
+    """The schedule (as ``shaped_schedule`` gives it) that the search numbers ``raw`` (SEARCH_KEYS ->
+    value, as Optuna stores them) stand for."""
+    return shaped_schedule(int(raw["search_p"]), float(raw["search_first"]), float(raw["search_growth"]),
+                           float(raw["search_tilt"]), n, int(raw["search_budget"]), order, selection_cost)
+
+
 def schedule_overrides(raw: dict, n: int, order: str, selection_cost: float) -> list[str]:
-    """Hydra overrides of the schedule that the search numbers ``raw`` (SEARCH_KEYS -> value) stand for."""
-    s = shaped_schedule(int(raw["search_p"]), float(raw["search_first"]), float(raw["search_growth"]),
-                        float(raw["search_tilt"]), n, int(raw["search_budget"]), order, selection_cost)
+    """Hydra overrides of the schedule that the search numbers ``raw`` stand for."""
     fmt = lambda v: "null" if v is None else str(v).replace(" ", "")  # noqa: E731
-    return [f"schedule.{k}={fmt(v)}" for k, v in s.items()]
+    return [f"schedule.{k}={fmt(v)}" for k, v in raw_schedule(raw, n, order, selection_cost).items()]
+
+
+def total_cost(schedule: dict, n: int, order: str, selection_cost: float) -> int:
+    """What a run of ``schedule`` ({"sizes", "epochs", "budget"}) spends in all: its training presentations
+    plus the charge for choosing. A compute-matched partner is conventional training stopped there."""
+    sch = build_schedule(schedule["sizes"], schedule["epochs"], n, schedule["budget"])
+    return sch.presentations + planned_charge(order, sch.sizes, selection_cost)
+
+
+CONFIRM = "search-confirm"  # the sweep (outputs/sweeps/<name>) where the best schedule meets its partner
+CONFIRM_SEEDS = (0, 30)  # seed, replicas: seeds 0..29, apart from the search seeds (experiment/search.yaml)
+
+
+def confirmation_commands(best: list[tuple[dict, str]], n: int, selection_cost: float) -> list[str]:
+    """Shell commands that confirm the schedules ``best`` [(search numbers, order)] stand for on fresh seeds
+    and the held-out set (the default ``data.test_seed``): each schedule and conventional training stopped
+    at its total cost (its compute-matched partner; p = 0, conventional cut to the budget, is its own); the
+    paper's selective schedule and its partner (70,560), the reference the search set out to beat, which
+    also gives the report's selection verdict two budgets to compare when only stratified or random orders
+    are confirmed; the paper's conventional run (the time-to-target target); then the report. Every curve
+    is scored each epoch; a partner two schedules share is run once."""
+    seed, replicas = CONFIRM_SEEDS
+    run = f"python train.py -m name={CONFIRM} seed={seed} replicas={replicas} eval.every=1"
+    cmds: list[str] = []
+    for raw, order in best:
+        sched = raw_schedule(raw, n, order, selection_cost)
+        staged = " ".join(f"'{o}'" for o in schedule_overrides(raw, n, order, selection_cost))
+        cmds.append(f"{run} schedule.name=search schedule.order={order} {staged}")
+        if len(sched["sizes"]) > 1:
+            cost = total_cost(sched, n, order, selection_cost)
+            cmds.append(f"{run} schedule=matched schedule.budget={cost}")
+    cmds += [f"{run} schedule=selective", f"{run} schedule=matched schedule.budget=70560",
+             f"{run} schedule=conventional"]
+    return [*dict.fromkeys(cmds), f"python -m selpres.report outputs/sweeps/{CONFIRM}"]

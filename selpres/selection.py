@@ -110,6 +110,16 @@ def selection_charge(candidates: int, fraction: float) -> int:
     return math.ceil(round(candidates * fraction, 9))
 
 
+def planned_charge(kind: str, sizes: list[int], fraction: float) -> int:
+    """Presentations a schedule of stage ``sizes`` (counts, the last = n) will be charged per replica for
+    choosing in order ``kind``: at each enlargement the loss orders score the n - n_k candidates outside
+    A_k; the other orders choose without a network and pay nothing. Known before training, so a run's
+    total cost (training + this) can be matched by a one-stage partner (configs/design/selection/)."""
+    if kind not in LOSS_ORDERS:
+        return 0
+    return sum(selection_charge(sizes[-1] - kept, fraction) for kept in sizes[:-1])
+
+
 def errors_of(engine, X: torch.Tensor, Y: torch.Tensor) -> torch.Tensor:
     """Every replica's per-pattern squared error on (X, Y) [n, in], [n, out] -> [R, n]: ``engine.predict``
     where the engine has it (one call), else the model's forward over its weights, SCORE_BLOCK replicas at

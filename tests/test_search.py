@@ -3,6 +3,7 @@ hand; a real Optuna study in SQLite that resumes (needs hydra-optuna-sweeper, el
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import subprocess
@@ -13,9 +14,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from selpres import search
 from selpres.errors import ConfigError
 from selpres.schedule import build_schedule
 from selpres.search import schedule_overrides, shaped_schedule, shaped_sizes
+
+from conftest import compose
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -64,6 +68,75 @@ def test_sizes_merged_by_rounding_reach_the_job_which_refuses_them():
         shaped_sizes(-1, 0.1, 1.0, 100)
 
 
+HAND = {"search_p": "2", "search_first": "0.1", "search_growth": "1", "search_tilt": "0",
+        "search_budget": "60000"}  # the schedule of test_a_loss_order_pays_for_its_choices_out_of_the_budget
+
+
+def test_total_cost_and_the_partner_of_the_confirmation_worked_by_hand():
+    """loss_high 100, 550, 1000 x 198, 36, 20 epochs: 19,800 + 19,800 + 20,000 = 59,600 trained, plus
+    300 + 150 charged = 60,050 in all; stratified pays nothing for choosing (59,600)."""
+    s = shaped_schedule(2, 0.1, 1.0, 0.0, 1000, 60_000, "loss_high", 1 / 3)
+    assert search.total_cost(s, 1000, "loss_high", 1 / 3) == 60_050
+    assert search.total_cost(s, 1000, "stratified", 1 / 3) == 59_600
+    commands = search.confirmation_commands([(HAND, "loss_high")], 1000, 1 / 3)
+    staged, partner, paper, paper_partner, target, report = commands
+    run = "python train.py -m name=search-confirm seed=0 replicas=30 eval.every=1"
+    assert staged == (f"{run} schedule.name=search schedule.order=loss_high 'schedule.sizes=[100,550,1000]' "
+                      "'schedule.epochs=[198,36,20]' 'schedule.budget=null'")
+    assert partner == f"{run} schedule=matched schedule.budget=60050"
+    assert paper == f"{run} schedule=selective"  # the paper's schedule and its partner, the reference
+    assert paper_partner == f"{run} schedule=matched schedule.budget=70560"
+    assert target == f"{run} schedule=conventional"
+    assert report == "python -m selpres.report outputs/sweeps/search-confirm"
+    # p = 0 is conventional training cut to the budget: its own compute-matched partner
+    cut = search.confirmation_commands([({**HAND, "search_p": "0"}, "random")], 1000, 1 / 3)
+    assert "'schedule.budget=60000'" in cut[0] and cut[1:] == commands[2:]
+    # several schedules: loss_low's is loss_high's, so is its partner (run once); random pays no charge, so
+    # its epochs are those of test_a_schedule_worked_out_by_hand (200, 36, 20: 59,800 presentations)
+    best = [(HAND, "loss_high"), (HAND, "loss_low"), (HAND, "random")]
+    three = search.confirmation_commands(best, 1000, 1 / 3)
+    assert three[:3] == [staged, partner, staged.replace("loss_high", "loss_low")]
+    assert "schedule.order=random" in three[3] and "'schedule.epochs=[200,36,20]'" in three[3]
+    assert three[4] == f"{run} schedule=matched schedule.budget=59800" and three[5:] == commands[2:]
+
+
+def test_the_search_is_scored_on_a_validation_draw_and_confirmed_on_other_seeds():
+    """The search's objective set (data.test_seed 7919) is not the held-out test set (the default seed),
+    and the search seeds are not the confirmation seeds."""
+    cfg, default = compose("experiment=search"), compose()
+    assert cfg.data.test_seed != default.data.test_seed
+    searched = set(range(cfg.seed, cfg.seed + cfg.replicas))
+    assert len(searched) >= 5 and not searched & set(range(30))  # confirmation: seed=0 replicas=30
+
+
+def test_the_validation_set_shares_no_pattern_with_the_held_out_set_and_seeds_nothing_else(tmp_path):
+    """Two jobs differing only in data.test_seed (the search's 7919 against the default) train identically
+    (exemplar set, scaler, every curve's training MSE and the final weights agree exactly), and their
+    held-out sets are two draws of 10,000 patterns with no pattern in common."""
+    import torch
+
+    from selpres.task import load_task
+    from selpres.train import train
+
+    base = ["replicas=2", "schedule.sizes=[50,1002]", "schedule.epochs=[3,2]", "schedule.order=loss_high",
+            "logging.progress=false", "logging.tensorboard=false"]
+    val, test = compose(*base, "data.test_seed=7919"), compose(*base)
+    tv, tt = load_task(val.robot, val.data), load_task(test.robot, test.data)
+    assert torch.equal(tv.exemplar.X, tt.exemplar.X) and torch.equal(tv.exemplar.Y, tt.exemplar.Y)
+    assert all(torch.equal(getattr(tv.scaler, k), getattr(tt.scaler, k))
+               for k in ("x_min", "x_max", "y_min", "y_max"))
+    hv, ht = tv.tests.heldout.X, tt.tests.heldout.X
+    assert hv.shape == ht.shape == (10_000, 6)
+    shared = {tuple(r) for r in hv.tolist()} & {tuple(r) for r in ht.tolist()}
+    assert not shared
+    (tmp_path / "val").mkdir(), (tmp_path / "test").mkdir()
+    rv, rt = train(val, tmp_path / "val"), train(test, tmp_path / "test")
+    assert [c["train_mse"] for c in rv["curves"]] == [c["train_mse"] for c in rt["curves"]]
+    wv, wt = torch.load(tmp_path / "val" / "weights.pt"), torch.load(tmp_path / "test" / "weights.pt")
+    assert all(torch.equal(a, b) for a, b in zip(wv["params"], wt["params"]))
+    assert rv["summary"]["heldout_rms_nm_overall"] != rt["summary"]["heldout_rms_nm_overall"]
+
+
 @settings(max_examples=200, deadline=None)
 @given(p=st.integers(1, 4), first=st.floats(0.02, 0.5), growth=st.floats(0.3, 3.0), tilt=st.floats(-1.0, 2.0),
        order=st.sampled_from(["stratified", "loss_high", "reselect"]))
@@ -99,3 +172,21 @@ def test_optuna_study_in_sqlite_runs_trials_as_jobs_and_resumes(tmp_path):
     assert "finished trials; running 1 more" in p.stdout + p.stderr
     jobs = list((tmp_path / "sweep").glob("*/results.json"))
     assert 1 <= len(jobs) <= 3 and (tmp_path / "sweep" / "optimization_results.yaml").exists()
+    # the confirmation: the best schedule's job, run as confirm.sh says, spends what its partner is given
+    lines = (tmp_path / "sweep" / "confirm.sh").read_text().splitlines()
+    at = next(i for i, x in enumerate(lines) if "schedule.name=search" in x)  # the best trial's schedule
+    staged, after = lines[at], lines[at + 1]
+    best = study.best_trial
+    assert f"schedule.order={best.params['schedule.order']}" in staged
+    small = ["replicas=2", "data.heldout=300", "eval.heldout_curve=300", "logging.progress=false",
+             f"hydra.sweep.dir={tmp_path / 'confirm'}"]
+    overrides = [o.strip("'") for o in staged.split()[2:]]  # after "python train.py", from "-m" on
+    p = subprocess.run([sys.executable, "train.py", *overrides, *small], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    (res,) = [json.loads(f.read_text()) for f in (tmp_path / "confirm").glob("*/results.json")]
+    assert res["seeds"] == [0, 1] and res["config"]["data"]["test_seed"] == 0
+    if len(res["schedule"]["sizes"]) > 1:  # its partner follows it, at what the job spent in all
+        assert after.endswith(f"schedule=matched schedule.budget={res['presentations_done']}")
+    else:  # p = 0: conventional cut to the budget, its own partner
+        assert "schedule=matched" not in after

@@ -15,11 +15,18 @@ the finished trials (the same seed would propose the same first points again); a
 mid-training resumes from its checkpoint in its own folder, and a schedule proposed twice is found done.
 A trial whose schedule its job refuses (rounding merged two stage sizes) fails alone: Optuna records it
 as failed, and ``max_failure_rate: 1.0`` keeps the study going.
+
+At the end the confirmation of the best trial and of the best trial of each other order
+(``selpres.search.confirmation_commands``: each schedule on fresh seeds and the held-out set, beside
+conventional training stopped at its total cost) is logged and written to ``confirm.sh`` in the sweep
+folder: ``bash outputs/sweeps/search/confirm.sh``. Several are confirmed because the validation RMS of 10
+search seeds is noisy and the best of many trials is biased low; the report's ``--holm`` adjusts for them.
 """
 
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 import optuna
 from hydra.types import HydraContext, TaskFunction
@@ -27,7 +34,7 @@ from hydra.utils import instantiate
 from hydra_plugins.hydra_optuna_sweeper.optuna_sweeper import OptunaSweeper
 from omegaconf import DictConfig
 
-from selpres.search import SEARCH_KEYS, schedule_overrides
+from selpres.search import SEARCH_KEYS, confirmation_commands, schedule_overrides
 from selpres.task import load_task
 
 log = logging.getLogger("selpres")
@@ -57,7 +64,7 @@ class ShapedScheduleSweeper(OptunaSweeper):
             return out
 
         impl._configure_trials = translated
-        self._translate = lambda raw, order: schedule_overrides(raw, n, order, cost)
+        self._confirm = lambda best: confirmation_commands(best, n, cost)
         self._order = sweep_order
         done = _finished_trials(impl.storage, impl.study_name)
         if done:
@@ -72,18 +79,35 @@ class ShapedScheduleSweeper(OptunaSweeper):
                          seed, done)
 
     def sweep(self, arguments: list[str]) -> None:
-        """The study's trials, then the best schedule as the overrides that confirm it."""
+        """The study's trials, then the commands that confirm the best schedule of the study and the best of
+        each order, logged and written to ``confirm.sh`` in the sweep folder."""
         super().sweep(arguments)
         impl = self.sweeper
         if impl.storage is None:
             return
-        best = optuna.load_study(study_name=impl.study_name, storage=impl.storage).best_trial
-        raw = {**best.user_attrs, **best.params}
-        order = raw.get("schedule.order", self._order)
-        overrides = " ".join(f"'{o}'" for o in self._translate(raw, order))
-        log.info("best schedule (validation RMS %.4f Nm): schedule.order=%s %s; confirm it on fresh seeds "
-                 "and the held-out set: python train.py -m name=confirm seed=0 replicas=30 "
-                 "schedule.order=%s %s", best.value, order, overrides, order, overrides)
+        study = optuna.load_study(study_name=impl.study_name, storage=impl.storage)
+        best = best_trials(study, self._order)
+        commands = self._confirm([(raw, order) for _, raw, order in best])
+        notes = [f"# {order}: trial {t.number}, validation RMS {t.value:.6f} Nm" for t, _, order in best]
+        script = Path(impl.config.hydra.sweep.dir) / "confirm.sh"
+        script.write_text(f"# study {impl.study_name}: the best trial, then the best of each other order, "
+                          "to confirm on fresh seeds and the held-out set\n" + "\n".join(notes)
+                          + "\nset -e\n" + "\n".join(commands) + "\n")
+        log.info("best schedules (%s); confirm them on fresh seeds and the held-out set against "
+                 "compute-matched conventional training (also in %s):\n%s",
+                 "; ".join(n[2:] for n in notes), script, "\n".join(commands))
+
+
+def best_trials(study, default_order: str) -> list[tuple]:
+    """[(trial, search numbers, order)]: the study's best complete trial, then the best of every other
+    order tried, by validation RMS."""
+    complete = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+    done = sorted(complete, key=lambda t: (t.value, t.number))
+    out: dict[str, tuple] = {}
+    for t in done:
+        raw = {**t.user_attrs, **t.params}
+        out.setdefault(raw.get("schedule.order", default_order), (t, raw))
+    return [(t, raw, order) for order, (t, raw) in out.items()]
 
 
 def _finished_trials(storage, study_name) -> int:
