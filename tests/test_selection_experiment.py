@@ -183,9 +183,6 @@ def test_the_report_pairs_the_stratified_run_with_conventional_training_at_its_c
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the report's matched_partner compares training presentations only, "
-                   "so a loss order (37,632 trained + 888 charged) is paired with conventional at 37,632; "
-                   "see docs/selection.md")
 def test_the_report_pairs_a_loss_order_with_conventional_training_at_its_total_cost(tiny):
     _, _, report = tiny
     rows = (report / "selection.csv").read_text().splitlines()
