@@ -158,7 +158,7 @@ def test_two_link_urdf_loads_as_eq6(tmp_path):
     "args",
     [
         ["robot=urdf", "data=sampled", "robot.path=missing.urdf"],
-        ["robot=puma560"],  # the paper's grid on a 6-joint arm
+        ["robot=puma560", "data=paper"],  # the paper's grid asked for on a 6-joint arm
         ["data=file", "data.path=missing.csv", "--urdf", "x.urdf"],
     ],
 )
