@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import time
+
 import torch
 from omegaconf import OmegaConf
 
@@ -42,7 +43,10 @@ def main() -> None:
     robot = OmegaConf.load(CONFIG_DIR / "robot/two_link.yaml")
 
     count, margin, G = evaluate(TwoLinkArm.from_config(robot), cfg)
-    print(f"current configs/robot/two_link.yaml {dict(robot)}: count={count} G(0)=({G[0]:.3f}, {G[1]:.3f}) Nm margin={margin:.2e}")
+    print(
+        f"current configs/robot/two_link.yaml {dict(robot)}: count={count} "
+        f"G(0)=({G[0]:.3f}, {G[1]:.3f}) Nm margin={margin:.2e}"
+    )
 
     gen = torch.Generator().manual_seed(args.seed)
     u = lambda lo, hi: lo + (hi - lo) * float(torch.rand((), dtype=torch.float64, generator=gen))
@@ -56,7 +60,9 @@ def main() -> None:
             m1 = round((u(cfg.tau1.lo, cfg.tau1.hi) - m2 * l2 * args.g) / (l1 * args.g) - m2, 2)
         else:
             # local search: each parameter within ±spread of the current config, on a 0.01 grid
-            m1, m2, l1, l2 = (round(v * u(1 - args.spread, 1 + args.spread), 2) for v in (base.m1, base.m2, base.l1, base.l2))
+            m1, m2, l1, l2 = (
+                round(v * u(1 - args.spread, 1 + args.spread), 2) for v in (base.m1, base.m2, base.l1, base.l2)
+            )
         if min(m1, m2, l1, l2) <= 0 or (m1, m2, l1, l2) in seen:
             continue
         seen.add((m1, m2, l1, l2))
@@ -67,10 +73,15 @@ def main() -> None:
         if abs(count - args.target) <= args.tolerance:
             hits.append((abs(count - args.target), -margin, arm, count, margin, G))
     hits.sort(key=lambda h: h[:2])
-    print(f"{args.n} candidates in {time.perf_counter() - t0:.1f} s; within ±{args.tolerance} of {args.target} (exact first, widest margin first):")
+    print(
+        f"{args.n} candidates in {time.perf_counter() - t0:.1f} s; within ±{args.tolerance} of {args.target} "
+        "(exact first, widest margin first):"
+    )
     for _, _, arm, count, margin, G in hits[:25]:
-        print(f"  m1={arm.m1:.2f} m2={arm.m2:.2f} l1={arm.l1:.2f} l2={arm.l2:.2f}: count={count} "
-              f"G(0)=({G[0]:.3f}, {G[1]:.3f}) Nm margin={margin:.2e}")
+        print(
+            f"  m1={arm.m1:.2f} m2={arm.m2:.2f} l1={arm.l1:.2f} l2={arm.l2:.2f}: count={count} "
+            f"G(0)=({G[0]:.3f}, {G[1]:.3f}) Nm margin={margin:.2e}"
+        )
 
 
 if __name__ == "__main__":

@@ -96,8 +96,10 @@ def _compiler_version(cc: list[str]) -> str:
     except (OSError, subprocess.SubprocessError) as exc:
         raise KernelUnavailable(f"C compiler {shlex.join(cc)!r} does not run: {exc}") from exc
     if proc.returncode != 0:
-        raise KernelUnavailable(f"C compiler {shlex.join(cc)!r} does not run: `--version` exited with "
-                                f"{proc.returncode}: {proc.stderr.strip()[:500] or '(no message)'}")
+        raise KernelUnavailable(
+            f"C compiler {shlex.join(cc)!r} does not run: `--version` exited with "
+            f"{proc.returncode}: {proc.stderr.strip()[:500] or '(no message)'}"
+        )
     return proc.stdout
 
 
@@ -137,8 +139,23 @@ class Kernel:
         self.lib = ctypes.CDLL(str(path))
         i64, dp, lp, c_int = ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int
         self._train = self.lib.selpres_train
-        self._train.argtypes = [c_int, lp, i64, i64, i64, dp, dp, dp, dp, lp, i64, i64,
-                                ctypes.c_double, ctypes.c_double, dp]
+        self._train.argtypes = [
+            c_int,
+            lp,
+            i64,
+            i64,
+            i64,
+            dp,
+            dp,
+            dp,
+            dp,
+            lp,
+            i64,
+            i64,
+            ctypes.c_double,
+            ctypes.c_double,
+            dp,
+        ]
         self._train.restype = c_int
         self._forward = self.lib.selpres_forward
         self._forward.argtypes = [c_int, lp, i64, i64, i64, i64, i64, dp, dp, i64, dp]
@@ -172,6 +189,7 @@ class Kernel:
     def _run(self, fn, chunks: list[tuple]) -> None:
         """``fn(*chunk)`` for every chunk, on the thread pool when there are several (ctypes releases
         the GIL, so they run in parallel); a non-zero return code is an error."""
+
         def call(args: tuple) -> None:
             rc = fn(*args)
             if rc != 0:
@@ -195,9 +213,20 @@ class Kernel:
         T = max(1, min(int(threads), n))
         return [(n * k // T, n * (k + 1) // T) for k in range(T)]
 
-    def train(self, sizes, w: torch.Tensor, buf: torch.Tensor, X: torch.Tensor, Y: torch.Tensor,
-              order: torch.Tensor, batch_size: int, lr: float, mom: float, loss: torch.Tensor,
-              threads: int) -> None:
+    def train(
+        self,
+        sizes,
+        w: torch.Tensor,
+        buf: torch.Tensor,
+        X: torch.Tensor,
+        Y: torch.Tensor,
+        order: torch.Tensor,
+        batch_size: int,
+        lr: float,
+        mom: float,
+        loss: torch.Tensor,
+        threads: int,
+    ) -> None:
         """One epoch for all groups of ``w``/``buf`` ([G, P, 4], updated in place); ``loss`` [G*4] gets
         per-lane sums. Threads take contiguous chunks of groups."""
         G, P, lanes = w.shape
@@ -207,8 +236,19 @@ class Kernel:
         assert order.dtype == torch.int64 and order.shape[0] == G * LANES
         m = order.shape[1]
         threads = self.threads_for(TRAIN_WORK_PER_PARAMETER * G * LANES * m * P, threads)
-        rest = (P, w.data_ptr(), buf.data_ptr(), X.data_ptr(), Y.data_ptr(), order.data_ptr(), m,
-                int(batch_size), float(lr), float(mom), loss.data_ptr())
+        rest = (
+            P,
+            w.data_ptr(),
+            buf.data_ptr(),
+            X.data_ptr(),
+            Y.data_ptr(),
+            order.data_ptr(),
+            m,
+            int(batch_size),
+            float(lr),
+            float(mom),
+            loss.data_ptr(),
+        )
         head = self._sizes_arg(sizes)
         self._run(self._train, [(*head, g0, g1, *rest) for g0, g1 in self._bounds(G, threads)])
 
@@ -229,8 +269,7 @@ class Kernel:
         self._run(self._forward, chunks)
         return out
 
-    def squared_errors(self, sizes, w: torch.Tensor, X: torch.Tensor, Y: torch.Tensor,
-                       threads: int) -> torch.Tensor:
+    def squared_errors(self, sizes, w: torch.Tensor, X: torch.Tensor, Y: torch.Tensor, threads: int) -> torch.Tensor:
         """Per lane of ``w`` ([G, P, 4]) and output, the sum over the patterns of ``X`` [N, in] of
         (output - ``Y``)^2: [G*4, out] float64, with no [G*4, N, out] array in between. Patterns are
         summed in fixed blocks of :data:`SCORE_BLOCK` (then the blocks in order), so the numbers do not
@@ -271,8 +310,14 @@ def macros(sizes) -> list[str]:
     """The ``-D`` flags that specialise ``kernels/sgd.c`` for topology ``sizes`` (see the file's header)."""
     sizes = tuple(int(s) for s in sizes)
     P = sum(o * i + o for i, o in zip(sizes[:-1], sizes[1:]))
-    return [f"-DNL={len(sizes) - 1}", f"-DSIZES={','.join(map(str, sizes))}", f"-DP_TOTAL={P}",
-            f"-DTOT_UNITS={sum(sizes)}", f"-DMAXW={max(sizes)}", f"-DNI={INTERLEAVE}"]
+    return [
+        f"-DNL={len(sizes) - 1}",
+        f"-DSIZES={','.join(map(str, sizes))}",
+        f"-DP_TOTAL={P}",
+        f"-DTOT_UNITS={sum(sizes)}",
+        f"-DMAXW={max(sizes)}",
+        f"-DNI={INTERLEAVE}",
+    ]
 
 
 _lock = threading.Lock()
@@ -299,8 +344,15 @@ def _intact(library: Path) -> bool:
 def library_path(sizes, cc: list[str] | None = None) -> Path:
     """Where the cache keeps the library for ``sizes``: keyed by source, macros, flags, compiler and CPU."""
     cc = cc or _compiler()
-    key_text = "\0".join([SOURCE.read_text(), shlex.join([*cc, *macros(sizes), *CFLAGS, *LIBS]),
-                          _compiler_version(cc), " ".join(sorted(cpu_flags())), _cpu_model()])
+    key_text = "\0".join(
+        [
+            SOURCE.read_text(),
+            shlex.join([*cc, *macros(sizes), *CFLAGS, *LIBS]),
+            _compiler_version(cc),
+            " ".join(sorted(cpu_flags())),
+            _cpu_model(),
+        ]
+    )
     key = hashlib.sha256(key_text.encode()).hexdigest()[:16]
     return cache_dir() / f"selpres_{'-'.join(map(str, sizes))}_{key}.so"
 
@@ -323,15 +375,17 @@ def build(sizes) -> Path:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=COMPILE_TIMEOUT)
             if proc.returncode != 0:
                 msg = (proc.stderr or proc.stdout).strip()[:2000] or "(no message)"
-                raise KernelUnavailable(f"compiling the native kernel failed ({shlex.join(cc)} exited with "
-                                        f"{proc.returncode}):\n{msg}")
+                raise KernelUnavailable(
+                    f"compiling the native kernel failed ({shlex.join(cc)} exited with {proc.returncode}):\n{msg}"
+                )
             digest = _digest(so)
             os.replace(so, target)  # atomic: concurrent builders each install a complete file
             (Path(tmp) / "sum").write_text(digest + "\n")
             os.replace(Path(tmp) / "sum", _sidecar(target))  # after the library: marks it complete
     except subprocess.TimeoutExpired as exc:
-        raise KernelUnavailable(f"compiling the native kernel timed out after {COMPILE_TIMEOUT} s "
-                                "(machine busy?); a later run retries") from exc
+        raise KernelUnavailable(
+            f"compiling the native kernel timed out after {COMPILE_TIMEOUT} s (machine busy?); a later run retries"
+        ) from exc
     except (OSError, subprocess.SubprocessError) as exc:
         raise KernelUnavailable(f"cannot build the native kernel in {target.parent}: {exc}") from exc
     log.info("built native kernel %s", target)

@@ -43,8 +43,12 @@ def check_batch_options(sigmoid_prime_offset, reduction, prefix: str = "optim") 
     """The batch-mode options, checked (ConfigError naming ``<prefix>.<key>``): (offset, reduction)."""
     if reduction not in REDUCTIONS:
         raise ConfigError(f"{prefix}.reduction", reduction, f"one of {', '.join(REDUCTIONS)}")
-    offset = require(f"{prefix}.sigmoid_prime_offset", sigmoid_prime_offset,
-                     "an offset >= 0 added to sigma' (Fahlman: 0.1; 0 = exact gradient)", lambda v: v >= 0)
+    offset = require(
+        f"{prefix}.sigmoid_prime_offset",
+        sigmoid_prime_offset,
+        "an offset >= 0 added to sigma' (Fahlman: 0.1; 0 = exact gradient)",
+        lambda v: v >= 0,
+    )
     return offset, reduction
 
 
@@ -58,13 +62,22 @@ class BatchEngine(ScoredByPredict):
     name = "batch"
     fallback_reason = None
 
-    def __init__(self, sizes, params, optimizer: str = "quickprop", hparams: dict | None = None, *,
-                 sigmoid_prime_offset: float = 0.0, reduction: str = "sum"):
+    def __init__(
+        self,
+        sizes,
+        params,
+        optimizer: str = "quickprop",
+        hparams: dict | None = None,
+        *,
+        sigmoid_prime_offset: float = 0.0,
+        reduction: str = "sum",
+    ):
         self.offset, self.reduction = check_batch_options(sigmoid_prime_offset, reduction)
         self.sizes = tuple(int(s) for s in sizes)
         if len(params) != 2 * (len(self.sizes) - 1):
-            raise ValueError(f"{len(params)} parameter tensors for topology {self.sizes}: "
-                             f"expected {2 * (len(self.sizes) - 1)}")
+            raise ValueError(
+                f"{len(params)} parameter tensors for topology {self.sizes}: expected {2 * (len(self.sizes) - 1)}"
+            )
         self.optimizer_name = optimizer
         self.R = params[0].shape[0]
         self.p = [t.detach().to(torch.float64).clone().contiguous().requires_grad_(True) for t in params]
@@ -111,13 +124,18 @@ class BatchEngine(ScoredByPredict):
         return [t.detach().clone() for t in self.p]
 
     def state_dict(self):
-        return {"params": self.params(), "optimizer_name": self.optimizer_name,
-                "optimizer": copy.deepcopy(self.opt.state_dict())}
+        return {
+            "params": self.params(),
+            "optimizer_name": self.optimizer_name,
+            "optimizer": copy.deepcopy(self.opt.state_dict()),
+        }
 
     def load_state_dict(self, state):
         if state.get("optimizer_name") != self.optimizer_name:
-            raise ValueError(f"checkpoint holds optimizer {state.get('optimizer_name')!r} state, "
-                             f"this engine runs {self.optimizer_name!r}")
+            raise ValueError(
+                f"checkpoint holds optimizer {state.get('optimizer_name')!r} state, "
+                f"this engine runs {self.optimizer_name!r}"
+            )
         with torch.no_grad():
             for p, src in zip(self.p, state["params"]):
                 p.copy_(src)

@@ -45,8 +45,10 @@ JOB_PARTS = ("train", "eval", "shuffle", "log", "checkpoint", "prepare", "loop")
 
 def data(n: int = N, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
     g = torch.Generator().manual_seed(seed)
-    return (torch.rand(n, SIZES[0], generator=g, dtype=torch.float64),
-            0.1 + 0.8 * torch.rand(n, SIZES[-1], generator=g, dtype=torch.float64))
+    return (
+        torch.rand(n, SIZES[0], generator=g, dtype=torch.float64),
+        0.1 + 0.8 * torch.rand(n, SIZES[-1], generator=g, dtype=torch.float64),
+    )
 
 
 def median_seconds(fn, repeats: int) -> float:
@@ -71,8 +73,11 @@ class EngineTable:
         base = self.rows[0]["per_run"]
         if epochs < EPOCHS:
             note = (note + f" extrapolated from {epochs} epochs").strip()
-        print(f"{label:<22} R={R:<5} thr={threads!s:<3} ep={epochs:<4} {per_run * 1e3:>10.2f} ms/replica-run "
-              f"{R * N * epochs / seconds:>12.3g} pres/s  x{base / per_run:>8.1f}  {note}", flush=True)
+        print(
+            f"{label:<22} R={R:<5} thr={threads!s:<3} ep={epochs:<4} {per_run * 1e3:>10.2f} ms/replica-run "
+            f"{R * N * epochs / seconds:>12.3g} pres/s  x{base / per_run:>8.1f}  {note}",
+            flush=True,
+        )
         return per_run * 1e3
 
 
@@ -117,8 +122,9 @@ def time_epochs(make, R: int, epochs: int, repeats: int):
     return eng, statistics.median(times)
 
 
-def bench_engine(table: EngineTable, name: str, R: int, epochs: int, repeats: int, threads=None,
-                 note: str = "") -> float:
+def bench_engine(
+    table: EngineTable, name: str, R: int, epochs: int, repeats: int, threads=None, note: str = ""
+) -> float:
     """One online engine's updates alone; returns ms per replica-run."""
     from selpres.engine import make_engine
 
@@ -216,8 +222,12 @@ def run_job_process(configs: Path, overrides: list[str], out_dir: Path) -> dict:
     path = os.pathsep.join(p for p in (str(PACKAGE_PARENT), os.environ.get("PYTHONPATH")) if p)
     env = dict(os.environ, PYTHONPATH=path)
     t = time.perf_counter()
-    p = subprocess.run([sys.executable, "-c", _CHILD, str(configs), json.dumps(overrides), str(out_dir)],
-                       env=env, capture_output=True, text=True)
+    p = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(configs), json.dumps(overrides), str(out_dir)],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
     wall = time.perf_counter() - t
     if p.returncode != 0:
         raise RuntimeError(f"job {overrides} failed (exit {p.returncode}):\n{p.stderr[-2000:]}")
@@ -233,8 +243,10 @@ def bench_jobs(table: EngineTable, quick: bool, configs: Path) -> bool:
     extrapolated to 150 epochs), the share of each part that results.json's ``wall_seconds`` reports (the
     keys present: ``train`` is the updates alone), and whole job / updates. Returns False if a job failed.
     """
-    print("\njob level: train() end to end, conventional 6-13-2, default settings (eval, TensorBoard, "
-          "checkpoints), one fresh process per job")
+    print(
+        "\njob level: train() end to end, conventional 6-13-2, default settings (eval, TensorBoard, "
+        "checkpoints), one fresh process per job"
+    )
     ok = True
     with tempfile.TemporaryDirectory(prefix="selpres-bench-") as tmp:
         for R in (1, 30, 1000):
@@ -251,8 +263,10 @@ def bench_jobs(table: EngineTable, quick: bool, configs: Path) -> bool:
             ws = res["wall_seconds"]
             total, updates = ws["total"], ws.get("train")
             per_run = total / R * 1e3
-            line = (f"job         R={R:<5} ep={epochs:<4} {per_run:>10.2f} ms/replica-run (whole job, "
-                    f"{total:.2f} s; process {res['process_seconds']:.2f} s with imports)")
+            line = (
+                f"job         R={R:<5} ep={epochs:<4} {per_run:>10.2f} ms/replica-run (whole job, "
+                f"{total:.2f} s; process {res['process_seconds']:.2f} s with imports)"
+            )
             if updates:
                 line += f"   whole job / updates x{total / updates:.2f}"
             print(line, flush=True)
@@ -304,8 +318,11 @@ def bench_shuffles(quick: bool) -> None:
             old.append(median_seconds(lambda: _epoch_orders_by_argsort(samplers), 1))
             new.append(median_seconds(lambda: epoch_orders(samplers), 1))
         o, w = statistics.median(old), statistics.median(new)
-        print(f"shuffle     R={R:<5} argsort {o * 1e3:8.3f} ms/epoch  epoch_orders {w * 1e3:8.3f} ms/epoch "
-              f"({w * EPOCHS / R * 1e3:.3f} ms per replica-run)  x{o / w:.2f}", flush=True)
+        print(
+            f"shuffle     R={R:<5} argsort {o * 1e3:8.3f} ms/epoch  epoch_orders {w * 1e3:8.3f} ms/epoch "
+            f"({w * EPOCHS / R * 1e3:.3f} ms per replica-run)  x{o / w:.2f}",
+            flush=True,
+        )
 
 
 def bench_orders(quick: bool) -> None:
@@ -320,13 +337,15 @@ def bench_orders(quick: bool) -> None:
         for kind in ORDERS:
             reps = 3 if n == N else 1
             sec = median_seconds(lambda: priority_order(X, kind, generator(0, "subset"), 2), reps)
-            print(f"order       {kind:<11} n={n:<7} one order {sec * 1e3:10.2f} ms  (median of {reps})",
-                  flush=True)
+            print(f"order       {kind:<11} n={n:<7} one order {sec * 1e3:10.2f} ms  (median of {reps})", flush=True)
             if n == N:
                 gens = [generator(s, "subset") for s in range(1000)]
                 sec = median_seconds(lambda: priority_orders(X, kind, gens, 2), 1)
-                print(f"order       {kind:<11} n={n:<7} R=1000     {sec * 1e3:10.2f} ms  (priority_orders: "
-                      f"{sec:.3f} ms per replica)", flush=True)
+                print(
+                    f"order       {kind:<11} n={n:<7} R=1000     {sec * 1e3:10.2f} ms  (priority_orders: "
+                    f"{sec:.3f} ms per replica)",
+                    flush=True,
+                )
 
 
 def _per_replica_enlargement(params, X, Y, orders, kept: int, added: int) -> torch.Tensor:
@@ -362,30 +381,32 @@ def bench_selection(quick: bool, configs: Path) -> bool:
         def params(self):
             return self._p
 
-    print("\nstage-wise orders: the cost of choosing, per enlargement (n = 1002, 50 of 952 candidates added; "
-          "one torch thread, as in a job)")
+    print(
+        "\nstage-wise orders: the cost of choosing, per enlargement (n = 1002, 50 of 952 candidates added; "
+        "one torch thread, as in a job)"
+    )
     X, Y = data(N, seed=3)
     for R in (1, 30, 1000):
         params = init_replica_params(SIZES, list(range(R)))
         orders = torch.stack(priority_orders(X, "stratified", [generator(s, "subset") for s in range(R)], 2))
         eng, seeds = Weights(params), list(range(R))
-        batched = functools.partial(lambda o, e: enlarge_by_loss(o, errors_of(e, X, Y), 50, 50, True),
-                                    orders, eng)
+        batched = functools.partial(lambda o, e: enlarge_by_loss(o, errors_of(e, X, Y), 50, 50, True), orders, eng)
         loop = functools.partial(_per_replica_enlargement, params, X, Y, orders, 50, 50)
         with one_thread():  # as a job chooses
             if not torch.equal(batched()[:, :100].sort(1).values, loop()[:, :100].sort(1).values):
                 raise AssertionError("the batched enlargement chose other patterns than the per-replica loop")
             batched, loop = median_seconds(batched, 3), median_seconds(loop, 3)
             redraw = median_seconds(functools.partial(reselected_orders, X, seeds, 1, 2), 3)
-        print(f"select      loss_high   R={R:<5} batched {batched * 1e3:9.2f} ms  per-replica loop "
-              f"{loop * 1e3:9.2f} ms  x{loop / batched:.1f}   reselect draw {redraw * 1e3:8.2f} ms",
-              flush=True)
+        print(
+            f"select      loss_high   R={R:<5} batched {batched * 1e3:9.2f} ms  per-replica loop "
+            f"{loop * 1e3:9.2f} ms  x{loop / batched:.1f}   reselect draw {redraw * 1e3:8.2f} ms",
+            flush=True,
+        )
     ok = True
     with tempfile.TemporaryDirectory(prefix="selpres-bench-") as tmp:
         for R in (30,) if quick else (30, 1000):
             for order in ("stratified", "loss_high", "reselect"):
-                overrides = ["schedule=selective", "topology=6-13-2", f"replicas={R}",
-                             f"schedule.order={order}"]
+                overrides = ["schedule=selective", "topology=6-13-2", f"replicas={R}", f"schedule.order={order}"]
                 out = Path(tmp) / f"{order}-R{R}"
                 try:
                     run_job_process(configs, overrides, out)
@@ -396,10 +417,13 @@ def bench_selection(quick: bool, configs: Path) -> bool:
                     continue
                 ws = res["wall_seconds"]
                 sel = ws.get("select", 0.0)
-                print(f"select job  {order:<11} R={R:<5} select {sel:7.3f} s  train {ws['train']:7.3f} s  "
-                      f"select/train {sel / ws['train']:6.1%}   "
-                      f"presentations {res['training_presentations']:,} trained + "
-                      f"{res['selection_presentations']:,} charged per replica", flush=True)
+                print(
+                    f"select job  {order:<11} R={R:<5} select {sel:7.3f} s  train {ws['train']:7.3f} s  "
+                    f"select/train {sel / ws['train']:6.1%}   "
+                    f"presentations {res['training_presentations']:,} trained + "
+                    f"{res['selection_presentations']:,} charged per replica",
+                    flush=True,
+                )
     return ok
 
 
@@ -408,8 +432,10 @@ def bench_selection(quick: bool, configs: Path) -> bool:
 
 def bench_compile() -> None:
     """First-use build time of the native kernel: cold (empty cache) and cached (a new process's load)."""
-    code = ("import time,torch;from selpres import _kernels;t=time.perf_counter();"
-            "_kernels.load((6,13,2));print(time.perf_counter()-t)")
+    code = (
+        "import time,torch;from selpres import _kernels;t=time.perf_counter();"
+        "_kernels.load((6,13,2));print(time.perf_counter()-t)"
+    )
     env = dict(os.environ, PYTHONPATH=str(PACKAGE_PARENT))
     with tempfile.TemporaryDirectory() as tmp:
         env["SELPRES_CACHE_DIR"] = tmp
@@ -417,8 +443,7 @@ def bench_compile() -> None:
         for _ in range(2):
             p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
             out.append(float(p.stdout.strip()) if p.returncode == 0 else float("nan"))
-    print(f"\nnative kernel build (6-13-2): cold {out[0]:.2f} s, cached {out[1] * 1e3:.1f} ms "
-          "(load of the .so)")
+    print(f"\nnative kernel build (6-13-2): cold {out[0]:.2f} s, cached {out[1] * 1e3:.1f} ms (load of the .so)")
 
 
 def bench_exemplar_generation(quick: bool, configs: Path) -> None:
@@ -436,10 +461,14 @@ def bench_exemplar_generation(quick: bool, configs: Path) -> None:
     batched = median_seconds(lambda: build_exemplar_set(arm, dcfg), reps)
 
     m1, m2, l1, l2, g, a = rcfg.m1, rcfg.m2, rcfg.l1, rcfg.l2, rcfg.g, dcfg.accel_limit
-    axes = {k: grid_axis(dcfg[k].lo, dcfg[k].hi, dcfg[k].step).tolist()
-            for k in ("theta", "dtheta", "tau1", "tau2")}
-    states = [(q1, w1, q2, w2) for q1 in axes["theta"] for w1 in axes["dtheta"]
-              for q2 in axes["theta"] for w2 in axes["dtheta"]]
+    axes = {k: grid_axis(dcfg[k].lo, dcfg[k].hi, dcfg[k].step).tolist() for k in ("theta", "dtheta", "tau1", "tau2")}
+    states = [
+        (q1, w1, q2, w2)
+        for q1 in axes["theta"]
+        for w1 in axes["dtheta"]
+        for q2 in axes["theta"]
+        for w2 in axes["dtheta"]
+    ]
     torques = [(t1, t2) for t1 in axes["tau1"] for t2 in axes["tau2"]]
     total = len(states) * len(torques)
     limit = 40 if quick else 120  # states timed; the rest extrapolated
@@ -450,8 +479,12 @@ def bench_exemplar_generation(quick: bool, configs: Path) -> None:
             h11 = l2 * l2 * m2 + 2 * l1 * l2 * m2 * c2 + l1 * l1 * (m1 + m2)
             h12 = l2 * l2 * m2 + l1 * l2 * m2 * c2
             h22 = l2 * l2 * m2
-            b1 = (-m2 * l1 * l2 * s2 * w2 * w2 - 2 * m2 * l1 * l2 * s2 * w1 * w2
-                  + m2 * l2 * g * math.cos(q1 + q2) + (m1 + m2) * l1 * g * math.cos(q1))
+            b1 = (
+                -m2 * l1 * l2 * s2 * w2 * w2
+                - 2 * m2 * l1 * l2 * s2 * w1 * w2
+                + m2 * l2 * g * math.cos(q1 + q2)
+                + (m1 + m2) * l1 * g * math.cos(q1)
+            )
             b2 = m2 * l1 * l2 * s2 * w1 * w1 + m2 * l2 * g * math.cos(q1 + q2)
             det = h11 * h22 - h12 * h12
             a1 = (h22 * (t1 - b1) - h12 * (t2 - b2)) / det
@@ -460,8 +493,10 @@ def bench_exemplar_generation(quick: bool, configs: Path) -> None:
     loop = (time.perf_counter() - t0) * len(states) / limit
     print(f"\nexemplar set: {total:,} candidates -> {len(ex.X)} patterns")
     print(f"  batched torch (build_exemplar_set)  {batched * 1e3:9.1f} ms  (median of {reps})")
-    print(f"  per-row Python loop                 {loop * 1e3:9.1f} ms  (extrapolated from {limit} of "
-          f"{len(states)} states)  ratio x {loop / batched:.0f}")
+    print(
+        f"  per-row Python loop                 {loop * 1e3:9.1f} ms  (extrapolated from {limit} of "
+        f"{len(states)} states)  ratio x {loop / batched:.0f}"
+    )
 
 
 # ------------------------------------------------------------------------------------------------ main
@@ -469,23 +504,30 @@ def bench_exemplar_generation(quick: bool, configs: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """The ``selpres-bench`` command: every section in turn; 0, or 1 if a job-level run failed."""
-    ap = argparse.ArgumentParser(prog="selpres-bench", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        prog="selpres-bench", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--quick", action="store_true", help="fewer epochs and repeats (about a minute)")
-    ap.add_argument("--configs", type=Path, default=DEFAULT_CONFIGS,
-                    help=f"the Hydra config directory the job rows compose (default: {DEFAULT_CONFIGS})")
+    ap.add_argument(
+        "--configs",
+        type=Path,
+        default=DEFAULT_CONFIGS,
+        help=f"the Hydra config directory the job rows compose (default: {DEFAULT_CONFIGS})",
+    )
     args = ap.parse_args(argv)
     if not (args.configs / "train.yaml").is_file():
-        ap.error(f"--configs={args.configs}: no train.yaml there; expected the repository's configs/ "
-                 "directory")
+        ap.error(f"--configs={args.configs}: no train.yaml there; expected the repository's configs/ directory")
     q = args.quick
     from selpres import _kernels
 
-    print(f"python {platform.python_version()}, torch {torch.__version__}, numpy {np.__version__}, "
-          f"{os.cpu_count()} CPUs, torch threads {torch.get_num_threads()}, "
-          f"load average at start {os.getloadavg()[0]:.2f}")
-    print(f"replica-run = {EPOCHS} epochs x {N} patterns, 6-13-2, batch 1; times are medians; "
-          f"ratio = idiomatic / this\n")
+    print(
+        f"python {platform.python_version()}, torch {torch.__version__}, numpy {np.__version__}, "
+        f"{os.cpu_count()} CPUs, torch threads {torch.get_num_threads()}, "
+        f"load average at start {os.getloadavg()[0]:.2f}"
+    )
+    print(
+        f"replica-run = {EPOCHS} epochs x {N} patterns, 6-13-2, batch 1; times are medians; ratio = idiomatic / this\n"
+    )
     try:
         _kernels.load(SIZES)
         native = True
@@ -503,8 +545,7 @@ def main(argv: list[str] | None = None) -> int:
     if native:
         bench_compile()
     bench_exemplar_generation(q, args.configs)
-    print(f"\nload average at end {os.getloadavg()[0]:.2f} "
-          "(other processes on the machine slow every number)")
+    print(f"\nload average at end {os.getloadavg()[0]:.2f} (other processes on the machine slow every number)")
     return 0 if jobs_ok else 1
 
 

@@ -67,9 +67,7 @@ def generation_rows(repeats: int) -> list[dict]:
             drawn = S.sample(arm, box, "inverse", S.Points(draw, 3 * arm.dof, r), GENERATION_N)
             times.append(time.perf_counter() - t0)
         assert drawn.tau.shape == (GENERATION_N, arm.dof)
-        rows.append(
-            {"arm": robot, "points": draw, "patterns": GENERATION_N, "seconds": statistics.median(times)}
-        )
+        rows.append({"arm": robot, "points": draw, "patterns": GENERATION_N, "seconds": statistics.median(times)})
     return rows
 
 

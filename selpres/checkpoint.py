@@ -64,8 +64,9 @@ class Checkpoints:
         try:
             ck = torch.load(self.path, weights_only=False)
             ok = ck.get("config_hash") == self.hash and "orders" in ck
-            why = (f"it belongs to another config or an older selpres (hash {ck.get('config_hash')}, "
-                   f"this job {self.hash})")
+            why = (
+                f"it belongs to another config or an older selpres (hash {ck.get('config_hash')}, this job {self.hash})"
+            )
         except Exception as exc:  # noqa: BLE001 - any unreadable file is set aside, never resumed
             ok, why = False, f"it cannot be read ({type(exc).__name__}: {exc})"
         if not ok:
@@ -80,20 +81,34 @@ class Checkpoints:
             history = [json.loads(line) for line in f.read().splitlines()]
         self._saved = len(history)
         log.info("resuming from %s at epoch %d", self.path, ck["epoch"])
-        return Progress(history, ck["diverged_at"], epoch=ck["epoch"], presentations=ck["presentations"],
-                        selection_presentations=ck["selection_presentations"], orders=ck["orders"],
-                        seconds=ck["seconds"], resumed_from=ck["epoch"])
+        return Progress(
+            history,
+            ck["diverged_at"],
+            epoch=ck["epoch"],
+            presentations=ck["presentations"],
+            selection_presentations=ck["selection_presentations"],
+            orders=ck["orders"],
+            seconds=ck["seconds"],
+            resumed_from=ck["epoch"],
+        )
 
     def save(self, engine, progress: Progress) -> None:
         """Append the new history records, then write the checkpoint atomically (write, then rename)."""
         with open(self.history_path, "ab" if self._saved else "wb") as f:
-            f.writelines((json.dumps(rec) + "\n").encode() for rec in progress.history[self._saved:])
+            f.writelines((json.dumps(rec) + "\n").encode() for rec in progress.history[self._saved :])
             size = f.tell()
         self._saved = len(progress.history)
-        state = {"config_hash": self.hash, "epoch": progress.epoch, "presentations": progress.presentations,
-                 "seconds": progress.seconds, "engine": engine.state_dict(),
-                 "diverged_at": progress.diverged_at, "history_bytes": size,
-                 "selection_presentations": progress.selection_presentations, "orders": progress.orders}
+        state = {
+            "config_hash": self.hash,
+            "epoch": progress.epoch,
+            "presentations": progress.presentations,
+            "seconds": progress.seconds,
+            "engine": engine.state_dict(),
+            "diverged_at": progress.diverged_at,
+            "history_bytes": size,
+            "selection_presentations": progress.selection_presentations,
+            "orders": progress.orders,
+        }
         atomic_write(self.path, lambda f: torch.save(state, f))
 
     def move_aside(self) -> Path:

@@ -58,12 +58,19 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
     make_optimizer(o.name.value, [torch.zeros(1)], optim_hparams(o))  # ConfigError naming optim.<key>
     check_batch_options(o.sigmoid_prime_offset, o.reduction.value)
     if o.batch_size < 0 or (o.name.value != "sgd" and o.batch_size != 0):
-        allowed = ("0 (the whole epoch): a batch method" if o.name.value != "sgd"
-                   else "0 (the whole epoch) or a whole number >= 1 (1 = online, as in the paper)")
+        allowed = (
+            "0 (the whole epoch): a batch method"
+            if o.name.value != "sgd"
+            else "0 (the whole epoch) or a whole number >= 1 (1 = online, as in the paper)"
+        )
         raise ConfigError("optim.batch_size", o.batch_size, allowed)
     if batch_mode(o) and cfg.engine.value not in ("fast", "torch"):
-        raise ConfigError("engine", cfg.engine.value, f"fast or torch with optim.name={o.name.value} and "
-                          f"optim.batch_size={o.batch_size}: batch mode runs replica-batched in torch")
+        raise ConfigError(
+            "engine",
+            cfg.engine.value,
+            f"fast or torch with optim.name={o.name.value} and "
+            f"optim.batch_size={o.batch_size}: batch mode runs replica-batched in torch",
+        )
     if cfg.replicas < 1:
         raise ConfigError("replicas", cfg.replicas, "a whole number >= 1")
     if cfg.threads < 0:
@@ -73,13 +80,18 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
     if cfg.eval.heldout_curve < 1:
         raise ConfigError("eval.heldout_curve", cfg.eval.heldout_curve, "a positive number of held-out patterns")
     if cfg.checkpoint.every < 0:
-        raise ConfigError("checkpoint.every", cfg.checkpoint.every, "0 (stage boundaries only) or a positive number of epochs")
+        raise ConfigError(
+            "checkpoint.every", cfg.checkpoint.every, "0 (stage boundaries only) or a positive number of epochs"
+        )
     if cfg.schedule.strata_bins < 1:
         raise ConfigError("schedule.strata_bins", cfg.schedule.strata_bins, "a whole number >= 1")
     if not 0 <= cfg.schedule.selection_cost <= 1:
-        raise ConfigError("schedule.selection_cost", cfg.schedule.selection_cost,
-                          "a fraction of a training presentation in [0, 1] charged per candidate scored "
-                          "(0 = choosing is free; default 1/3, a forward pass of forward + backward)")
+        raise ConfigError(
+            "schedule.selection_cost",
+            cfg.schedule.selection_cost,
+            "a fraction of a training presentation in [0, 1] charged per candidate scored "
+            "(0 = choosing is free; default 1/3, a forward pass of forward + backward)",
+        )
     return check_topology(cfg.topology.layers, check_task(cfg))
 
 
@@ -92,8 +104,7 @@ def check_task(cfg: DictConfig) -> Shape:
     for other in DATA_KEYS.values():
         for k in other:
             if k not in reads and d[k] is not None:
-                raise ConfigError(f"data.{k}", d[k],
-                                  f"unset (null) for data.kind={kind}, which reads {list(reads)}")
+                raise ConfigError(f"data.{k}", d[k], f"unset (null) for data.kind={kind}, which reads {list(reads)}")
     optional = ("q", "tau", "wrench")  # sampled: null = the joint limits, no torque box, no wrench
     for k in reads:
         if d[k] is None and k not in optional:
@@ -101,8 +112,9 @@ def check_task(cfg: DictConfig) -> Shape:
     if d.test_patterns < 1:
         raise ConfigError("data.test_patterns", d.test_patterns, "a whole number >= 1")
     if not 0 <= d.test_from_exemplar <= d.test_patterns:
-        raise ConfigError("data.test_from_exemplar", d.test_from_exemplar,
-                          f"a count in [0, data.test_patterns = {d.test_patterns}]")
+        raise ConfigError(
+            "data.test_from_exemplar", d.test_from_exemplar, f"a count in [0, data.test_patterns = {d.test_patterns}]"
+        )
     heldout_count(d.heldout, 1, "the patterns")  # type and range only: selpres.task counts a fraction
     s = d.scaling
     if not (0 <= s.lo < s.hi <= 1):
@@ -133,14 +145,18 @@ def _check_grid(d: DictConfig) -> None:
         try:
             points[k] = grid_points(r.lo, r.hi, r.step, f"data.{k}")
         except ValueError:
-            raise ConfigError(f"data.{k}.step", r.step,
-                              f"a step that divides hi - lo = {r.hi - r.lo:g} into whole steps") from None
+            raise ConfigError(
+                f"data.{k}.step", r.step, f"a step that divides hi - lo = {r.hi - r.lo:g} into whole steps"
+            ) from None
     candidates = points["theta"] ** 2 * points["dtheta"] ** 2 * points["tau1"] * points["tau2"]
     if candidates > MAX_GRID_CANDIDATES:
         finest = max(points, key=points.get)
-        raise ConfigError(f"data.{finest}.step", d[finest].step,
-                          f"a coarser step: the grid (θ² × θ̇² × τ1 × τ2 points) would have {candidates:,} candidates, "
-                          f"at most {MAX_GRID_CANDIDATES:,} are allowed (the paper's has 1,050,625)")
+        raise ConfigError(
+            f"data.{finest}.step",
+            d[finest].step,
+            f"a coarser step: the grid (θ² × θ̇² × τ1 × τ2 points) would have {candidates:,} candidates, "
+            f"at most {MAX_GRID_CANDIDATES:,} are allowed (the paper's has 1,050,625)",
+        )
 
 
 def check_topology(layers: str, shape: Shape) -> tuple[int, ...]:

@@ -54,7 +54,9 @@ class Before:
         hydra = folder / ".hydra"
         files = {p.name: p.read_bytes() for p in hydra.iterdir() if p.is_file()} if hydra.is_dir() else {}
         log_file = folder / "train.log"
-        return cls(None, {p.name for p in folder.iterdir()}, files, log_file.stat().st_size if log_file.exists() else None)
+        return cls(
+            None, {p.name for p in folder.iterdir()}, files, log_file.stat().st_size if log_file.exists() else None
+        )
 
     def undo(self, folder: Path) -> None:
         """Remove what the run created and restore what Hydra overwrote; never touch anything else."""
@@ -110,8 +112,12 @@ def _objective(res: dict) -> float:
 def _failed(out: Path, cfg: DictConfig, error: str, kind: str) -> None:
     """A failed job's results.json: enough for the report to list it in its place."""
     record = {
-        "status": "failed", "error": error, "kind": kind, "schedule": {"name": cfg.schedule.name},
-        "topology": cfg.topology.layers, "replicas": cfg.replicas,
+        "status": "failed",
+        "error": error,
+        "kind": kind,
+        "schedule": {"name": cfg.schedule.name},
+        "topology": cfg.topology.layers,
+        "replicas": cfg.replicas,
         "seeds": [cfg.seed + r for r in range(cfg.replicas)],
     }
     write_json(out / RESULTS, record)
@@ -139,8 +145,9 @@ def run_job(cfg: DictConfig) -> float:
     except KeyboardInterrupt:
         if multirun:
             raise
-        print("interrupted" + ("; run the same command to resume" if (out / CHECKPOINT).exists() else ""),
-              file=sys.stderr)
+        print(
+            "interrupted" + ("; run the same command to resume" if (out / CHECKPOINT).exists() else ""), file=sys.stderr
+        )
         if not (out / CHECKPOINT).exists():  # interrupted before anything worth keeping
             _undo(out)
         sys.exit(130)
@@ -186,12 +193,21 @@ def summary_table(results: dict) -> str:
     rows = [
         ("schedule", f"{sch['name']} (p={sch['p']}, sizes {sch['sizes']}, epochs {sch['epochs']})"),
         ("topology", results["topology"]),
-        ("replicas", f"{results['replicas']} (seeds {results['seeds'][0]}..{results['seeds'][-1]}), "
-                     f"{results['diverged_replicas']} diverged"),
-        ("cost T/t", f"{sch['presentations']:,} presentations  (T_con/t at equal epochs "
-                     f"{sch['conventional_presentations']:,}; ratio {sch['cost_ratio']:.3f})"
-                     + (f" + {results['selection_presentations']:,} charged for choosing A_i"
-                        if results.get("selection_presentations") else "")),
+        (
+            "replicas",
+            f"{results['replicas']} (seeds {results['seeds'][0]}..{results['seeds'][-1]}), "
+            f"{results['diverged_replicas']} diverged",
+        ),
+        (
+            "cost T/t",
+            f"{sch['presentations']:,} presentations  (T_con/t at equal epochs "
+            f"{sch['conventional_presentations']:,}; ratio {sch['cost_ratio']:.3f})"
+            + (
+                f" + {results['selection_presentations']:,} charged for choosing A_i"
+                if results.get("selection_presentations")
+                else ""
+            ),
+        ),
         ("engine", engine),
         ("wall time", f"{wall['total']:.2f} s total, {wall['train']:.2f} s in updates"),
         ("test-10 RMS", f"{fmt('test10_rms_nm_overall')} Nm   {fmt('test10_rms_scaled_overall')} scaled"),

@@ -84,8 +84,7 @@ def heldout_count(value: Any, total: int, what: str) -> int:
         raise ConfigError("data.heldout", value, "a whole number of patterns >= 1, or a fraction in (0, 1)")
     if isinstance(value, float):
         if not 0.0 < value < 1.0:
-            raise ConfigError("data.heldout", value,
-                              f"a fraction in (0, 1) of {what}, or a whole number >= 1")
+            raise ConfigError("data.heldout", value, f"a fraction in (0, 1) of {what}, or a whole number >= 1")
         return max(1, math.floor(value * total + 0.5))
     if value < 1:
         raise ConfigError("data.heldout", value, "a whole number of patterns >= 1, or a fraction in (0, 1)")
@@ -272,8 +271,7 @@ class Scaler:
     hi: float = 0.9
 
     @classmethod
-    def fit(cls, exemplar: Patterns, data_cfg: Any,
-            commanded: tuple[torch.Tensor, ...] | None = None) -> Scaler:
+    def fit(cls, exemplar: Patterns, data_cfg: Any, commanded: tuple[torch.Tensor, ...] | None = None) -> Scaler:
         """Bounds from the exemplar set (mode exemplar) or the commanded boxes: ``commanded`` = (x lo, x hi,
         y lo, y hi) when given, else the grid route's θ, θ̇, ±accel_limit and τ boxes."""
         sc = cfg_get(data_cfg, "scaling")
@@ -408,10 +406,18 @@ def _table(p: Patterns, wrench: torch.Tensor | None) -> np.ndarray:
     return torch.cat(cols, 1).cpu().numpy().astype(np.float64)
 
 
-def export(path_stem: str | os.PathLike, exemplar: ExemplarSet, tests: TestSets, robot_cfg: Any,
-           data_cfg: Any, *, input_names: tuple[str, ...] = INPUT_NAMES,
-           target_names: tuple[str, ...] = TARGET_NAMES, arm: dict | None = None,
-           wrench: torch.Tensor | None = None) -> dict[str, Path]:
+def export(
+    path_stem: str | os.PathLike,
+    exemplar: ExemplarSet,
+    tests: TestSets,
+    robot_cfg: Any,
+    data_cfg: Any,
+    *,
+    input_names: tuple[str, ...] = INPUT_NAMES,
+    target_names: tuple[str, ...] = TARGET_NAMES,
+    arm: dict | None = None,
+    wrench: torch.Tensor | None = None,
+) -> dict[str, Path]:
     """Write ``<stem>.npz`` and ``<stem>_{exemplar,test10,heldout}.csv`` (``%.17g``: exact float64
     round trip). The CSVs start with ``# config_hash=...`` and, when an arm made the data,
     ``# arm=<its to_config() as JSON>``; then the header: the input names, the target names and, for a
@@ -424,11 +430,13 @@ def export(path_stem: str | os.PathLike, exemplar: ExemplarSet, tests: TestSets,
 
     columns = tuple(input_names) + tuple(target_names) + (WRENCH_NAMES if wrench is not None else ())
     n_in = len(input_names)
-    tables = {name: _table(p, wrench) for name, p in
-              (("exemplar", exemplar), ("test10", tests.test10), ("heldout", tests.heldout))}
+    tables = {
+        name: _table(p, wrench)
+        for name, p in (("exemplar", exemplar), ("test10", tests.test10), ("heldout", tests.heldout))
+    }
     arrays: dict[str, np.ndarray] = {}
     for name, t in tables.items():
-        arrays[f"{name}_X"], arrays[f"{name}_Y"] = t[:, :n_in], t[:, n_in:n_in + len(target_names)]
+        arrays[f"{name}_X"], arrays[f"{name}_Y"] = t[:, :n_in], t[:, n_in : n_in + len(target_names)]
     arrays["test10_from_exemplar"] = tests.test10_from_exemplar.cpu().numpy().astype(bool)
     arrays["input_names"] = np.array(input_names)
     arrays["target_names"] = np.array(target_names)
@@ -446,7 +454,9 @@ def export(path_stem: str | os.PathLike, exemplar: ExemplarSet, tests: TestSets,
     header = f"# config_hash={h}\n" + arm_line + ",".join(columns)
     for name, t in tables.items():
         paths[name] = stem.with_name(f"{stem.name}_{name}.csv")
-        atomic_write(paths[name], lambda f, t=t: np.savetxt(f, t, fmt="%.17g", delimiter=",", header=header, comments=""))
+        atomic_write(
+            paths[name], lambda f, t=t: np.savetxt(f, t, fmt="%.17g", delimiter=",", header=header, comments="")
+        )
     return paths
 
 
@@ -467,7 +477,9 @@ def load_exported(path_npz: str | os.PathLike, robot_cfg: Any, data_cfg: Any) ->
     return arrays
 
 
-def load_csv(path: str | os.PathLike, robot_cfg: Any = None, data_cfg: Any = None) -> tuple[str, tuple[str, ...], np.ndarray]:
+def load_csv(
+    path: str | os.PathLike, robot_cfg: Any = None, data_cfg: Any = None
+) -> tuple[str, tuple[str, ...], np.ndarray]:
     """(config_hash, column names, float64 table) of an exported CSV; checks the hash when configs are given."""
     comments = []
     with open(path) as f:

@@ -67,9 +67,7 @@ def _csv_header(path: Path) -> tuple[int, list[str]]:
         for number, line in enumerate(f, 1):
             if line.strip() and not line.lstrip().startswith("#"):
                 return number, [c.strip() for c in next(csv.reader([line]))]
-    raise DataFileError(
-        path, "header", "no header row (the first line that is not a '#' comment names the columns)"
-    )
+    raise DataFileError(path, "header", "no header row (the first line that is not a '#' comment names the columns)")
 
 
 def _npz_columns(path: Path) -> dict[str, np.ndarray]:
@@ -94,8 +92,7 @@ def _npz_columns(path: Path) -> dict[str, np.ndarray]:
             raise DataFileError(
                 path,
                 f"array {k!r}",
-                f"has shape {v.shape}: expected one 1-D array per column "
-                f"(or a 2-D {NPZ_TABLE!r} with {NPZ_COLUMNS!r})",
+                f"has shape {v.shape}: expected one 1-D array per column (or a 2-D {NPZ_TABLE!r} with {NPZ_COLUMNS!r})",
             )
     return arrays
 
@@ -107,8 +104,7 @@ def _no_duplicates(path: Path, names: list[str]) -> None:
             raise DataFileError(
                 path,
                 f"column {name!r}",
-                f"named twice in the header (columns {seen[name] + 1} "
-                f"and {i + 1}): every column needs its own name",
+                f"named twice in the header (columns {seen[name] + 1} and {i + 1}): every column needs its own name",
             )
         seen[name] = i
 
@@ -136,18 +132,14 @@ def check_columns(path: str | Path | None, inputs, outputs) -> tuple[tuple[str, 
             )
         for n in names:
             if n not in have:
-                raise DataFileError(
-                    path, f"column {n!r} ({key})", f"not in the file: its columns are {list(have)}"
-                )
+                raise DataFileError(path, f"column {n!r} ({key})", f"not in the file: its columns are {list(have)}")
         dup = sorted({n for n in names if list(names).count(n) > 1})
         if dup:
             raise ConfigError(key, list(names), f"each column once ({dup[0]!r} is listed twice)")
         picked[key] = tuple(names)
     both = sorted(set(picked["data.inputs"]) & set(picked["data.outputs"]))
     if both:
-        raise ConfigError(
-            "data.outputs", list(outputs), f"columns that are not also inputs ({both[0]!r} is both)"
-        )
+        raise ConfigError("data.outputs", list(outputs), f"columns that are not also inputs ({both[0]!r} is both)")
     return picked["data.inputs"], picked["data.outputs"]
 
 
@@ -174,18 +166,14 @@ def _parse_csv(path: Path, wanted: list[str]) -> np.ndarray:
             if number <= header_line or not any(cell.strip() for cell in row):
                 continue
             if len(row) != len(names):
-                raise DataFileError(
-                    path, f"line {number}", f"has {len(row)} cells, the header names {len(names)}"
-                )
+                raise DataFileError(path, f"line {number}", f"has {len(row)} cells, the header names {len(names)}")
             parsed = []
             for col, i in zip(wanted, index):
                 cell = row[i].strip()
                 try:
                     v = float(cell)
                 except ValueError:
-                    raise DataFileError(
-                        path, f"column {col!r}, line {number}", f"{cell!r} is not a number"
-                    ) from None
+                    raise DataFileError(path, f"column {col!r}, line {number}", f"{cell!r} is not a number") from None
                 if not math.isfinite(v):
                     raise DataFileError(
                         path,
@@ -206,9 +194,7 @@ def _parse_npz(path: Path, wanted: list[str]) -> np.ndarray:
         if a.dtype.kind not in "biuf":
             raise DataFileError(path, f"column {name!r}", f"has dtype {a.dtype}: expected numbers")
         if length is not None and len(a) != length:
-            raise DataFileError(
-                path, f"column {name!r}", f"has {len(a)} rows, column {wanted[0]!r} has {length}"
-            )
+            raise DataFileError(path, f"column {name!r}", f"has {len(a)} rows, column {wanted[0]!r} has {length}")
         length = len(a)
         bad = np.flatnonzero(~np.isfinite(a.astype(np.float64)))
         if bad.size:

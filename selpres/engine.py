@@ -103,8 +103,9 @@ def _check_scoring(sizes, X: torch.Tensor, Y: torch.Tensor) -> tuple[torch.Tenso
     """``squared_errors``' inputs as float64, or a ValueError naming the bad shape."""
     X = _check_patterns(sizes, X)
     if Y.dim() != 2 or Y.shape != (X.shape[0], sizes[-1]):
-        raise ValueError(f"Y must be [{X.shape[0]}, {sizes[-1]}] (scaled targets of X's patterns), "
-                         f"got {tuple(Y.shape)}")
+        raise ValueError(
+            f"Y must be [{X.shape[0]}, {sizes[-1]}] (scaled targets of X's patterns), got {tuple(Y.shape)}"
+        )
     return X, Y.detach().to(torch.float64)
 
 
@@ -164,8 +165,10 @@ class ReferenceEngine(ScoredByPredict):
         return replicas_finite(self.params())
 
     def params(self):
-        return [torch.stack(group) for group in zip(*(
-            [p.detach().clone() for p in model.flat_params()] for model in self.models))]
+        return [
+            torch.stack(group)
+            for group in zip(*([p.detach().clone() for p in model.flat_params()] for model in self.models))
+        ]
 
     def _momentum(self, model, opt):
         out = []
@@ -299,8 +302,9 @@ class NativeEngine:
         padded[: self.R] = order.detach().cpu().numpy()
         padded_order = torch.from_numpy(padded)
         loss = torch.zeros(self.G * self.LANES, dtype=torch.float64)
-        self._k.train(self.sizes, self.w, self.buf, X, Y, padded_order, self.batch_size,
-                      self.lr, self.mom, loss, self.threads)
+        self._k.train(
+            self.sizes, self.w, self.buf, X, Y, padded_order, self.batch_size, self.lr, self.mom, loss, self.threads
+        )
         return (loss[: self.R] / m) if m else torch.full((self.R,), float("nan"), dtype=torch.float64)
 
     def predict(self, X):
@@ -340,8 +344,9 @@ def native_available(sizes=(6, 13, 2)) -> bool:
         return False
 
 
-def make_engine(name: str, sizes, params, lr: float, momentum: float, batch_size: int,
-                threads: int | None = None) -> Engine:
+def make_engine(
+    name: str, sizes, params, lr: float, momentum: float, batch_size: int, threads: int | None = None
+) -> Engine:
     """``name``: ``"reference"``, ``"torch"``, ``"native"`` or ``"fast"`` (native if it can be had, else
     torch, with ``fallback_reason`` set and one warning logged); ``"native"`` raises ``KernelUnavailable``.
 
@@ -350,8 +355,7 @@ def make_engine(name: str, sizes, params, lr: float, momentum: float, batch_size
     """
     sizes = tuple(int(s) for s in sizes)
     if len(params) != 2 * (len(sizes) - 1):
-        raise ValueError(f"{len(params)} parameter tensors for topology {sizes}: "
-                         f"expected {2 * (len(sizes) - 1)}")
+        raise ValueError(f"{len(params)} parameter tensors for topology {sizes}: expected {2 * (len(sizes) - 1)}")
     if int(batch_size) < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size}")
     if name == "reference":
@@ -369,7 +373,9 @@ def make_engine(name: str, sizes, params, lr: float, momentum: float, batch_size
             engine = TorchEngine(sizes, params, lr, momentum, batch_size)
             engine.fallback_reason = str(exc)
             line = " ".join(str(exc).split())  # one line, however long the compiler's message
-            log.warning("engine 'fast' runs the torch engine: native kernel unavailable: %s",
-                        line if len(line) <= 400 else line[:400] + " ...")
+            log.warning(
+                "engine 'fast' runs the torch engine: native kernel unavailable: %s",
+                line if len(line) <= 400 else line[:400] + " ...",
+            )
             return engine
     raise ValueError(f"unknown engine {name!r}: choose one of {ENGINE_NAMES}")

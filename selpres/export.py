@@ -55,8 +55,10 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
         print(f"robot {arm.name} ({arm.dof} joints)  G(q=0) = ({', '.join(f'{g:.3f}' for g in G)}) Nm")
     info = task.info
     kept = f" of {info['candidates']:,} candidates" if "candidates" in info else ""
-    print(f"exemplar set: {len(ex):,}{kept} ({info['source']}; {t1 - t0:.3f} s); "
-          f"test10: {len(tests.test10)}, heldout: {len(tests.heldout):,}")
+    print(
+        f"exemplar set: {len(ex):,}{kept} ({info['source']}; {t1 - t0:.3f} s); "
+        f"test10: {len(tests.test10)}, heldout: {len(tests.heldout):,}"
+    )
     for k, name in enumerate(task.output_names):
         print(f"  exemplar {name}: {ex.Y[:, k].min():.3f} .. {ex.Y[:, k].max():.3f}")
     for mode in ("exemplar", "commanded"):
@@ -66,8 +68,7 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
             print(f"  scaling.mode={mode:9s} not available: {e.allowed}")
             continue
         ys = s.transform_y(ex.Y)
-        rng = ", ".join(f"{n} [{ys[:, k].min():.3f}, {ys[:, k].max():.3f}]"
-                        for k, n in enumerate(task.output_names))
+        rng = ", ".join(f"{n} [{ys[:, k].min():.3f}, {ys[:, k].max():.3f}]" for k, n in enumerate(task.output_names))
         print(f"  scaling.mode={mode:9s} scaled exemplar targets: {rng}")
     paths = {}
     if urdf is not None:  # first: a refusal here leaves nothing written
@@ -78,8 +79,19 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
             paths["urdf"] = to_urdf(arm.as_serial() if isinstance(arm, TwoLinkArm) else arm, urdf)
         except ValueError as e:
             raise ConfigError("--urdf", str(urdf), f"an arm URDF can name: {e}") from None
-    paths.update(D.export(stem, ex, tests, robot_cfg, data_cfg, input_names=task.input_names,
-                          target_names=task.output_names, arm=task.arm, wrench=task.wrench))
+    paths.update(
+        D.export(
+            stem,
+            ex,
+            tests,
+            robot_cfg,
+            data_cfg,
+            input_names=task.input_names,
+            target_names=task.output_names,
+            arm=task.arm,
+            wrench=task.wrench,
+        )
+    )
     print(f"config_hash={D.config_hash(robot_cfg, data_cfg)}  (robot + data, test_seed={data_cfg.test_seed})")
     for p in paths.values():
         print(f"  wrote {p}")
@@ -89,22 +101,39 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
 def _override(text: str) -> str:
     key = text.split("=", 1)[0]
     if "=" not in text or not (key in ("robot", "data") or key.startswith(("robot.", "data."))):
-        raise argparse.ArgumentTypeError(f"{text!r} is not allowed here: expected robot=NAME, data=NAME, "
-                                         "robot.KEY=VALUE or data.KEY=VALUE")
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not allowed here: expected robot=NAME, data=NAME, robot.KEY=VALUE or data.KEY=VALUE"
+        )
     return text
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="selpres-export", description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter,
-                                 epilog=__doc__.split("\n\n", 2)[2])
-    ap.add_argument("overrides", nargs="*", type=_override, metavar="KEY=VALUE",
-                    help="robot=NAME, data=NAME, robot.* or data.* overrides, as for train.py")
-    ap.add_argument("--out", type=Path, default=Path("outputs/data/exemplar"),
-                    help="output stem: writes STEM.npz and STEM_{exemplar,test10,heldout}.csv "
-                         "(default: %(default)s)")
-    ap.add_argument("--urdf", type=Path, default=None, metavar="PATH",
-                    help="also write the arm as a URDF file (load it with robot=urdf robot.path=PATH)")
+    ap = argparse.ArgumentParser(
+        prog="selpres-export",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=__doc__.split("\n\n", 2)[2],
+    )
+    ap.add_argument(
+        "overrides",
+        nargs="*",
+        type=_override,
+        metavar="KEY=VALUE",
+        help="robot=NAME, data=NAME, robot.* or data.* overrides, as for train.py",
+    )
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=Path("outputs/data/exemplar"),
+        help="output stem: writes STEM.npz and STEM_{exemplar,test10,heldout}.csv (default: %(default)s)",
+    )
+    ap.add_argument(
+        "--urdf",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="also write the arm as a URDF file (load it with robot=urdf robot.path=PATH)",
+    )
     args = ap.parse_args(argv)
     try:
         robot_cfg, data_cfg = compose_data_config(args.overrides)

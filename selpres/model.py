@@ -30,8 +30,7 @@ class TopologyError(ValueError):
         return type(self), (self.topology, self.allowed)
 
 
-def parse_topology(topology: str, n_inputs: int | None = None,
-                   n_outputs: int | None = None) -> tuple[int, ...]:
+def parse_topology(topology: str, n_inputs: int | None = None, n_outputs: int | None = None) -> tuple[int, ...]:
     """``"6-13-2"`` -> ``(6, 13, 2)``; checks widths against the data when they are given."""
     text = str(topology).strip()
     if not _TOPOLOGY_RE.match(text):
@@ -54,9 +53,7 @@ class BPN(nn.Module):
     def __init__(self, sizes: tuple[int, ...] | str, dtype: torch.dtype = torch.float64):
         super().__init__()
         self.sizes = parse_topology(sizes) if isinstance(sizes, str) else tuple(sizes)
-        self.layers = nn.ModuleList(
-            nn.Linear(i, o, dtype=dtype) for i, o in zip(self.sizes[:-1], self.sizes[1:])
-        )
+        self.layers = nn.ModuleList(nn.Linear(i, o, dtype=dtype) for i, o in zip(self.sizes[:-1], self.sizes[1:]))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         for layer in self.layers:
@@ -71,8 +68,9 @@ class BPN(nn.Module):
         return out
 
 
-def init_replica_params(sizes: tuple[int, ...], seeds: list[int],
-                        dtype: torch.dtype = torch.float64) -> list[torch.Tensor]:
+def init_replica_params(
+    sizes: tuple[int, ...], seeds: list[int], dtype: torch.dtype = torch.float64
+) -> list[torch.Tensor]:
     """Initial weights for one replica per seed, drawn from ``nn.Linear``'s default distribution.
 
     ``nn.Linear`` draws weight and bias from U(-1/sqrt(fan_in), 1/sqrt(fan_in)); here each replica

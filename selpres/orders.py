@@ -47,8 +47,7 @@ def priority_order(X: torch.Tensor, kind: str, gen: torch.Generator, bins: int =
     return priority_orders(X, kind, [gen], bins)[0]
 
 
-def priority_orders(X: torch.Tensor, kind: str, gens: list[torch.Generator],
-                    bins: int = 2) -> list[torch.Tensor]:
+def priority_orders(X: torch.Tensor, kind: str, gens: list[torch.Generator], bins: int = 2) -> list[torch.Tensor]:
     """One priority order per generator (one per replica), computed together where that is cheaper
     (coverage); each equals ``priority_order`` with that generator alone."""
     if kind == "random":
@@ -85,8 +84,9 @@ def _stratified(sid: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
     return shuffled[torch.argsort(key, stable=True)]
 
 
-def coverage_orders(X: torch.Tensor, gens: list[torch.Generator], exact_max: int = COVERAGE_EXACT_MAX,
-                    level1: int | None = None) -> list[torch.Tensor]:
+def coverage_orders(
+    X: torch.Tensor, gens: list[torch.Generator], exact_max: int = COVERAGE_EXACT_MAX, level1: int | None = None
+) -> list[torch.Tensor]:
     """Greedy farthest-point orders of U in its unit cube, one per generator, which draws the first pattern.
 
     n <= ``exact_max``: the exact greedy (Gonzalez 1985), O(n^2) time and O(n) memory per order (the
@@ -156,8 +156,9 @@ def _distance_rows(C: np.ndarray, groups: int):
     return lambda i, out: _sq_distances(C, C[group, :, i], out, tmp)
 
 
-def _farthest_first(d: np.ndarray, steps: int, dist, start: np.ndarray | None = None,
-                    owner: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _farthest_first(
+    d: np.ndarray, steps: int, dist, start: np.ndarray | None = None, owner: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Greedy farthest-point steps in G independent groups at once.
 
     d: [G, m] squared distance of each point to its group's chosen set, updated in place (-inf marks a

@@ -97,9 +97,7 @@ def cluster_strata(X: torch.Tensor, clusters: int = CLUSTERS) -> torch.Tensor:
     for _ in range(ITERATIONS):
         member = torch.nn.functional.one_hot(cell, k).to(fit.dtype)  # [points, k]: a matmul, not a scatter
         sums, counts = member.T @ fit, member.sum(0).unsqueeze(1)
-        centres = torch.where(
-            counts > 0, sums / counts.clamp(min=1), centres
-        )  # an empty cell keeps its centre
+        centres = torch.where(counts > 0, sums / counts.clamp(min=1), centres)  # an empty cell keeps its centre
         moved = _nearest(fit, centres)
         if torch.equal(moved, cell):
             break

@@ -54,6 +54,4 @@ def with_fraction_form(e: ConfigError, sizes: Sequence) -> ConfigError:
     if e.key != "schedule.sizes" or not _counts(sizes) or sizes[-1] <= 0:
         return e
     fractions = ",".join(f"{c / sizes[-1]:.4g}" for c in sizes[:-1]) + ",1.0"
-    return ConfigError(
-        e.key, e.value, f"{e.allowed}; as fractions of n, which fit any n: schedule.sizes=[{fractions}]"
-    )
+    return ConfigError(e.key, e.value, f"{e.allowed}; as fractions of n, which fit any n: schedule.sizes=[{fractions}]")

@@ -43,8 +43,15 @@ def replica_results(seeds: list[int], final: dict, diverged_at: list, last_train
             name: {unit: {k: (v[r].item() if ok else None) for k, v in ev[unit].items()} for unit in UNITS}
             for name, ev in final.items()
         }
-        out.append({"seed": seed, "status": "complete" if ok else "diverged", "diverged": diverged_at[r],
-                    "final": metrics, "train_mse": last_train_mse[r] if ok else None})
+        out.append(
+            {
+                "seed": seed,
+                "status": "complete" if ok else "diverged",
+                "diverged": diverged_at[r],
+                "final": metrics,
+                "train_mse": last_train_mse[r] if ok else None,
+            }
+        )
     return out
 
 
@@ -53,7 +60,9 @@ def summary(replicas: list[dict]) -> dict:
     joints = list(replicas[0]["final"]["heldout"]["nm"]) if replicas else []
     return {
         f"{name}_rms_{unit}_{joint}": summarize(rep["final"][name][unit][joint] for rep in replicas)
-        for name in SETS for unit in UNITS for joint in joints
+        for name in SETS
+        for unit in UNITS
+        for joint in joints
     }
 
 
@@ -79,9 +88,11 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "training_presentations": training,
         "selection_presentations": progress.selection_presentations,  # forward passes (selpres.selection)
         "selection_cost": cfg.schedule.selection_cost,  # the charge per candidate scored
-        "tests": {"test10": {"n": int(prob.tests["test10"][0].shape[0])},
-                  "heldout": {"n": heldout_n, "curve_n": min(cfg.eval.heldout_curve, heldout_n)},
-                  "heldout_curve_every": cfg.eval.every},
+        "tests": {
+            "test10": {"n": int(prob.tests["test10"][0].shape[0])},
+            "heldout": {"n": heldout_n, "curve_n": min(cfg.eval.heldout_curve, heldout_n)},
+            "heldout_curve_every": cfg.eval.every,
+        },
         "data": prob.task.info if prob.task is not None else None,  # what data was made, how, its hash
         "schedule_note": prob.schedule_note,  # how a named schedule's counts were applied to this n
         "resumed_from_epoch": progress.resumed_from,
@@ -99,8 +110,13 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
 
 def _git_commit() -> str | None:
     try:
-        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).parent,
-                             capture_output=True, text=True, timeout=5)
+        out = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=Path(__file__).parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
         return out.stdout.strip() or None
     except (OSError, subprocess.SubprocessError):
         return None

@@ -156,8 +156,7 @@ def make_arm(robot_cfg: Any) -> Arm:
     used = KIND_KEYS[kind]
     for k, v in c.items():
         if k != "kind" and k not in used and v is not None:
-            raise ConfigError(f"robot.{k}", v,
-                              f"unset (null) for robot.kind={kind}, which reads {list(used)}")
+            raise ConfigError(f"robot.{k}", v, f"unset (null) for robot.kind={kind}, which reads {list(used)}")
     if kind == "two_link":
         for k in ROBOT_KEYS:
             v = c.get(k)

@@ -15,7 +15,7 @@ the checkpoint keeps), and the shuffles of all replicas of a job are computed in
 from __future__ import annotations
 
 import functools
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 import torch
@@ -30,8 +30,10 @@ _BLOCK_HASHES = 2**15  # per block of replicas: 256 KB stays in L2, and torch.ga
 _NARROW_MAX_BITS = 11  # sizes up to 2**11 sort 32-bit keys (>= 21 hash bits; ~1 tied pair per row at most)
 
 
-_MIX_STEPS = tuple((np.uint64(s), None if m is None else np.uint64(m))
-                   for s, m in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB), (31, None)))
+_MIX_STEPS = tuple(
+    (np.uint64(s), None if m is None else np.uint64(m))
+    for s, m in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB), (31, None))
+)
 
 
 def _mix64_(z: np.ndarray, tmp: np.ndarray | None = None) -> np.ndarray:
@@ -121,7 +123,7 @@ def _settle_ties(h: np.ndarray, pos: np.ndarray, tie: np.ndarray) -> None:
         pos[row] = np.argsort(h[row])
 
 
-def epoch_orders(samplers: list["SelectivePresentationSampler"]) -> torch.Tensor:
+def epoch_orders(samplers: list[SelectivePresentationSampler]) -> torch.Tensor:
     """Every sampler's current epoch order, stacked [R, m]: one vectorised shuffle for all replicas.
 
     Replica r's shuffle is argsort of hash(key_r, epoch, i) over the current set's positions i, a
@@ -156,9 +158,7 @@ class SelectivePresentationSampler(Sampler[int]):
 
     def __init__(self, order: torch.Tensor, schedule: Schedule, seed: int):
         if order.numel() != schedule.n:
-            raise ValueError(
-                f"priority order has {order.numel()} indices but the schedule ends at n = {schedule.n}"
-            )
+            raise ValueError(f"priority order has {order.numel()} indices but the schedule ends at n = {schedule.n}")
         self.order = order
         self.schedule = schedule
         self.seed = int(seed)

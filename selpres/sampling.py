@@ -112,15 +112,9 @@ def boxes(arm: Arm, data_cfg: Any) -> Boxes:
         qbox = _box(list(q), "data.q", dof)
     dq = cfg_get(data_cfg, "dq")
     if dq is None:
-        raise ConfigError(
-            "data.dq", None, "[lo, hi] joint rates (rad/s) for every joint, or one pair per joint"
-        )
+        raise ConfigError("data.dq", None, "[lo, hi] joint rates (rad/s) for every joint, or one pair per joint")
     accel = cfg_get(data_cfg, "accel_limit")
-    if (
-        isinstance(accel, bool)
-        or not isinstance(accel, (int, float))
-        or not (math.isfinite(accel) and accel > 0)
-    ):
+    if isinstance(accel, bool) or not isinstance(accel, (int, float)) or not (math.isfinite(accel) and accel > 0):
         raise ConfigError("data.accel_limit", accel, "a positive acceleration bound in rad/s²")
     tau = cfg_get(data_cfg, "tau")
     if tau is None and route == "forward":

@@ -9,9 +9,10 @@ that epoch's shuffled order, so the total equals the budget exactly.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 from selpres.errors import ConfigError
 
@@ -74,12 +75,9 @@ class Schedule:
         (a one-stage schedule's partial epoch counts as the fraction of an epoch it is)."""
         return self.n * sum(s.epochs for s in self.stages) + sum(s.extra for s in self.stages)
 
-    def plan(self) -> list[EpochPlan]:
-        out: list[EpochPlan] = []
-        for k, st in enumerate(self.stages):
-            counts = [st.size] * st.epochs + ([st.extra] if st.extra else [])
-            out += [EpochPlan(len(out) + j, k, st.size, c) for j, c in enumerate(counts)]
-        return out
+    def plan(self) -> tuple[EpochPlan, ...]:
+        """Every epoch in order (computed once per schedule: every replica's sampler shares it)."""
+        return _plan(self.stages)
 
     def stage_ends(self) -> list[int]:
         """Global index of each stage's last epoch (where the loop scores, reports and checkpoints)."""
@@ -102,6 +100,15 @@ class Schedule:
         }
 
 
+@functools.lru_cache(maxsize=64)
+def _plan(stages: tuple[Stage, ...]) -> tuple[EpochPlan, ...]:
+    out: list[EpochPlan] = []
+    for k, st in enumerate(stages):
+        counts = [st.size] * st.epochs + ([st.extra] if st.extra else [])
+        out += [EpochPlan(len(out) + j, k, st.size, c) for j, c in enumerate(counts)]
+    return tuple(out)
+
+
 def _is_fraction(v) -> bool:
     return isinstance(v, float)
 
@@ -109,7 +116,9 @@ def _is_fraction(v) -> bool:
 def resolve_sizes(sizes: Sequence, n: int, key: str = "schedule.sizes") -> list[int]:
     """Counts stay counts; floats are fractions of n in (0, 1] (rounded half up, at least 1)."""
     if not isinstance(sizes, (list, tuple)) or len(sizes) == 0:
-        raise ConfigError(key, sizes, "a non-empty list of counts (e.g. [50, 100, 1002]) or fractions of n (e.g. [0.05, 1.0])")
+        raise ConfigError(
+            key, sizes, "a non-empty list of counts (e.g. [50, 100, 1002]) or fractions of n (e.g. [0.05, 1.0])"
+        )
     out = []
     for v in sizes:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
@@ -129,7 +138,9 @@ def resolve_sizes(sizes: Sequence, n: int, key: str = "schedule.sizes") -> list[
     if out[-1] > n:
         raise ConfigError(key, sizes, f"sizes at most n = {n}, the exemplar set's size; resolved to {out}")
     if out[-1] != n:
-        raise ConfigError(key, sizes, f"the last stage to be the whole exemplar set (n = {n}, or 1.0); resolved to {out}")
+        raise ConfigError(
+            key, sizes, f"the last stage to be the whole exemplar set (n = {n}, or 1.0); resolved to {out}"
+        )
     return out
 
 
@@ -140,15 +151,25 @@ def build_schedule(sizes: Sequence, epochs: Sequence | None, n: int, budget: int
         if isinstance(budget, bool) or not isinstance(budget, int) or budget <= 0:
             raise ConfigError("schedule.budget", budget, "a positive whole number of presentations, or null")
         if len(counts) != 1:
-            raise ConfigError("schedule.budget", budget, "a budget only with a one-stage (conventional) schedule: sizes = [n]")
+            raise ConfigError(
+                "schedule.budget", budget, "a budget only with a one-stage (conventional) schedule: sizes = [n]"
+            )
         if epochs is not None:
-            raise ConfigError("schedule.epochs", list(epochs), "null when schedule.budget is set (epochs follow from the budget)")
+            raise ConfigError(
+                "schedule.epochs", list(epochs), "null when schedule.budget is set (epochs follow from the budget)"
+            )
         full, extra = divmod(budget, n)
         return Schedule((Stage(n, full, extra),))
     if epochs is None or not isinstance(epochs, (list, tuple)):
-        raise ConfigError("schedule.epochs", epochs, "a list of positive epoch counts, one per stage (or set schedule.budget)")
+        raise ConfigError(
+            "schedule.epochs", epochs, "a list of positive epoch counts, one per stage (or set schedule.budget)"
+        )
     if len(epochs) != len(counts):
-        raise ConfigError("schedule.epochs", list(epochs), f"one entry per stage: {len(counts)} sizes {list(sizes)} but {len(epochs)} epochs")
+        raise ConfigError(
+            "schedule.epochs",
+            list(epochs),
+            f"one entry per stage: {len(counts)} sizes {list(sizes)} but {len(epochs)} epochs",
+        )
     for e in epochs:
         if isinstance(e, bool) or not isinstance(e, int) or e <= 0:
             raise ConfigError("schedule.epochs", list(epochs), "positive whole numbers of epochs")

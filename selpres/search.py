@@ -33,15 +33,17 @@ def shaped_sizes(p: int, first: float, growth: float, n: int) -> list[int]:
     """Stage sizes n_0 <= ... <= n_p = n from (p, first, growth). Where rounding merges two (small n, large
     first), they are returned merged: the job refuses them (``schedule.sizes`` must grow) and fails alone."""
     if p < 0 or not 0 < first <= 1 or not growth > 0:
-        raise ConfigError("search", {"p": p, "first": first, "growth": growth},
-                          "p >= 0 enlargements, first in (0, 1], growth > 0")
+        raise ConfigError(
+            "search", {"p": p, "first": first, "growth": growth}, "p >= 0 enlargements, first in (0, 1], growth > 0"
+        )
     if p == 0:
         return [n]
     return [max(1, math.floor((first + (1 - first) * (i / p) ** growth) * n + 0.5)) for i in range(p + 1)]
 
 
-def shaped_schedule(p: int, first: float, growth: float, tilt: float, n: int, budget: int, order: str,
-                    selection_cost: float) -> dict:
+def shaped_schedule(
+    p: int, first: float, growth: float, tilt: float, n: int, budget: int, order: str, selection_cost: float
+) -> dict:
     """The schedule of (p, first, growth, tilt) at ``budget`` total presentations for ``order``, as
     ``schedule.*`` config values: {"sizes": [...], "epochs": [...] or None, "budget": None or int}."""
     sizes = shaped_sizes(p, first, growth, n)
@@ -58,8 +60,16 @@ def shaped_schedule(p: int, first: float, growth: float, tilt: float, n: int, bu
 def raw_schedule(raw: dict, n: int, order: str, selection_cost: float) -> dict:
     """The schedule (as ``shaped_schedule`` gives it) that the search numbers ``raw`` (SEARCH_KEYS ->
     value, as Optuna stores them) stand for."""
-    return shaped_schedule(int(raw["search_p"]), float(raw["search_first"]), float(raw["search_growth"]),
-                           float(raw["search_tilt"]), n, int(raw["search_budget"]), order, selection_cost)
+    return shaped_schedule(
+        int(raw["search_p"]),
+        float(raw["search_first"]),
+        float(raw["search_growth"]),
+        float(raw["search_tilt"]),
+        n,
+        int(raw["search_budget"]),
+        order,
+        selection_cost,
+    )
 
 
 def schedule_overrides(raw: dict, n: int, order: str, selection_cost: float) -> list[str]:
@@ -97,6 +107,9 @@ def confirmation_commands(best: list[tuple[dict, str]], n: int, selection_cost: 
         if len(sched["sizes"]) > 1:
             cost = total_cost(sched, n, order, selection_cost)
             cmds.append(f"{run} schedule=matched schedule.budget={cost}")
-    cmds += [f"{run} schedule=selective", f"{run} schedule=matched schedule.budget=70560",
-             f"{run} schedule=conventional"]
+    cmds += [
+        f"{run} schedule=selective",
+        f"{run} schedule=matched schedule.budget=70560",
+        f"{run} schedule=conventional",
+    ]
     return [*dict.fromkeys(cmds), f"python -m selpres.report outputs/sweeps/{CONFIRM}"]

@@ -75,8 +75,7 @@ def pattern_errors(outputs: torch.Tensor, Y: torch.Tensor) -> torch.Tensor:
     return torch.nan_to_num((outputs - Y).square().sum(-1), nan=float("inf"))
 
 
-def enlarge_by_loss(orders: torch.Tensor, errors: torch.Tensor, kept: int, added: int,
-                    hard: bool) -> torch.Tensor:
+def enlarge_by_loss(orders: torch.Tensor, errors: torch.Tensor, kept: int, added: int, hard: bool) -> torch.Tensor:
     """New orders [R, n]: each row's first ``kept`` patterns (A_{k-1}) stay; of the candidates after them,
     the ``added`` with the largest (``hard``) or smallest ``errors`` [R, n] come next and the others after,
     both in the order the candidates were in (so equal errors go to the earlier candidate).
@@ -129,8 +128,12 @@ def errors_of(engine, X: torch.Tensor, Y: torch.Tensor) -> torch.Tensor:
         if predict is not None:
             return pattern_errors(predict(X), Y)
         params = engine.params()
-        return torch.cat([pattern_errors(forward_replicas([p[r0 : r0 + SCORE_BLOCK] for p in params], X), Y)
-                          for r0 in range(0, len(params[0]), SCORE_BLOCK)])
+        return torch.cat(
+            [
+                pattern_errors(forward_replicas([p[r0 : r0 + SCORE_BLOCK] for p in params], X), Y)
+                for r0 in range(0, len(params[0]), SCORE_BLOCK)
+            ]
+        )
 
 
 class StageSelection:
@@ -140,17 +143,25 @@ class StageSelection:
     the prepared orders), so a checkpoint holds them and a resumed job presents what it would have.
     """
 
-    def __init__(self, kind: str, schedule: Schedule, seeds: list[int], X_raw: torch.Tensor, bins: int,
-                 X: torch.Tensor, Y: torch.Tensor, cost_fraction: float,
-                 samplers: list[SelectivePresentationSampler]):
+    def __init__(
+        self,
+        kind: str,
+        schedule: Schedule,
+        seeds: list[int],
+        X_raw: torch.Tensor,
+        bins: int,
+        X: torch.Tensor,
+        Y: torch.Tensor,
+        cost_fraction: float,
+        samplers: list[SelectivePresentationSampler],
+    ):
         if kind not in STAGEWISE:
             raise ValueError(f"order {kind!r} is fixed before training; stage-wise orders: {STAGEWISE}")
         self.kind, self.schedule, self.seeds, self.X_raw, self.bins = kind, schedule, seeds, X_raw, bins
         self.X, self.Y, self.cost_fraction = X, Y, float(cost_fraction)
         self.samplers = samplers
         plan = schedule.plan()
-        self.stage_starts = {ep.index: ep.stage for ep in plan
-                             if ep.stage > 0 and plan[ep.index - 1].stage != ep.stage}
+        self.stage_starts = {ep.index: ep.stage for ep in plan if ep.stage > 0 and plan[ep.index - 1].stage != ep.stage}
         self._applied = None  # the orders tensor the samplers currently present
 
     def begin_epoch(self, ep: EpochPlan, engine, progress) -> int:
@@ -184,9 +195,17 @@ class StageSelection:
         return selection_charge(self.schedule.n - kept, self.cost_fraction)
 
 
-def stage_selection(kind: str, schedule: Schedule, seeds: list[int], X_raw: torch.Tensor, bins: int,
-                    X: torch.Tensor, Y: torch.Tensor, cost_fraction: float,
-                    samplers: list[SelectivePresentationSampler]) -> StageSelection | None:
+def stage_selection(
+    kind: str,
+    schedule: Schedule,
+    seeds: list[int],
+    X_raw: torch.Tensor,
+    bins: int,
+    X: torch.Tensor,
+    Y: torch.Tensor,
+    cost_fraction: float,
+    samplers: list[SelectivePresentationSampler],
+) -> StageSelection | None:
     """The job's stage-wise selection, or None for an order fixed before training (nothing to choose or
     charge)."""
     if kind not in STAGEWISE:

@@ -148,8 +148,9 @@ def _about_origin(link: Link) -> Mat3:
     """The link's inertia about its own frame's origin (parallel axes): I + m(|c|² 1 − c cᵀ)."""
     c, m = link.com, link.mass
     sq = sum(x * x for x in c)
-    return tuple(tuple(link.inertia[r][k] + m * ((sq if r == k else 0.0) - c[r] * c[k]) for k in range(3))
-                 for r in range(3))  # type: ignore[return-value]
+    return tuple(
+        tuple(link.inertia[r][k] + m * ((sq if r == k else 0.0) - c[r] * c[k]) for k in range(3)) for r in range(3)
+    )  # type: ignore[return-value]
 
 
 def _finite(values: Sequence[float]) -> bool:
@@ -165,8 +166,11 @@ def check_link(link: Link, where: str) -> Link:
     plain floats with its axis normalised (URDF semantics: only the direction counts)."""
     if not (_finite([link.mass]) and link.mass >= 0):
         raise ConfigError(f"{where}.mass", link.mass, "a finite mass >= 0 kg")
-    for field, value, unit in (("com", link.com, " (m)"), ("joint.xyz", link.xyz, " (m)"),
-                               ("joint.axis", link.axis, "")):
+    for field, value, unit in (
+        ("com", link.com, " (m)"),
+        ("joint.xyz", link.xyz, " (m)"),
+        ("joint.axis", link.axis, ""),
+    ):
         if not (isinstance(value, Sequence) and len(value) == 3 and _finite(value)):
             raise ConfigError(f"{where}.{field}", value, f"three finite floats{unit}")
     for field, value in (("inertia", link.inertia), ("joint.rotation", link.rotation)):
@@ -179,36 +183,51 @@ def check_link(link: Link, where: str) -> Link:
     eig = torch.linalg.eigvalsh(torch.tensor(link.inertia, dtype=torch.float64))
     if float(eig.min()) < -1e-12 * scale:
         eigs = [round(float(e), 9) for e in eig]
-        raise ConfigError(f"{where}.inertia", link.inertia,
-                          f"a positive semi-definite tensor (eigenvalues {eigs})")
+        raise ConfigError(f"{where}.inertia", link.inertia, f"a positive semi-definite tensor (eigenvalues {eigs})")
     rot = torch.tensor(link.rotation, dtype=torch.float64)
     if not (torch.allclose(rot @ rot.T, torch.eye(3, dtype=rot.dtype), atol=1e-12) and torch.det(rot) > 0):
         raise ConfigError(f"{where}.joint.rotation", link.rotation, "a proper rotation matrix")
     norm = math.sqrt(sum(a * a for a in link.axis))
     if not norm > 0:
         raise ConfigError(f"{where}.joint.axis", link.axis, "a non-zero finite 3-vector")
-    if link.limits is not None and not (isinstance(link.limits, Sequence) and len(link.limits) == 2
-                                        and _finite(link.limits) and link.limits[0] < link.limits[1]):
+    if link.limits is not None and not (
+        isinstance(link.limits, Sequence)
+        and len(link.limits) == 2
+        and _finite(link.limits)
+        and link.limits[0] < link.limits[1]
+    ):
         raise ConfigError(f"{where}.joint.limits", link.limits, "[lower, upper] in rad with lower < upper")
     floats = lambda v: tuple(float(x) for x in v)  # noqa: E731
-    return replace(link, mass=float(link.mass), com=floats(link.com), xyz=floats(link.xyz),
-                   inertia=tuple(floats(r) for r in link.inertia),
-                   rotation=tuple(floats(r) for r in link.rotation),
-                   axis=tuple(float(a) / norm for a in link.axis),
-                   limits=None if link.limits is None else floats(link.limits))
+    return replace(
+        link,
+        mass=float(link.mass),
+        com=floats(link.com),
+        xyz=floats(link.xyz),
+        inertia=tuple(floats(r) for r in link.inertia),
+        rotation=tuple(floats(r) for r in link.rotation),
+        axis=tuple(float(a) / norm for a in link.axis),
+        limits=None if link.limits is None else floats(link.limits),
+    )
 
 
 # ------------------------------------------------------------------------------------------------- the arm
 class SerialArm:
     """N revolute joints in a chain; eq. (4)/(5) batched over any leading shape."""
 
-    def __init__(self, links: Sequence[Link], gravity: Sequence[float], end_point: Sequence[float] = ZERO3, *,
-                 name: str = "arm", base: str = "base", tip: str = "tip"):
+    def __init__(
+        self,
+        links: Sequence[Link],
+        gravity: Sequence[float],
+        end_point: Sequence[float] = ZERO3,
+        *,
+        name: str = "arm",
+        base: str = "base",
+        tip: str = "tip",
+    ):
         if len(links) < 1:
             raise ConfigError("links", list(links), "at least one link")
         checked = (check_link(lk, f"links[{i}]") for i, lk in enumerate(links))
-        self.links = tuple(lk if lk.joint else replace(lk, joint=f"joint{i + 1}")
-                           for i, lk in enumerate(checked))
+        self.links = tuple(lk if lk.joint else replace(lk, joint=f"joint{i + 1}") for i, lk in enumerate(checked))
         if not (len(gravity) == 3 and _finite(gravity)):
             raise ConfigError("gravity", gravity, "three finite numbers (m/s^2, base frame)")
         if not (len(end_point) == 3 and _finite(end_point)):
@@ -229,13 +248,20 @@ class SerialArm:
     def two_link(cls, m1: float, m2: float, l1: float, l2: float, g: float = 9.81) -> SerialArm:
         """The paper's arm (eq. 6): point masses at the distal link ends, planar in x–y, axes along z,
         θ1 from the horizontal x axis, θ2 relative to link 1, gravity along −y."""
-        return cls([Link("link1", m1, (l1, 0.0, 0.0), joint="joint1"),
-                    Link("link2", m2, (l2, 0.0, 0.0), joint="joint2", xyz=(l1, 0.0, 0.0))],
-                   gravity=(0.0, -g, 0.0), end_point=(l2, 0.0, 0.0), name="two_link")
+        return cls(
+            [
+                Link("link1", m1, (l1, 0.0, 0.0), joint="joint1"),
+                Link("link2", m2, (l2, 0.0, 0.0), joint="joint2", xyz=(l1, 0.0, 0.0)),
+            ],
+            gravity=(0.0, -g, 0.0),
+            end_point=(l2, 0.0, 0.0),
+            name="two_link",
+        )
 
     @classmethod
-    def from_dh(cls, rows: Sequence[Mapping[str, Any]], gravity: Sequence[float],
-                end_point: Sequence[float] = ZERO3, **kw: Any) -> SerialArm:
+    def from_dh(
+        cls, rows: Sequence[Mapping[str, Any]], gravity: Sequence[float], end_point: Sequence[float] = ZERO3, **kw: Any
+    ) -> SerialArm:
         """Standard Denavit–Hartenberg rows {a, alpha, d, offset, mass, com, inertia, name, joint, limits}
         (com, inertia and ``end_point`` in DH frame i, as Corke's toolbox) mapped onto URDF-style links.
 
@@ -247,13 +273,19 @@ class SerialArm:
             a, alpha, d = float(row["a"]), float(row["alpha"]), float(row["d"])
             rx = rot_x(alpha)
             inertia = row.get("inertia", ZERO33)
-            links.append(Link(
-                name=row.get("name", f"link{i + 1}"), mass=float(row["mass"]),
-                com=tuple(x + y for x, y in zip((a, 0.0, d), _mat_vec(rx, row["com"]))),
-                inertia=_mat_mul(rx, _mat_mul(inertia, _transpose(rx))),
-                joint=row.get("joint", f"joint{i + 1}"), xyz=prev_xyz,
-                rotation=_mat_mul(prev_rot, rot_z(float(row.get("offset", 0.0)))),
-                axis=(0.0, 0.0, 1.0), limits=row.get("limits")))
+            links.append(
+                Link(
+                    name=row.get("name", f"link{i + 1}"),
+                    mass=float(row["mass"]),
+                    com=tuple(x + y for x, y in zip((a, 0.0, d), _mat_vec(rx, row["com"]))),
+                    inertia=_mat_mul(rx, _mat_mul(inertia, _transpose(rx))),
+                    joint=row.get("joint", f"joint{i + 1}"),
+                    xyz=prev_xyz,
+                    rotation=_mat_mul(prev_rot, rot_z(float(row.get("offset", 0.0)))),
+                    axis=(0.0, 0.0, 1.0),
+                    limits=row.get("limits"),
+                )
+            )
             prev_xyz, prev_rot = (a, 0.0, d), rx
         end = tuple(x + y for x, y in zip(prev_xyz, _mat_vec(prev_rot, end_point)))
         return cls(links, gravity, end, **kw)
@@ -270,10 +302,24 @@ class SerialArm:
             joint = {"name": lk.joint, "xyz": list(lk.xyz), "rpy": list(lk.rpy), "axis": list(lk.axis)}
             if lk.limits is not None:
                 joint["limits"] = list(lk.limits)
-            links.append({"name": lk.name, "joint": joint, "mass": lk.mass, "com": list(lk.com),
-                          "inertia": [list(r) for r in lk.inertia]})
-        return {"kind": "serial", "name": self.name, "gravity": list(self.gravity_vector),
-                "end_point": list(self.end_point), "base": self.base, "tip": self.tip, "links": links}
+            links.append(
+                {
+                    "name": lk.name,
+                    "joint": joint,
+                    "mass": lk.mass,
+                    "com": list(lk.com),
+                    "inertia": [list(r) for r in lk.inertia],
+                }
+            )
+        return {
+            "kind": "serial",
+            "name": self.name,
+            "gravity": list(self.gravity_vector),
+            "end_point": list(self.end_point),
+            "base": self.base,
+            "tip": self.tip,
+            "links": links,
+        }
 
     def __repr__(self) -> str:
         return f"SerialArm(name={self.name!r}, dof={self.dof}, links={[lk.name for lk in self.links]})"
@@ -287,8 +333,7 @@ class SerialArm:
     def joint_limits(self, dtype: torch.dtype = torch.float64) -> torch.Tensor:
         """``[N, 2]`` (lower, upper) in rad; ±inf for a joint without limits."""
         inf = math.inf
-        return torch.tensor([lk.limits if lk.limits is not None else (-inf, inf) for lk in self.links],
-                            dtype=dtype)
+        return torch.tensor([lk.limits if lk.limits is not None else (-inf, inf) for lk in self.links], dtype=dtype)
 
     # -- batched evaluation -------------------------------------------------------------------------------
     # Inside, a vector is a tuple of three entries and a matrix a tuple of three rows, each entry a [B]
@@ -301,22 +346,23 @@ class SerialArm:
         chunks of CHUNK states given as lists of [B] rows (q as its rows cos q_1..N, sin q_1..N), and return
         ``[..., width]`` (``[...]`` if width is 0)."""
         shape = torch.broadcast_shapes(q.shape[:-1], *(a.shape[:-1] for a in args if a is not None))
-        flat = [None if a is None else a.expand(*shape, a.shape[-1]).reshape(-1, a.shape[-1])
-                for a in (q, *args)]
+        flat = [None if a is None else a.expand(*shape, a.shape[-1]).reshape(-1, a.shape[-1]) for a in (q, *args)]
         flat[0] = torch.cat((torch.cos(flat[0]), torch.sin(flat[0])), -1)  # once: torch threads these
         total = math.prod(shape)
         out = torch.empty(total, max(width, 1), dtype=q.dtype, device=q.device)
         for s in range(0, total, CHUNK):  # column by column: every op stays below torch's parallel grain
-            rows = [None if x is None else [c.contiguous() for c in x[s:s + CHUNK].unbind(1)] for x in flat]
+            rows = [None if x is None else [c.contiguous() for c in x[s : s + CHUNK].unbind(1)] for x in flat]
             try:
                 res = fn(*rows)
             except _Singular as e:
                 state = q.expand(*shape, q.shape[-1]).reshape(-1, q.shape[-1])[s + e.index]
-                raise ValueError(f"H(q) is not positive definite at q={state.tolist()} (joint {e.joint} "
-                                 "moves no mass or inertia there): the forward dynamics of eq. (5) are "
-                                 "undefined") from None
+                raise ValueError(
+                    f"H(q) is not positive definite at q={state.tolist()} (joint {e.joint} "
+                    "moves no mass or inertia there): the forward dynamics of eq. (5) are "
+                    "undefined"
+                ) from None
             for j, r in enumerate(res):
-                out[s:s + CHUNK, j] = r
+                out[s : s + CHUNK, j] = r
         return out.reshape(*shape, width) if width else out.reshape(shape)
 
     def _check(self, **named: torch.Tensor | None) -> None:
@@ -324,8 +370,9 @@ class SerialArm:
             n = 6 if name == "k" else self.dof
             if x is not None and (not isinstance(x, torch.Tensor) or x.ndim < 1 or x.shape[-1] != n):
                 shape = tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
-                raise ValueError(f"{name} has shape {shape}: expected a tensor [..., {n}] for {self.name} "
-                                 f"({self.dof} joints)")
+                raise ValueError(
+                    f"{name} has shape {shape}: expected a tensor [..., {n}] for {self.name} ({self.dof} joints)"
+                )
 
     def _rotations(self, trig: Sequence[torch.Tensor]) -> list:
         """Each link's rotation into its parent's frame, R0 Rot(axis, q_i) = P + cos q_i Q + sin q_i S, from
@@ -333,8 +380,12 @@ class SerialArm:
         out = []
         for i, (fixed, turn, skew) in enumerate(self._parts):
             cos, sin = trig[i], trig[self.dof + i]
-            out.append(tuple(tuple(_lin((fixed[r][c], 1.0), (turn[r][c], cos), (skew[r][c], sin))
-                                   for c in range(3)) for r in range(3)))
+            out.append(
+                tuple(
+                    tuple(_lin((fixed[r][c], 1.0), (turn[r][c], cos), (skew[r][c], sin)) for c in range(3))
+                    for r in range(3)
+                )
+            )
         return out
 
     def _rnea(self, rots: list, qd, qdd, k, with_gravity: bool) -> list:
@@ -394,8 +445,7 @@ class SerialArm:
             own = self._about_origin[i]
             mass = mass + lk.mass
             first = _add(first, _scale(lk.com, lk.mass))
-            second = own if second is None else _sym(lambda r, c, s=second, o=own: _lin((s[r][c], 1.0),
-                                                                                         (o[r][c], 1.0)))
+            second = own if second is None else _sym(lambda r, c, s=second, o=own: _lin((s[r][c], 1.0), (o[r][c], 1.0)))
             force, moment = _cross(lk.axis, first), _mv(second, lk.axis)
             h_rows[i][i] = _dot(lk.axis, moment)
             for j in range(i - 1, -1, -1):  # carry the column's wrench to joint j
@@ -417,18 +467,21 @@ class SerialArm:
         return rots, origins, _add(o, _mv(rot, self.end_point))
 
     # -- the paper's quantities ---------------------------------------------------------------------------
-    def inverse_dynamics(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor,
-                         k: torch.Tensor | None = None) -> torch.Tensor:
+    def inverse_dynamics(
+        self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor, k: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """τ = H q̈ + C q̇ + G + Kᵀk (eq. 4): what the network learns. ``[..., N]``."""
         self._check(q=q, qd=qd, qdd=qdd, k=k)
-        return self._batched(lambda q_, qd_, qdd_, k_: self._rnea(self._rotations(q_), qd_, qdd_, k_, True),
-                             self.dof, q, qd, qdd, k)
+        return self._batched(
+            lambda q_, qd_, qdd_, k_: self._rnea(self._rotations(q_), qd_, qdd_, k_, True), self.dof, q, qd, qdd, k
+        )
 
     def bias(self, q: torch.Tensor, qd: torch.Tensor, k: torch.Tensor | None = None) -> torch.Tensor:
         """b = C q̇ + G + Kᵀk, τ at q̈ = 0 (the paper's "bias torque", eq. 5)."""
         self._check(q=q, qd=qd, k=k)
-        return self._batched(lambda q_, qd_, k_: self._rnea(self._rotations(q_), qd_, None, k_, True),
-                             self.dof, q, qd, k)
+        return self._batched(
+            lambda q_, qd_, k_: self._rnea(self._rotations(q_), qd_, None, k_, True), self.dof, q, qd, k
+        )
 
     def gravity(self, q: torch.Tensor) -> torch.Tensor:
         """G(q): the torques holding the arm still against gravity."""
@@ -438,29 +491,29 @@ class SerialArm:
     def coriolis(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
         """C(q, q̇) q̇ as a vector (centrifugal and Coriolis torques), as ``TwoLinkArm.coriolis``."""
         self._check(q=q, qd=qd)
-        return self._batched(lambda q_, qd_: self._rnea(self._rotations(q_), qd_, None, None, False),
-                             self.dof, q, qd)
+        return self._batched(lambda q_, qd_: self._rnea(self._rotations(q_), qd_, None, None, False), self.dof, q, qd)
 
     def wrench_torque(self, q: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
         """K(q)ᵀk: the joint torques that exert the wrench k (base frame) at the end point."""
         self._check(q=q, k=k)
-        return self._batched(lambda q_, k_: self._rnea(self._rotations(q_), None, None, k_, False),
-                             self.dof, q, k)
+        return self._batched(lambda q_, k_: self._rnea(self._rotations(q_), None, None, k_, False), self.dof, q, k)
 
     def mass_matrix(self, q: torch.Tensor) -> torch.Tensor:
         """H(q) ``[..., N, N]``: symmetric positive definite."""
         self._check(q=q)
         n = self.dof
-        return self._batched(lambda q_: [x for row in self._mass_matrix(self._rotations(q_)) for x in row],
-                             n * n, q).unflatten(-1, (n, n))
+        return self._batched(
+            lambda q_: [x for row in self._mass_matrix(self._rotations(q_)) for x in row], n * n, q
+        ).unflatten(-1, (n, n))
 
     def det_mass_matrix(self, q: torch.Tensor) -> torch.Tensor:
         """det H(q) ``[...]``: the Jacobian of q̈ → τ, for exact sampling in selpres.data."""
         self._check(q=q)
         return self._batched(lambda q_: [math.prod(_ldl(self._mass_matrix(self._rotations(q_)))[1])], 0, q)
 
-    def forward_dynamics(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor,
-                         k: torch.Tensor | None = None) -> torch.Tensor:
+    def forward_dynamics(
+        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, k: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """q̈ = H⁻¹(τ − b) (eq. 5): the paper's simulator, an LDLᵀ solve per state."""
         self._check(q=q, qd=qd, tau=tau, k=k)
         n = self.dof
@@ -490,8 +543,11 @@ class SerialArm:
             return [x for r in rots for row in r for x in row] + [x for o in origins for x in o] + list(end)
 
         out = self._batched(fn, n * 12 + 3, q)
-        return (out[..., :9 * n].unflatten(-1, (n, 3, 3)), out[..., 9 * n:12 * n].unflatten(-1, (n, 3)),
-                out[..., 12 * n:])
+        return (
+            out[..., : 9 * n].unflatten(-1, (n, 3, 3)),
+            out[..., 9 * n : 12 * n].unflatten(-1, (n, 3)),
+            out[..., 12 * n :],
+        )
 
     def jacobian(self, q: torch.Tensor) -> torch.Tensor:
         """K(q) ``[..., 6, N]``: end-point velocity (rows 0–2) and angular velocity (rows 3–5) per q̇_i."""
@@ -548,8 +604,11 @@ def _scale(v, s):
 
 
 def _cross(a, b):
-    return (_lin((a[1], b[2]), (a[2], b[1], -1.0)), _lin((a[2], b[0]), (a[0], b[2], -1.0)),
-            _lin((a[0], b[1]), (a[1], b[0], -1.0)))
+    return (
+        _lin((a[1], b[2]), (a[2], b[1], -1.0)),
+        _lin((a[2], b[0]), (a[0], b[2], -1.0)),
+        _lin((a[0], b[1]), (a[1], b[0], -1.0)),
+    )
 
 
 def _dot(a, b) -> Any:
@@ -579,8 +638,13 @@ def _carry_composite(rot, p, mass: float, first, second) -> tuple:
 
     def entry(r: int, c: int) -> Any:
         diag = 1.0 if r == c else 0.0
-        return _lin(*zip(rj[r], rot[c]), (mass * (pp * diag - p[r] * p[c]), 1.0), (2.0 * diag, ph),
-                    (p[r], h_rot[c], -1.0), (h_rot[r], p[c], -1.0))
+        return _lin(
+            *zip(rj[r], rot[c]),
+            (mass * (pp * diag - p[r] * p[c]), 1.0),
+            (2.0 * diag, ph),
+            (p[r], h_rot[c], -1.0),
+            (h_rot[r], p[c], -1.0),
+        )
 
     return _add(_scale(p, mass), h_rot), _sym(entry)
 
@@ -665,16 +729,19 @@ def _inertia(value: Any, key: str) -> Mat3:
     if isinstance(value, dict):
         node = _keys(value, key, INERTIA_KEYS, ("ixx", "iyy", "izz"))
         v = {k: _number(node.get(k, 0.0), f"{key}.{k}") for k in INERTIA_KEYS}
-        return ((v["ixx"], v["ixy"], v["ixz"]), (v["ixy"], v["iyy"], v["iyz"]),
-                (v["ixz"], v["iyz"], v["izz"]))
+        return ((v["ixx"], v["ixy"], v["ixz"]), (v["ixy"], v["iyy"], v["iyz"]), (v["ixz"], v["iyz"], v["izz"]))
     if isinstance(value, list) and len(value) == 3:
         return tuple(_vector(row, f"{key}[{i}]") for i, row in enumerate(value))  # type: ignore[return-value]
     raise ConfigError(key, value, "{ixx, iyy, izz[, ixy, ixz, iyz]} or a 3x3 list (kg m^2, about the com)")
 
 
 def _parse_config(node: Any, prefix: str) -> SerialArm:
-    top = _keys(node, prefix, ("kind", "name", "gravity", "end_point", "base", "tip", "convention", "links"),
-                ("gravity", "links"))
+    top = _keys(
+        node,
+        prefix,
+        ("kind", "name", "gravity", "end_point", "base", "tip", "convention", "links"),
+        ("gravity", "links"),
+    )
     if top.get("kind", "serial") != "serial":
         raise ConfigError(f"{prefix}.kind", top["kind"], "'serial' for selpres.serial.SerialArm")
     convention = top.get("convention", "urdf")
@@ -691,26 +758,37 @@ def _parse_config(node: Any, prefix: str) -> SerialArm:
     for i, raw in enumerate(links):
         key = f"{prefix}.links[{i}]"
         geometry = "dh" if convention == "dh" else "joint"
-        lk = _keys(raw, key, ("name", "joint", "dh", "mass", "com", "inertia") if convention == "dh"
-                   else ("name", "joint", "mass", "com", "inertia"), ("mass", "com", geometry))
-        joint = _keys(lk.get("joint", {}), f"{key}.joint", joint_keys,
-                      () if convention == "dh" else ("axis",))
-        row = {"name": str(lk.get("name", f"link{i + 1}")), "mass": _number(lk["mass"], f"{key}.mass"),
-               "com": _vector(lk["com"], f"{key}.com"),
-               "inertia": _inertia(lk["inertia"], f"{key}.inertia") if "inertia" in lk else ZERO33,
-               "joint": str(joint.get("name", f"joint{i + 1}")),
-               "limits": _vector(joint["limits"], f"{key}.joint.limits", 2) if "limits" in joint else None}
+        lk = _keys(
+            raw,
+            key,
+            ("name", "joint", "dh", "mass", "com", "inertia")
+            if convention == "dh"
+            else ("name", "joint", "mass", "com", "inertia"),
+            ("mass", "com", geometry),
+        )
+        joint = _keys(lk.get("joint", {}), f"{key}.joint", joint_keys, () if convention == "dh" else ("axis",))
+        row = {
+            "name": str(lk.get("name", f"link{i + 1}")),
+            "mass": _number(lk["mass"], f"{key}.mass"),
+            "com": _vector(lk["com"], f"{key}.com"),
+            "inertia": _inertia(lk["inertia"], f"{key}.inertia") if "inertia" in lk else ZERO33,
+            "joint": str(joint.get("name", f"joint{i + 1}")),
+            "limits": _vector(joint["limits"], f"{key}.joint.limits", 2) if "limits" in joint else None,
+        }
         if convention == "dh":
             dh = _keys(lk["dh"], f"{key}.dh", ("a", "alpha", "d", "offset"), ("a", "alpha", "d"))
             row.update({k: _number(v, f"{key}.dh.{k}") for k, v in dh.items()})
         else:
-            row.update(xyz=_vector(joint.get("xyz", [0.0, 0.0, 0.0]), f"{key}.joint.xyz"),
-                       rotation=rpy_matrix(_vector(joint.get("rpy", [0.0, 0.0, 0.0]), f"{key}.joint.rpy")),
-                       axis=_vector(joint["axis"], f"{key}.joint.axis"))
+            row.update(
+                xyz=_vector(joint.get("xyz", [0.0, 0.0, 0.0]), f"{key}.joint.xyz"),
+                rotation=rpy_matrix(_vector(joint.get("rpy", [0.0, 0.0, 0.0]), f"{key}.joint.rpy")),
+                axis=_vector(joint["axis"], f"{key}.joint.axis"),
+            )
         # physical checks with this config's key names (the arm re-checks with its own)
-        check = Link(**{k: row[k] for k in ("name", "mass", "com", "inertia", "joint", "limits")},
-                     **({"xyz": row["xyz"], "rotation": row["rotation"], "axis": row["axis"]}
-                        if convention == "urdf" else {}))
+        check = Link(
+            **{k: row[k] for k in ("name", "mass", "com", "inertia", "joint", "limits")},
+            **({"xyz": row["xyz"], "rotation": row["rotation"], "axis": row["axis"]} if convention == "urdf" else {}),
+        )
         check_link(check, key)
         parsed.append(row)
     if convention == "dh":

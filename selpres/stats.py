@@ -9,7 +9,7 @@ honest.
 from __future__ import annotations
 
 import math
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
 
 
 def t_cdf(t: float, df: int) -> float:
@@ -109,8 +109,7 @@ def tost(values: Iterable[float | None], margin: float, alpha: float = 0.05) -> 
     if not 0 < alpha < 0.5:
         raise ValueError(f"tost needs 0 < alpha < 0.5, got {alpha!r}")
     n, mean, se = _mean_se(values)
-    out = {"n": n, "mean": mean, "p_lower": None, "p_upper": None, "p": None, "ci": [None, None],
-           "equivalent": None}
+    out = {"n": n, "mean": mean, "p_lower": None, "p_upper": None, "p": None, "ci": [None, None], "equivalent": None}
     if se is None:
         return out
     p_lower = _upper_tail(mean + margin, se, n - 1)  # evidence against mean ≤ −margin

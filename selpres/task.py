@@ -157,9 +157,7 @@ def _task(robot_json: str, data_json: str, files: str) -> Task:
     task.info["hash"] = D.config_hash(robot_cfg, data_cfg)
     i = task.info
     kept = (
-        f" kept of {i['candidates']:,} candidates (acceptance {i['acceptance_rate']:.3g})"
-        if "candidates" in i
-        else ""
+        f" kept of {i['candidates']:,} candidates (acceptance {i['acceptance_rate']:.3g})" if "candidates" in i else ""
     )
     log.info(
         "exemplar set: %s patterns%s, %s; test10 %d, held-out %d",
@@ -268,9 +266,7 @@ def _file(robot_cfg, data_cfg) -> Task:
             f"({held_n} rows, at least {n_test - n_ex} for the test patterns) and train on "
             f"the rest (at least {max(1, n_ex)} rows)",
         )
-    perm = torch.randperm(
-        rows, generator=torch.Generator().manual_seed(derive_seed(int(data_cfg.test_seed), "split"))
-    )
+    perm = torch.randperm(rows, generator=torch.Generator().manual_seed(derive_seed(int(data_cfg.test_seed), "split")))
     held, train = perm[:held_n].sort().values, perm[held_n:].sort().values
     X, Y = table[:, : len(ins)], table[:, len(ins) :]
     exemplar = D.ExemplarSet(X[train].contiguous(), Y[train].contiguous(), n_candidates=rows)
@@ -278,12 +274,8 @@ def _file(robot_cfg, data_cfg) -> Task:
     gen = torch.Generator().manual_seed(int(data_cfg.test_seed))
     idx_ex = torch.randperm(n, generator=gen)[:n_ex]
     idx_out = held[torch.randperm(held_n, generator=gen)[: n_test - n_ex]]
-    test10 = D.Patterns(
-        torch.cat((exemplar.X[idx_ex], X[idx_out])), torch.cat((exemplar.Y[idx_ex], Y[idx_out]))
-    )
-    tests = D.TestSets(
-        test10, torch.arange(n_test) < n_ex, D.Patterns(X[held].contiguous(), Y[held].contiguous())
-    )
+    test10 = D.Patterns(torch.cat((exemplar.X[idx_ex], X[idx_out])), torch.cat((exemplar.Y[idx_ex], Y[idx_out])))
+    tests = D.TestSets(test10, torch.arange(n_test) < n_ex, D.Patterns(X[held].contiguous(), Y[held].contiguous()))
     info = {
         "kind": "file",
         "source": f"data=file {path}",

@@ -60,9 +60,7 @@ class Tracker:
     def close(self, hparams: dict, metrics: dict) -> None:
         if self.writer is None:
             return
-        hp = {k: (v if isinstance(v, (int, float, str, bool)) else str(v))
-              for k, v in flatten(hparams, "/").items()}
-        mt = {k: v for k, v in flatten(metrics, "/").items()
-              if isinstance(v, (int, float)) and math.isfinite(v)}
+        hp = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in flatten(hparams, "/").items()}
+        mt = {k: v for k, v in flatten(metrics, "/").items() if isinstance(v, (int, float)) and math.isfinite(v)}
         self.writer.add_hparams(hp, mt, run_name=".")
         self.writer.close()

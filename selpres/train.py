@@ -93,11 +93,20 @@ def prepare(cfg: DictConfig) -> Problem:
     samplers = [SelectivePresentationSampler(order, schedule, s) for order, s in zip(orders, seeds)]
     X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
     return Problem(
-        sizes=sizes, schedule=schedule, seeds=seeds, scaler=task.scaler, X=X, Y=Y, tests=task.scaled_tests(),
-        samplers=samplers, init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
-        selection=stage_selection(kind, schedule, seeds, task.exemplar.X, bins, X, Y,
-                                  cfg.schedule.selection_cost, samplers),
-        task=task, schedule_note=note,
+        sizes=sizes,
+        schedule=schedule,
+        seeds=seeds,
+        scaler=task.scaler,
+        X=X,
+        Y=Y,
+        tests=task.scaled_tests(),
+        samplers=samplers,
+        init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
+        selection=stage_selection(
+            kind, schedule, seeds, task.exemplar.X, bins, X, Y, cfg.schedule.selection_cost, samplers
+        ),
+        task=task,
+        schedule_note=note,
     )
 
 
@@ -114,9 +123,13 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
     except ConfigError as e:
         if e.key == "schedule.sizes" and task.info.get("kind") == "file":
             i = task.info
-            raise DataFileError(i["path"], "rows", f"{i['rows']:,} rows ({task.n:,} for training after "
-                                f"holding out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} "
-                                f"({e.allowed})") from None
+            raise DataFileError(
+                i["path"],
+                "rows",
+                f"{i['rows']:,} rows ({task.n:,} for training after "
+                f"holding out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} "
+                f"({e.allowed})",
+            ) from None
         raise with_fraction_form(e, sizes) from None
 
 
@@ -127,14 +140,21 @@ def job_engine(cfg: DictConfig, prob: Problem):
 
     o = cfg.optim
     if batch_mode(o):
-        return BatchEngine(prob.sizes, prob.init_params, o.name.value, optim_hparams(o),
-                           sigmoid_prime_offset=o.sigmoid_prime_offset, reduction=o.reduction.value)
+        return BatchEngine(
+            prob.sizes,
+            prob.init_params,
+            o.name.value,
+            optim_hparams(o),
+            sigmoid_prime_offset=o.sigmoid_prime_offset,
+            reduction=o.reduction.value,
+        )
     try:
         momentum = 0.0 if o.momentum is None else o.momentum
         return make_engine(cfg.engine.value, prob.sizes, prob.init_params, o.lr, momentum, o.batch_size)
     except KernelUnavailable as exc:
-        raise ConfigError("engine", cfg.engine.value,
-                          f"fast, torch or reference: the native kernel cannot run here ({exc})") from None
+        raise ConfigError(
+            "engine", cfg.engine.value, f"fast, torch or reference: the native kernel cannot run here ({exc})"
+        ) from None
 
 
 class Clock:
@@ -204,8 +224,10 @@ def final_scores(engine, prob: Problem) -> dict:
         scores = {}
         for unit, weight in (("nm", prob.nm_per_scaled.square()), ("scaled", torch.ones_like(prob.nm_per_scaled))):
             per_joint = (sums * weight).div(n).sqrt()
-            scores[unit] = {"overall": (sums * weight).sum(1).div(n * sums.shape[1]).sqrt(),
-                            **{joint: per_joint[:, k] for k, joint in enumerate(D.metric_names(sums.shape[1])[1:])}}
+            scores[unit] = {
+                "overall": (sums * weight).sum(1).div(n * sums.shape[1]).sqrt(),
+                **{joint: per_joint[:, k] for k, joint in enumerate(D.metric_names(sums.shape[1])[1:])},
+            }
         out[name] = scores
     return out
 
@@ -243,8 +265,9 @@ def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
         ckpts.discard()
     progress = ckpts.resume(engine, len(prob.seeds)) if ckpts else Progress.fresh(len(prob.seeds))
     clock.add(progress.seconds)
-    tracker = Tracker(out / "tb" if out else Path("tb"), cfg.logging.tensorboard and out is not None,
-                      cfg.logging.per_replica)
+    tracker = Tracker(
+        out / "tb" if out else Path("tb"), cfg.logging.tensorboard and out is not None, cfg.logging.per_replica
+    )
     tracker.replay(progress.history)
     job = Job(cfg, prob, engine, progress, chash, out, ckpts, tracker)
     if not progress.history:  # the untrained network: every curve starts at 0 presentations
@@ -279,8 +302,9 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
     return rec
 
 
-def train(cfg: DictConfig, out_dir: str | Path | None = None,
-          on_stage_end: Callable[[dict, Problem], None] | None = None) -> dict:
+def train(
+    cfg: DictConfig, out_dir: str | Path | None = None, on_stage_end: Callable[[dict, Problem], None] | None = None
+) -> dict:
     """Train ``cfg.replicas`` replicas through the schedule; returns the results dict.
 
     With ``out_dir`` the job logs to TensorBoard, checkpoints and writes ``results.json`` and ``weights.pt``
@@ -291,7 +315,7 @@ def train(cfg: DictConfig, out_dir: str | Path | None = None,
     with clock("prepare"):
         job = start(cfg, out_dir, clock)
     with clock("loop"):
-        for ep in job.prob.plan[job.progress.epoch:]:
+        for ep in job.prob.plan[job.progress.epoch :]:
             rec = run_epoch(job, ep, clock)
             if on_stage_end is not None and ep.index in job.prob.stage_ends:
                 on_stage_end(rec, job.prob)
@@ -314,15 +338,30 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
     results = results_json.build(cfg, job.chash, prob, job.engine, final, job.progress, seconds)
     if job.out is None:
         return results
-    trained = {"params": job.engine.params(), "seeds": prob.seeds, "topology": cfg.topology.layers,
-               "scaler": dataclasses.asdict(prob.scaler), "config_hash": job.chash}
+    trained = {
+        "params": job.engine.params(),
+        "seeds": prob.seeds,
+        "topology": cfg.topology.layers,
+        "scaler": dataclasses.asdict(prob.scaler),
+        "config_hash": job.chash,
+    }
     atomic_write(job.out / WEIGHTS, lambda f: torch.save(trained, f))
     write_json(job.out / RESULTS, results)
-    hp = {"schedule": cfg.schedule.name, "topology": cfg.topology.layers, "seed": cfg.seed,
-          "replicas": len(prob.seeds), "optim": cfg.optim.name.value, "lr": cfg.optim.lr, "momentum": cfg.optim.momentum,
-          "batch_size": cfg.optim.batch_size, "sizes": str(prob.schedule.sizes),
-          "epochs": str(prob.schedule.epochs), "order": cfg.schedule.order.value,
-          "engine": results["engine"], "engine_requested": results["engine_requested"]}
+    hp = {
+        "schedule": cfg.schedule.name,
+        "topology": cfg.topology.layers,
+        "seed": cfg.seed,
+        "replicas": len(prob.seeds),
+        "optim": cfg.optim.name.value,
+        "lr": cfg.optim.lr,
+        "momentum": cfg.optim.momentum,
+        "batch_size": cfg.optim.batch_size,
+        "sizes": str(prob.schedule.sizes),
+        "epochs": str(prob.schedule.epochs),
+        "order": cfg.schedule.order.value,
+        "engine": results["engine"],
+        "engine_requested": results["engine_requested"],
+    }
     job.tracker.close(hp, {f"final/{k}": v["mean"] for k, v in results["summary"].items()})
     if job.ckpts:
         job.ckpts.discard()

@@ -104,22 +104,31 @@ class _Reader:
                 raise UrdfError(path, where, "defined twice")
             kind = self.attr(el, "type", where)
             if kind in REFUSED:
-                raise UrdfError(path, where, f"type {kind!r} ({REFUSED[kind]}) is not supported: selpres "
-                                "simulates chains of revolute joints (revolute, continuous; fixed joints are "
-                                "merged)")
+                raise UrdfError(
+                    path,
+                    where,
+                    f"type {kind!r} ({REFUSED[kind]}) is not supported: selpres "
+                    "simulates chains of revolute joints (revolute, continuous; fixed joints are "
+                    "merged)",
+                )
             if kind not in (*MOVING, "fixed"):
                 raise UrdfError(path, where, f"unknown type {kind!r}: expected revolute, continuous or fixed")
             if el.find("mimic") is not None:
                 raise UrdfError(path, where, "<mimic> couples joints; selpres needs independent joints")
-            parent, child = (self.attr(self.one(el, tag, where), "link", f"{where} <{tag}>")
-                             for tag in ("parent", "child"))
+            parent, child = (
+                self.attr(self.one(el, tag, where), "link", f"{where} <{tag}>") for tag in ("parent", "child")
+            )
             for tag, link in (("parent", parent), ("child", child)):
                 if link not in self.links:
                     raise UrdfError(path, where, f"<{tag} link={link!r}> names a link that no <link> defines")
             if child in self.parent_of:
-                raise UrdfError(path, f'<link name="{child}">', f"is the child of joints "
-                                f"{self.parent_of[child]!r} and {name!r}: a closed loop (selpres takes "
-                                "serial chains)")
+                raise UrdfError(
+                    path,
+                    f'<link name="{child}">',
+                    f"is the child of joints "
+                    f"{self.parent_of[child]!r} and {name!r}: a closed loop (selpres takes "
+                    "serial chains)",
+                )
             self.joints[name] = el
             self.parent_of[child] = name
             self.children[parent].append(name)
@@ -145,8 +154,9 @@ class _Reader:
         except ValueError:
             values = ()
         if len(values) != n or not all(math.isfinite(v) for v in values):
-            raise UrdfError(self.path, where, f"{text!r} is not " + ("a finite number" if n == 1 else
-                                                                    f"{n} finite numbers"))
+            raise UrdfError(
+                self.path, where, f"{text!r} is not " + ("a finite number" if n == 1 else f"{n} finite numbers")
+            )
         return values
 
     def origin(self, el: ET.Element, where: str) -> _Pose:
@@ -168,10 +178,11 @@ class _Reader:
         mass_el = self.one(el, "mass", where)
         (mass,) = self.numbers(self.attr(mass_el, "value", f"{where} <mass>"), 1, f"{where} <mass value>", ())
         inertia_el = self.one(el, "inertia", where)
-        v = {k: self.numbers(self.attr(inertia_el, k, f"{where} <inertia>"), 1, f"{where} <inertia {k}>",
-                             ())[0] for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
-        tensor = ((v["ixx"], v["ixy"], v["ixz"]), (v["ixy"], v["iyy"], v["iyz"]),
-                  (v["ixz"], v["iyz"], v["izz"]))
+        v = {
+            k: self.numbers(self.attr(inertia_el, k, f"{where} <inertia>"), 1, f"{where} <inertia {k}>", ())[0]
+            for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+        }
+        tensor = ((v["ixx"], v["ixy"], v["ixz"]), (v["ixy"], v["iyy"], v["iyz"]), (v["ixz"], v["iyz"], v["izz"]))
         try:
             check_link(Link(link, mass, pose.xyz, tensor), "inertial")
         except ConfigError as e:
@@ -213,14 +224,19 @@ def _merge(reader: _Reader, parts: list[tuple[str, _Pose]], moved_by: str) -> tu
         inertial = reader.inertial(link)
         if inertial is not None:
             m, c, inertia = inertial
-            items.append((m, _add(_mat_vec(pose.rot, c), pose.xyz),
-                          _mat_mul(pose.rot, _mat_mul(inertia, _transpose(pose.rot)))))
+            items.append(
+                (m, _add(_mat_vec(pose.rot, c), pose.xyz), _mat_mul(pose.rot, _mat_mul(inertia, _transpose(pose.rot))))
+            )
     if not items:
-        raise UrdfError(reader.path, f'<link name="{parts[0][0]}">', f"has no <inertial> but joint "
-                        f"{moved_by!r} moves it, so its mass matters: add <inertial> (mass 0 to declare it "
-                        "massless)")
+        raise UrdfError(
+            reader.path,
+            f'<link name="{parts[0][0]}">',
+            f"has no <inertial> but joint "
+            f"{moved_by!r} moves it, so its mass matters: add <inertial> (mass 0 to declare it "
+            "massless)",
+        )
     mass = sum(m for m, _, _ in items)
-    com = (tuple(sum(m * c[i] for m, c, _ in items) / mass for i in range(3)) if mass > 0 else items[0][1])
+    com = tuple(sum(m * c[i] for m, c, _ in items) / mass for i in range(3)) if mass > 0 else items[0][1]
     total = [[0.0] * 3 for _ in range(3)]
     for m, c, inertia in items:
         d = tuple(c[i] - com[i] for i in range(3))
@@ -237,8 +253,11 @@ def load_urdf(path: str | Path, *, g: float = 9.81, tip: str | None = None) -> S
     reader = _Reader(Path(path))
     roots = [n for n in reader.links if n not in reader.parent_of]
     if len(roots) != 1:
-        problem = ("every link is some joint's child: a closed loop" if not roots else
-                   f"links {roots[:3]} have no parent joint: the file holds more than one tree")
+        problem = (
+            "every link is some joint's child: a closed loop"
+            if not roots
+            else f"links {roots[:3]} have no parent joint: the file holds more than one tree"
+        )
         raise UrdfError(reader.path, "<robot>", problem)
     # walk down the one path that leads to moving joints
     chain: list[str] = []  # moving joints, base to tip
@@ -248,8 +267,11 @@ def load_urdf(path: str | Path, *, g: float = 9.81, tip: str | None = None) -> S
     while True:
         onward = [j for j in reader.children[link] if _moving_below(reader, j)]
         if len(onward) > 1:
-            raise UrdfError(reader.path, f'<link name="{link}">', f"branches into joints {onward[:3]}, each "
-                            "leading to moving joints: selpres takes serial chains")
+            raise UrdfError(
+                reader.path,
+                f'<link name="{link}">',
+                f"branches into joints {onward[:3]}, each leading to moving joints: selpres takes serial chains",
+            )
         if not onward:
             break
         j = onward[0]
@@ -272,25 +294,46 @@ def load_urdf(path: str | Path, *, g: float = 9.81, tip: str | None = None) -> S
     for i, (j, body) in enumerate(zip(chain, bodies)):
         el = reader.joints[j]
         where = f'<joint name="{j}">'
-        axis = reader.numbers((el.find("axis").get("xyz") if el.find("axis") is not None else None), 3,
-                              f"{where} <axis xyz>", (1.0, 0.0, 0.0))
+        axis = reader.numbers(
+            (el.find("axis").get("xyz") if el.find("axis") is not None else None),
+            3,
+            f"{where} <axis xyz>",
+            (1.0, 0.0, 0.0),
+        )
         limits = None
         limit_el = el.find("limit")
         if el.get("type") == "revolute" and limit_el is not None and "lower" in limit_el.attrib:
             lower = reader.numbers(limit_el.get("lower"), 1, f"{where} <limit lower>", ())[0]
             upper = reader.numbers(limit_el.get("upper"), 1, f"{where} <limit upper>", (0.0,))[0]
             if not lower < upper:
-                raise UrdfError(reader.path, where, f"<limit lower={lower} upper={upper}>: "
-                                "need lower < upper")
+                raise UrdfError(reader.path, where, f"<limit lower={lower} upper={upper}>: need lower < upper")
             limits = (lower, upper)
         dyn = el.find("dynamics")
         if dyn is not None and any(float(dyn.get(k, "0") or 0) != 0.0 for k in ("damping", "friction")):
-            log.warning("%s: %s <dynamics %s> ignored: selpres simulates the rigid-body eq. (4) only",
-                        reader.path, where, " ".join(f'{k}="{v}"' for k, v in dyn.attrib.items()))
+            log.warning(
+                "%s: %s <dynamics %s> ignored: selpres simulates the rigid-body eq. (4) only",
+                reader.path,
+                where,
+                " ".join(f'{k}="{v}"' for k, v in dyn.attrib.items()),
+            )
         mass, com, inertia = _merge(reader, _body(reader, body), j)
         try:
-            links.append(check_link(Link(body, mass, com, inertia, joint=j, xyz=poses[i].xyz,
-                                         rotation=poses[i].rot, axis=axis, limits=limits), "link"))
+            links.append(
+                check_link(
+                    Link(
+                        body,
+                        mass,
+                        com,
+                        inertia,
+                        joint=j,
+                        xyz=poses[i].xyz,
+                        rotation=poses[i].rot,
+                        axis=axis,
+                        limits=limits,
+                    ),
+                    "link",
+                )
+            )
         except ConfigError as e:
             raise UrdfError(reader.path, where, str(e)) from None
     end, tip_name = _tip(reader, bodies[-1], tip)
@@ -303,8 +346,11 @@ def _tip(reader: _Reader, last: str, tip: str | None) -> tuple[Vec3, str]:
     attached = dict(_body(reader, last))
     if tip is not None:
         if tip not in attached:
-            raise UrdfError(reader.path, f'tip="{tip}"', f"is not a link fixed to the last moving link "
-                            f"{last!r} (those are {sorted(attached)})")
+            raise UrdfError(
+                reader.path,
+                f'tip="{tip}"',
+                f"is not a link fixed to the last moving link {last!r} (those are {sorted(attached)})",
+            )
         return attached[tip].xyz, tip
     link, pose = last, _Pose()
     while len(reader.children[link]) == 1 and reader.joints[reader.children[link][0]].get("type") == "fixed":
@@ -333,8 +379,7 @@ def _gravity_turn(gravity: Vec3) -> Mat3:
     k = tuple(x / s for x in axis)
     skew = ((0.0, -k[2], k[1]), (k[2], 0.0, -k[0]), (-k[1], k[0], 0.0))
     sq = _mat_mul(skew, skew)
-    return tuple(tuple(IDENTITY[r][j] + s * skew[r][j] + (1 - c) * sq[r][j] for j in range(3))
-                 for r in range(3))
+    return tuple(tuple(IDENTITY[r][j] + s * skew[r][j] + (1 - c) * sq[r][j] for j in range(3)) for r in range(3))
 
 
 def to_urdf(arm: SerialArm, path: str | Path) -> Path:
@@ -344,19 +389,20 @@ def to_urdf(arm: SerialArm, path: str | Path) -> Path:
     names = {lk.name for lk in arm.links} | {arm.base}
     write_tip = arm.tip != arm.links[-1].name
     if write_tip and arm.tip in names:
-        raise ValueError(f"tip name {arm.tip!r} is already a link or the base of {arm.name!r}: "
-                         "rename the tip")
+        raise ValueError(f"tip name {arm.tip!r} is already a link or the base of {arm.name!r}: rename the tip")
     if not write_tip and any(x != 0.0 for x in arm.end_point):
-        raise ValueError(f"tip {arm.tip!r} is the last link but the end point {arm.end_point} "
-                         "is not its origin")
+        raise ValueError(f"tip {arm.tip!r} is the last link but the end point {arm.end_point} is not its origin")
     g = math.sqrt(sum(x * x for x in arm.gravity_vector))
     turn = _gravity_turn(arm.gravity_vector)
     robot = ET.Element("robot", name=arm.name)
-    robot.append(ET.Comment(
-        f" written by selpres.urdf.to_urdf: {arm.dof} revolute joints. Gravity {g!r} m/s^2 along -z of the "
-        f"root link (selpres: load_urdf(path, g={g!r})). The wrench of eq. (4) is expressed in link "
-        f"{arm.base!r} and acts at the origin of link {arm.tip!r}. Effort and velocity limits are not part "
-        "of selpres's model: written as 0 (= not given). "))
+    robot.append(
+        ET.Comment(
+            f" written by selpres.urdf.to_urdf: {arm.dof} revolute joints. Gravity {g!r} m/s^2 along -z of the "
+            f"root link (selpres: load_urdf(path, g={g!r})). The wrench of eq. (4) is expressed in link "
+            f"{arm.base!r} and acts at the origin of link {arm.tip!r}. Effort and velocity limits are not part "
+            "of selpres's model: written as 0 (= not given). "
+        )
+    )
 
     def joint(name: str, kind: str, parent: str, child: str, xyz, rpy) -> ET.Element:
         el = ET.SubElement(robot, "joint", name=name, type=kind)
@@ -376,14 +422,21 @@ def to_urdf(arm: SerialArm, path: str | Path) -> Path:
         el = joint(lk.joint, kind, parent, lk.name, lk.xyz, lk.rpy)
         ET.SubElement(el, "axis", xyz=_fmt(lk.axis))
         if lk.limits is not None:
-            ET.SubElement(el, "limit", lower=repr(lk.limits[0]), upper=repr(lk.limits[1]), effort="0",
-                          velocity="0")
+            ET.SubElement(el, "limit", lower=repr(lk.limits[0]), upper=repr(lk.limits[1]), effort="0", velocity="0")
         inertial = ET.SubElement(ET.SubElement(robot, "link", name=lk.name), "inertial")
         ET.SubElement(inertial, "origin", xyz=_fmt(lk.com), rpy="0 0 0")
         ET.SubElement(inertial, "mass", value=repr(lk.mass))
         i = lk.inertia
-        ET.SubElement(inertial, "inertia", ixx=repr(i[0][0]), ixy=repr(i[0][1]), ixz=repr(i[0][2]),
-                      iyy=repr(i[1][1]), iyz=repr(i[1][2]), izz=repr(i[2][2]))
+        ET.SubElement(
+            inertial,
+            "inertia",
+            ixx=repr(i[0][0]),
+            ixy=repr(i[0][1]),
+            ixz=repr(i[0][2]),
+            iyy=repr(i[1][1]),
+            iyz=repr(i[1][2]),
+            izz=repr(i[2][2]),
+        )
         parent = lk.name
     if write_tip:
         joint(f"{parent}_to_{arm.tip}", "fixed", parent, arm.tip, arm.end_point, ZERO3)

@@ -30,10 +30,11 @@ def exemplar():
 def compose(*overrides: str, hydra: bool = False):
     """The ``train`` config composed as ``python train.py`` composes it (Hydra's compose API), GlobalHydra
     cleared around it. The one place tests compose configs."""
-    import selpres.config  # noqa: F401  registers the typed schema and resolvers
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
+
+    import selpres.config  # noqa: F401  registers the typed schema and resolvers
 
     GlobalHydra.instance().clear()
     try:

@@ -87,9 +87,7 @@ def test_identity_is_the_arm_not_the_file(tmp_path):
     from_a = cfg_of("robot=urdf", f"robot.path={a}").robot
     from_b = cfg_of("robot=urdf", f"robot.path={b}").robot
     assert config_hash(puma, data) == config_hash(from_a, data) == config_hash(from_b, data)
-    assert config_hash(cfg_of("robot=puma560", "robot.links.2.mass=4.9").robot, data) != config_hash(
-        puma, data
-    )
+    assert config_hash(cfg_of("robot=puma560", "robot.links.2.mass=4.9").robot, data) != config_hash(puma, data)
 
 
 def _export(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
@@ -120,9 +118,7 @@ def test_export_names_columns_carries_the_arm_and_writes_its_urdf(tmp_path):
         assert f.readline().startswith("# config_hash=")
         arm_line = f.readline()
     arm = make_arm(cfg_of("robot=puma560").robot)
-    assert arm_line.startswith("# arm=") and json.loads(arm_line[6:]) == json.loads(
-        json.dumps(arm.to_config())
-    )
+    assert arm_line.startswith("# arm=") and json.loads(arm_line[6:]) == json.loads(json.dumps(arm.to_config()))
     _, names, table = load_csv(tmp_path / "ex_exemplar.csv")
     assert names == (
         *(f"{p}{i}" for p in ("q", "dq", "ddq") for i in range(1, 7)),
@@ -152,9 +148,7 @@ def test_two_link_urdf_loads_as_eq6(tmp_path):
     loaded = load_urdf(tmp_path / "two.urdf", g=9.81)
     q, qd, qdd = states(2)
     arm = make_arm(load_group("robot", "two_link"))
-    assert torch.allclose(
-        loaded.inverse_dynamics(q, qd, qdd), arm.inverse_dynamics(q, qd, qdd), atol=1e-12, rtol=0
-    )
+    assert torch.allclose(loaded.inverse_dynamics(q, qd, qdd), arm.inverse_dynamics(q, qd, qdd), atol=1e-12, rtol=0)
     _, names, _ = load_csv(tmp_path / "ex_exemplar.csv")
     assert names == ("theta1", "dtheta1", "ddtheta1", "theta2", "dtheta2", "ddtheta2", "tau1", "tau2")
 
@@ -164,7 +158,7 @@ def test_two_link_urdf_loads_as_eq6(tmp_path):
     "args",
     [
         ["robot=urdf", "data=sampled", "robot.path=missing.urdf"],
-        ["robot=puma560"],  # the paper's grid on a 6-joint arm
+        ["robot=puma560", "data=paper"],  # the paper's grid asked for on a 6-joint arm
         ["data=file", "data.path=missing.csv", "--urdf", "x.urdf"],
     ],
 )
@@ -177,9 +171,7 @@ def test_export_refusals_exit_2_and_write_nothing(tmp_path, args):
         timeout=300,
         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
     )
-    assert out.returncode == 2 and out.stderr.startswith("error: ") and "Traceback" not in out.stderr, (
-        out.stderr
-    )
+    assert out.returncode == 2 and out.stderr.startswith("error: ") and "Traceback" not in out.stderr, out.stderr
     assert not list(tmp_path.iterdir())
 
 
@@ -202,9 +194,7 @@ def test_train_refuses_a_bad_urdf_with_exit_2(tmp_path):
         text=True,
         timeout=300,
     )
-    assert (
-        out.returncode == 2 and f"error: {path}: <robot>: has no revolute or continuous joint" in out.stderr
-    )
+    assert out.returncode == 2 and f"error: {path}: <robot>: has no revolute or continuous joint" in out.stderr
     assert not run.exists()
 
 
@@ -214,8 +204,6 @@ def test_planar3_with_a_massless_hand_is_the_paper_arm():
     arm, paper = make_arm(cfg.robot), make_arm(load_group("robot", "two_link"))
     q, qd, qdd = states(3)
     tau = arm.inverse_dynamics(q, qd, qdd)
-    assert torch.allclose(
-        tau[:, :2], paper.inverse_dynamics(q[:, :2], qd[:, :2], qdd[:, :2]), atol=1e-12, rtol=0
-    )
+    assert torch.allclose(tau[:, :2], paper.inverse_dynamics(q[:, :2], qd[:, :2], qdd[:, :2]), atol=1e-12, rtol=0)
     assert torch.allclose(tau[:, 2], torch.zeros(64, dtype=F64), atol=1e-15)
     assert np.isfinite(tau.numpy()).all()

@@ -21,14 +21,26 @@ R, N, M, EPOCHS = 3, 40, 25, 5
 # (config name, flat hparams, the same optimizer built directly from its class: the reference)
 OPTIMIZERS = [
     ("sgd", {"lr": 0.5, "momentum": 0.9}, lambda p: torch.optim.SGD(p, lr=0.5, momentum=0.9)),
-    ("quickprop", {"lr": 0.3, "mu": 1.75, "weight_decay": 1e-3},
-     lambda p: QuickProp(p, lr=0.3, mu=1.75, weight_decay=1e-3)),
-    ("delta_bar_delta", {"lr": 0.3, "kappa": 0.1, "phi": 0.3, "theta": 0.7, "momentum": 0.5},
-     lambda p: DeltaBarDelta(p, lr=0.3, kappa=0.1, phi=0.3, theta=0.7, momentum=0.5)),
-    ("rprop", {"lr": 0.05, "eta_minus": 0.5, "eta_plus": 1.2, "step_min": 1e-6, "step_max": 50.0},
-     lambda p: torch.optim.Rprop(p, lr=0.05, etas=(0.5, 1.2), step_sizes=(1e-6, 50.0))),
-    ("adam", {"lr": 0.02, "beta1": 0.9, "beta2": 0.999, "eps": 1e-8},
-     lambda p: torch.optim.Adam(p, lr=0.02, betas=(0.9, 0.999), eps=1e-8)),
+    (
+        "quickprop",
+        {"lr": 0.3, "mu": 1.75, "weight_decay": 1e-3},
+        lambda p: QuickProp(p, lr=0.3, mu=1.75, weight_decay=1e-3),
+    ),
+    (
+        "delta_bar_delta",
+        {"lr": 0.3, "kappa": 0.1, "phi": 0.3, "theta": 0.7, "momentum": 0.5},
+        lambda p: DeltaBarDelta(p, lr=0.3, kappa=0.1, phi=0.3, theta=0.7, momentum=0.5),
+    ),
+    (
+        "rprop",
+        {"lr": 0.05, "eta_minus": 0.5, "eta_plus": 1.2, "step_min": 1e-6, "step_max": 50.0},
+        lambda p: torch.optim.Rprop(p, lr=0.05, etas=(0.5, 1.2), step_sizes=(1e-6, 50.0)),
+    ),
+    (
+        "adam",
+        {"lr": 0.02, "beta1": 0.9, "beta2": 0.999, "eps": 1e-8},
+        lambda p: torch.optim.Adam(p, lr=0.02, betas=(0.9, 0.999), eps=1e-8),
+    ),
 ]
 IDS = [o[0] for o in OPTIMIZERS]
 
@@ -87,8 +99,7 @@ def test_batch_sgd_equals_torch_engine_with_the_epoch_as_batch(problem):
     ours = BatchEngine(SIZES, params, "sgd", {"lr": 0.5, "momentum": 0.9}, reduction="mean")
     theirs = TorchEngine(SIZES, params, 0.5, 0.9, M)
     for order in orders:
-        torch.testing.assert_close(ours.train_epoch(X, Y, order), theirs.train_epoch(X, Y, order),
-                                   rtol=0, atol=1e-14)
+        torch.testing.assert_close(ours.train_epoch(X, Y, order), theirs.train_epoch(X, Y, order), rtol=0, atol=1e-14)
     for a, b in zip(ours.params(), theirs.params()):
         torch.testing.assert_close(a, b, rtol=0, atol=1e-13)
 
@@ -162,10 +173,13 @@ def test_empty_epoch_changes_nothing(problem):
     assert all(torch.equal(a, b) for a, b in zip(eng.params(), params))
 
 
-@pytest.mark.parametrize("kwargs, key", [
-    ({"reduction": "avg"}, "optim.reduction"),
-    ({"sigmoid_prime_offset": -0.1}, "optim.sigmoid_prime_offset"),
-])
+@pytest.mark.parametrize(
+    "kwargs, key",
+    [
+        ({"reduction": "avg"}, "optim.reduction"),
+        ({"sigmoid_prime_offset": -0.1}, "optim.sigmoid_prime_offset"),
+    ],
+)
 def test_bad_engine_options_name_their_key(problem, kwargs, key):
     _, _, _, params = problem
     with pytest.raises(ConfigError) as err:

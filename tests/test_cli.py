@@ -31,7 +31,9 @@ def _cmd(run_dir: Path, *overrides: str) -> list[str]:
 
 
 def _run(run_dir: Path, *overrides: str) -> subprocess.CompletedProcess:
-    return subprocess.run(_cmd(run_dir, *overrides), cwd=REPO, env=_env(), capture_output=True, text=True, timeout=TIMEOUT)
+    return subprocess.run(
+        _cmd(run_dir, *overrides), cwd=REPO, env=_env(), capture_output=True, text=True, timeout=TIMEOUT
+    )
 
 
 @pytest.fixture(scope="module")
@@ -82,8 +84,8 @@ def test_same_command_again_is_skipped(smoke):
 def test_summary_table_for_a_budget_below_one_epoch(smoke):
     """schedule=matched with a budget < n has no full epoch, only a partial one: the summary table must
     still render it (a crash there would turn a finished job into a 'failed' results.json)."""
-    from selpres.schedule import build_schedule
     from selpres.cli import summary_table
+    from selpres.schedule import build_schedule
 
     _, run_dir = smoke
     res = json.loads((run_dir / "results.json").read_text())
@@ -111,8 +113,14 @@ def test_bad_inputs_fail_cleanly(tmp_path):
     procs = []
     for i, (override, key, code) in enumerate(BAD):
         run_dir = tmp_path / f"bad{i}" / "run"
-        p = subprocess.Popen(_cmd(run_dir, *TINY, override), cwd=REPO, env=_env(),
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        p = subprocess.Popen(
+            _cmd(run_dir, *TINY, override),
+            cwd=REPO,
+            env=_env(),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         procs.append((override, key, code, run_dir, p))
     failures = []
     deadline = time.monotonic() + TIMEOUT
@@ -166,11 +174,14 @@ def _snapshot(root: Path) -> dict:
     return {p.relative_to(root).as_posix(): (p.read_bytes() if p.is_file() else "dir") for p in sorted(root.rglob("*"))}
 
 
-@pytest.mark.parametrize("override, code", [
-    ("optim.lr=-1", 2),  # our ConfigError, raised inside the job after Hydra made .hydra/ and train.log
-    ("schedule.sizes=[50,2000]", 2),  # refused against the exemplar set (needs the data first)
-    ("optim.lrr=1", 1),  # Hydra's own error, before any job starts
-])
+@pytest.mark.parametrize(
+    "override, code",
+    [
+        ("optim.lr=-1", 2),  # our ConfigError, raised inside the job after Hydra made .hydra/ and train.log
+        ("schedule.sizes=[50,2000]", 2),  # refused against the exemplar set (needs the data first)
+        ("optim.lrr=1", 1),  # Hydra's own error, before any job starts
+    ],
+)
 def test_a_refused_run_into_an_existing_folder_leaves_it_exactly_as_it_was(tmp_path, override, code):
     folder = tmp_path / "mine"
     before = _user_folder(folder)
@@ -193,8 +204,14 @@ def test_a_refused_rerun_restores_the_record_of_the_finished_run(tmp_path):
 def test_a_failing_job_in_a_multirun_keeps_the_users_sweep_folder(tmp_path):
     sweep = tmp_path / "sweep"
     before = _user_folder(sweep)
-    proc = subprocess.run([sys.executable, "train.py", "-m", f"hydra.sweep.dir={sweep}", *TINY, "optim.lr=-1,0.15"],
-                          cwd=REPO, env=_env(), capture_output=True, text=True, timeout=TIMEOUT)
+    proc = subprocess.run(
+        [sys.executable, "train.py", "-m", f"hydra.sweep.dir={sweep}", *TINY, "optim.lr=-1,0.15"],
+        cwd=REPO,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+    )
     assert proc.returncode != 0
     after = _snapshot(sweep)
     assert {k: v for k, v in after.items() if k in before} == before
@@ -205,8 +222,14 @@ def test_ctrl_c_during_set_up_keeps_the_users_folder(tmp_path):
     """SIGINT while the job builds a large held-out set: exit 130, no traceback, the folder as it was."""
     folder = tmp_path / "mine"
     before = _user_folder(folder)
-    p = subprocess.Popen(_cmd(folder, *TINY, "data.heldout=1000000"), cwd=REPO, env=_env(),
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        _cmd(folder, *TINY, "data.heldout=1000000"),
+        cwd=REPO,
+        env=_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + TIMEOUT
     while not (folder / ".hydra" / "overrides.yaml").exists() and time.monotonic() < deadline:
         time.sleep(0.02)
@@ -250,8 +273,14 @@ def test_a_fallback_from_the_native_engine_is_said_and_recorded(tmp_path):
     assert "SELPRES_NO_NATIVE" in log and "stage 5/5" in log  # Python logging reaches train.log
     assert "torch (requested fast" in proc.stdout  # the summary names the engine that ran
     # asking for the native engine where it cannot run is a user error, not a silent substitute
-    bad = subprocess.run(_cmd(tmp_path / "native", *TINY[:-1], "engine=native"), cwd=REPO, env=env,
-                         capture_output=True, text=True, timeout=TIMEOUT)
+    bad = subprocess.run(
+        _cmd(tmp_path / "native", *TINY[:-1], "engine=native"),
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+    )
     assert bad.returncode == 2 and bad.stderr.startswith("error: engine='native'"), bad.stderr
     assert not (tmp_path / "native").exists()
 

@@ -22,7 +22,9 @@ def _options(group: str) -> list[str]:
 
 
 # design/ holds experiment=sensitivity's 148 points, each checked in tests/test_sensitivity.py
-GROUPS = sorted(p.name for p in CONFIGS.iterdir() if p.is_dir() and p.name not in ("hydra", "design")) + ["hydra/launcher"]
+GROUPS = sorted(p.name for p in CONFIGS.iterdir() if p.is_dir() and p.name not in ("hydra", "design")) + [
+    "hydra/launcher"
+]
 OPTIONS = [(g, o) for g in GROUPS for o in _options(g)]
 
 
@@ -68,12 +70,20 @@ def companions(group: str, option: str, files: dict) -> list[str]:
         ("topology", "18-40-6"): ["robot=puma560", "data.n=2000"],
         ("robot", "puma560"): ["data=sampled", "topology.layers=18-40-6"],
         ("robot", "urdf"): [f"robot.path={files['urdf']}", "data=sampled", "topology.layers=9-13-3"],
-        ("data", "file"): [f"data.path={files['csv']}", "data.inputs=[a,b,c]", "data.outputs=[y]",
-                           "topology.layers=3-5-1"],
+        ("data", "file"): [
+            f"data.path={files['csv']}",
+            "data.inputs=[a,b,c]",
+            "data.outputs=[y]",
+            "topology.layers=3-5-1",
+        ],
     }.get((group, option), [])
 
 
-@pytest.mark.parametrize("group, option", OPTIONS, ids=[f"{g}={o}" for g, o in OPTIONS])
+_HEAVY = {("robot", "puma560"), ("topology", "18-40-6")}  # draw a 6-joint arm's exemplar set
+_OPTIONS = [pytest.param(g, o, marks=pytest.mark.slow) if (g, o) in _HEAVY else (g, o) for g, o in OPTIONS]
+
+
+@pytest.mark.parametrize("group, option", _OPTIONS, ids=[f"{g}={o}" for g, o in OPTIONS])
 def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, group, option):
     from selpres.train import prepare
 
@@ -83,8 +93,11 @@ def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, g
     sizes = validate(cfg)
     prob = prepare(cfg)
     n = prob.X.shape[0]
-    assert (sizes[0], sizes[-1]) == (len(prob.task.input_names), len(prob.task.output_names)) == \
-        (prob.X.shape[1], prob.Y.shape[1])
+    assert (
+        (sizes[0], sizes[-1])
+        == (len(prob.task.input_names), len(prob.task.output_names))
+        == (prob.X.shape[1], prob.Y.shape[1])
+    )
     if cfg.data.kind.value == "grid":
         assert n == 1002 and sizes[0] == 6 and sizes[-1] == 2  # the paper's exemplar set
     assert prob.schedule.n == n and prob.schedule.sizes[-1] == n

@@ -41,8 +41,17 @@ def _data(**over):
 
 def test_data_config_has_exactly_the_agreed_keys():
     assert set(DATA_CFG.keys()) == {
-        "kind", "theta", "dtheta", "tau1", "tau2", "accel_limit", "test_patterns", "test_from_exemplar",
-        "heldout", "test_seed", "scaling",
+        "kind",
+        "theta",
+        "dtheta",
+        "tau1",
+        "tau2",
+        "accel_limit",
+        "test_patterns",
+        "test_from_exemplar",
+        "heldout",
+        "test_seed",
+        "scaling",
     }
     assert DATA_CFG.kind == "grid" and ROBOT_CFG.kind == "two_link"
     assert set(DATA_CFG.scaling.keys()) == {"mode", "margin", "lo", "hi"}
@@ -76,7 +85,9 @@ def test_bad_config_range_names_key():
 
 
 def test_accel_filter_boundary_is_inclusive():
-    a = torch.tensor([[2.0, -2.0], [-2.0, 0.0], [math.nextafter(2.0, 3.0), 0.0], [0.0, -math.nextafter(2.0, 3.0)]], dtype=F64)
+    a = torch.tensor(
+        [[2.0, -2.0], [-2.0, 0.0], [math.nextafter(2.0, 3.0), 0.0], [0.0, -math.nextafter(2.0, 3.0)]], dtype=F64
+    )
     assert D.accel_filter(a, 2.0).tolist() == [True, True, False, False]
 
 
@@ -119,7 +130,9 @@ def test_exemplar_set_deterministic_fast_and_config_driven(exemplar):
     assert time.perf_counter() - t0 < 1.0
     assert torch.equal(again.X, exemplar.X) and torch.equal(again.Y, exemplar.Y)
     # lexicographic order θ1, θ̇1, θ2, θ̇2, τ1, τ2
-    key = torch.stack((exemplar.X[:, 0], exemplar.X[:, 1], exemplar.X[:, 3], exemplar.X[:, 4], exemplar.Y[:, 0], exemplar.Y[:, 1]), 1)
+    key = torch.stack(
+        (exemplar.X[:, 0], exemplar.X[:, 1], exemplar.X[:, 3], exemplar.X[:, 4], exemplar.Y[:, 0], exemplar.Y[:, 1]), 1
+    )
     diffs = key[1:] - key[:-1]
     first_nonzero = diffs[torch.arange(len(diffs)), (diffs != 0).int().argmax(1)]
     assert (first_nonzero > 0).all()
@@ -256,7 +269,9 @@ def test_commanded_scaling_squeezes_targets(exemplar):
     ys = s.transform_y(exemplar.Y)
     spread = ys.max(0).values - ys.min(0).values
     assert (spread < 0.4).all()  # exemplar mode gives 0.667 for both
-    torch.testing.assert_close(s.transform_y(torch.tensor([14.0, 4.0], dtype=F64)), torch.full((2,), 0.1 + 0.8 / 12, dtype=F64))
+    torch.testing.assert_close(
+        s.transform_y(torch.tensor([14.0, 4.0], dtype=F64)), torch.full((2,), 0.1 + 0.8 / 12, dtype=F64)
+    )
 
 
 def test_scaler_rejects_unknown_mode(exemplar):
@@ -277,7 +292,9 @@ def test_rms_errors_units_and_replica_dim(exemplar, tests_small):
     assert all(v.shape == (3,) for v in r.values())
     torch.testing.assert_close(r["tau1_Nm"], torch.tensor([0.0, 0.3, 0.3], dtype=F64))
     torch.testing.assert_close(r["tau2_Nm"], torch.tensor([0.0, 0.0, 0.4], dtype=F64))
-    torch.testing.assert_close(r["overall_Nm"], torch.tensor([0.0, math.sqrt(0.09 / 2), math.sqrt(0.25 / 2)], dtype=F64))
+    torch.testing.assert_close(
+        r["overall_Nm"], torch.tensor([0.0, math.sqrt(0.09 / 2), math.sqrt(0.25 / 2)], dtype=F64)
+    )
     gain = (s.hi - s.lo) / (s.y_max - s.y_min)
     torch.testing.assert_close(r["tau1_scaled"], r["tau1_Nm"] * gain[0])
     torch.testing.assert_close(r["tau2_scaled"], r["tau2_Nm"] * gain[1])
@@ -302,7 +319,10 @@ def test_export_round_trip_exact(tmp_path, exemplar, tests_small):
     stem = tmp_path / "sub" / "exemplar"
     paths = D.export(stem, exemplar, tests_small, ROBOT_CFG, DATA_CFG)
     assert sorted(p.name for p in (tmp_path / "sub").iterdir()) == [
-        "exemplar.npz", "exemplar_exemplar.csv", "exemplar_heldout.csv", "exemplar_test10.csv",
+        "exemplar.npz",
+        "exemplar_exemplar.csv",
+        "exemplar_heldout.csv",
+        "exemplar_test10.csv",
     ]  # no temp files left behind
     arr = D.load_exported(paths["npz"], ROBOT_CFG, DATA_CFG)
     h = D.config_hash(ROBOT_CFG, DATA_CFG)

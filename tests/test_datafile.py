@@ -60,9 +60,7 @@ def test_split_by_seed_and_test_patterns_from_the_heldout_rows(sarcos):
     table = torch.from_numpy(np.loadtxt(sarcos, delimiter=",", skiprows=1))
     assert len(task.tests.heldout) == 120 and task.n == 480  # data.heldout: 0.2 of 600 rows
     both = torch.cat((task.exemplar.X, task.tests.heldout.X))
-    assert torch.equal(
-        both[both[:, 0].argsort()], table[table[:, 0].argsort(), :21]
-    )  # a partition of the rows
+    assert torch.equal(both[both[:, 0].argsort()], table[table[:, 0].argsort(), :21])  # a partition of the rows
     ex_rows = task.exemplar.X[:, 0]
     assert torch.all(ex_rows[1:] != ex_rows[:-1])
     positions = [int((table[:, 0] == v).nonzero()) for v in ex_rows]
@@ -107,9 +105,12 @@ def _schedules() -> list[str]:
 
 @pytest.mark.parametrize(
     "variant",
-    [f"schedule={s}" for s in _schedules()]
-    + [f"optim={o}" for o in ("quickprop", "delta_bar_delta", "rprop", "adam")]
-    + ["schedule.order=random", "schedule.order=coverage"],
+    [
+        f"schedule={s}" if s == "selective" else pytest.param(f"schedule={s}", marks=pytest.mark.slow)
+        for s in _schedules()
+    ]
+    + [pytest.param(f"optim={o}", marks=pytest.mark.slow) for o in ("quickprop", "delta_bar_delta", "rprop", "adam")]
+    + [pytest.param(f"schedule.order={o}", marks=pytest.mark.slow) for o in ("random", "coverage")],
 )
 def test_every_schedule_order_and_optimizer_trains_on_it(sarcos, variant):
     from selpres.train import train
@@ -137,9 +138,7 @@ def _error(path: Path, *overrides: str, **kw) -> ConfigError:
 
 def test_missing_column_is_named_with_the_columns_there_are(sarcos):
     e = _error(sarcos, inputs=INPUTS[:-1] + ["ddq8"])
-    assert (
-        isinstance(e, DataFileError) and str(sarcos) in str(e) and "'ddq8'" in str(e) and "'tau7'" in str(e)
-    )
+    assert isinstance(e, DataFileError) and str(sarcos) in str(e) and "'ddq8'" in str(e) and "'tau7'" in str(e)
 
 
 @pytest.mark.parametrize(
@@ -186,11 +185,7 @@ def test_npz_problems_are_named(tmp_path):
 def test_too_few_rows_for_the_schedule_names_the_file(tmp_path):
     path = write_csv(tmp_path / "tiny.csv", np.random.default_rng(0).uniform(size=(12, 2)), ["a", "y"])
     e = _error(path, "data.test_from_exemplar=1", "data.test_patterns=2", inputs=["a"], outputs=["y"])
-    assert (
-        isinstance(e, DataFileError)
-        and str(e).startswith(f"{path}: rows: 12 rows")
-        and "schedule.sizes" in str(e)
-    )
+    assert isinstance(e, DataFileError) and str(e).startswith(f"{path}: rows: 12 rows") and "schedule.sizes" in str(e)
 
 
 def test_too_few_rows_for_the_split(tmp_path):
@@ -245,8 +240,5 @@ def test_command_line_exits_2_and_writes_nothing(tmp_path):
         timeout=300,
     )
     assert out.returncode == 2, out.stderr
-    assert (
-        f"error: {path}: column 'y', line 3: 'x' is not a number" in out.stderr
-        and "Traceback" not in out.stderr
-    )
+    assert f"error: {path}: column 'y', line 3: 'x' is not a number" in out.stderr and "Traceback" not in out.stderr
     assert not run.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]

@@ -14,8 +14,10 @@ from selpres.train import train
 from conftest import cfg_of, numbers, requires_native
 
 
-@pytest.mark.parametrize("engine", [pytest.param("reference", marks=pytest.mark.slow), "torch",
-                                    pytest.param("native", marks=requires_native)])
+@pytest.mark.parametrize(
+    "engine",
+    [pytest.param("reference", marks=pytest.mark.slow), "torch", pytest.param("native", marks=requires_native)],
+)
 def test_same_config_same_numbers(tmp_path, engine):
     a = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2", f"engine={engine}"), tmp_path / "a")
     task._task.cache_clear()  # the second run rebuilds its data too, as a new process would

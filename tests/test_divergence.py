@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 from selpres.train import train
+
 from conftest import cfg_of
 
 

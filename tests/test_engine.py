@@ -7,11 +7,12 @@ import math
 
 import pytest
 import torch
-from conftest import requires_native
 
 from selpres import _kernels
 from selpres.engine import make_engine
 from selpres.model import forward_replicas, init_replica_params
+
+from conftest import requires_native
 
 LR, MOM = 0.15, 0.9
 NATIVE = pytest.param("native", marks=requires_native)
@@ -47,10 +48,10 @@ def _manual_step(sizes, params, x, t, buf):
     loss = ((y - t) ** 2).mean()
     delta = 2.0 * (y - t) / (B * nout) * y * (1.0 - y)
     grads = [None] * len(params)
-    for l in range(len(Ws) - 1, -1, -1):
-        grads[2 * l] = delta.T @ acts[l]
-        grads[2 * l + 1] = delta.sum(0)
-        delta = (delta @ Ws[l]) * acts[l] * (1.0 - acts[l])
+    for layer in range(len(Ws) - 1, -1, -1):
+        grads[2 * layer] = delta.T @ acts[layer]
+        grads[2 * layer + 1] = delta.sum(0)
+        delta = (delta @ Ws[layer]) * acts[layer] * (1.0 - acts[layer])
     new_buf = [MOM * bb + g for bb, g in zip(buf, grads)]
     new_p = [p - LR * bb for p, bb in zip(params, new_buf)]
     return new_p, new_buf, loss.item()
@@ -114,21 +115,23 @@ def test_reference_matches_torch_func_and_returns_pre_update_loss():
 # every topology, every R and B = 7 with interleaving; the whole grid on all n = 1002 is marked slow.
 TOPOLOGIES = [(6, 4, 2), (6, 8, 2), (6, 13, 2), (6, 8, 8, 2)]
 DEFAULT_CASES = [((6, 4, 2), 1, 1), ((6, 8, 2), 8, 7), ((6, 13, 2), 30, 1), ((6, 8, 8, 2), 13, 7)]
-EQUIVALENCE_CASES = (
-    [pytest.param(sizes, R, B, 200, id=f"{'-'.join(map(str, sizes))}-R{R}-B{B}-n200")
-     for sizes, R, B in DEFAULT_CASES]
-    + [pytest.param(sizes, R, B, 1002, id=f"{'-'.join(map(str, sizes))}-R{R}-B{B}-n1002",
-                    marks=pytest.mark.slow)
-       for sizes in TOPOLOGIES for R in (1, 8, 13, 30) for B in (1, 7)])
+EQUIVALENCE_CASES = [
+    pytest.param(sizes, R, B, 200, id=f"{'-'.join(map(str, sizes))}-R{R}-B{B}-n200") for sizes, R, B in DEFAULT_CASES
+] + [
+    pytest.param(sizes, R, B, 1002, id=f"{'-'.join(map(str, sizes))}-R{R}-B{B}-n1002", marks=pytest.mark.slow)
+    for sizes in TOPOLOGIES
+    for R in (1, 8, 13, 30)
+    for B in (1, 7)
+]
 TOL = 1e-12
 
 
 @pytest.fixture(scope="module")
 def scaled_exemplar(exemplar):
     """The exemplar set as the network sees it (inputs and targets in [0.1, 0.9])."""
-    from conftest import load_group
-
     from selpres.data import Scaler
+
+    from conftest import load_group
 
     scaler = Scaler.fit(exemplar, load_group("data", "paper"))
     return scaler.transform_x(exemplar.X), scaler.transform_y(exemplar.Y)
@@ -211,8 +214,10 @@ def test_fast_engine_falls_back_to_torch_and_says_why(monkeypatch, caplog):
 def test_fast_engine_reports_the_compilers_message(tmp_path, monkeypatch, caplog):
     """A failing compiler (here a script printing an error) is named in fallback_reason, in one log line."""
     cc = tmp_path / "broken-cc"
-    cc.write_text('#!/bin/sh\ncase "$1" in --version) echo broken-cc 1.0;;\n'
-                  '*) echo "sgd.c:1: error: boom" >&2; echo "second line" >&2; exit 3;; esac\n')
+    cc.write_text(
+        '#!/bin/sh\ncase "$1" in --version) echo broken-cc 1.0;;\n'
+        '*) echo "sgd.c:1: error: boom" >&2; echo "second line" >&2; exit 3;; esac\n'
+    )
     cc.chmod(0o755)
     monkeypatch.setenv("CC", str(cc))
     monkeypatch.delenv("SELPRES_NO_NATIVE", raising=False)
@@ -261,8 +266,10 @@ def test_state_dict_round_trip_is_exact(name):
     fresh = make_engine(name, sizes, init_replica_params(sizes, [9, 9, 9]), LR, MOM, 3)
     fresh.load_state_dict(state)
     fresh.train_epoch(X, Y, orders[2])
-    for a, b in zip(straight.state_dict()["params"] + straight.state_dict()["momentum"],
-                    fresh.state_dict()["params"] + fresh.state_dict()["momentum"]):
+    for a, b in zip(
+        straight.state_dict()["params"] + straight.state_dict()["momentum"],
+        fresh.state_dict()["params"] + fresh.state_dict()["momentum"],
+    ):
         assert torch.equal(a, b)
 
 
@@ -387,15 +394,19 @@ def _batch_engine(sizes, params):
 
 
 def _engine(name, sizes, params, threads=1):
-    return _batch_engine(sizes, params) if name == "batch" else make_engine(name, sizes, params, LR, MOM, 1,
-                                                                            threads=threads)
+    return (
+        _batch_engine(sizes, params)
+        if name == "batch"
+        else make_engine(name, sizes, params, LR, MOM, 1, threads=threads)
+    )
 
 
 def _fsum_squared_errors(outputs, Y):
     """Per replica and output, math.fsum over the patterns (an exactly rounded sum, not torch's)."""
     sq = (outputs - Y).square()
-    return torch.tensor([[math.fsum(sq[r, :, o].tolist()) for o in range(sq.shape[2])]
-                         for r in range(sq.shape[0])], dtype=torch.float64)
+    return torch.tensor(
+        [[math.fsum(sq[r, :, o].tolist()) for o in range(sq.shape[2])] for r in range(sq.shape[0])], dtype=torch.float64
+    )
 
 
 # three of the kernel's blocks of patterns, the last partly full, ending 5 patterns past a multiple of 8

@@ -27,7 +27,9 @@ junk_topologies = st.lists(widths, min_size=1, max_size=5).map("-".join)
 valid_topologies = st.lists(st.integers(1, 9), min_size=1, max_size=2).map(lambda h: "-".join(map(str, [6, *h, 2])))
 topologies = st.one_of(valid_topologies, junk_topologies)
 sizes_item = st.one_of(st.integers(-5, 1100), st.floats(-0.5, 1.5), st.sampled_from([float("nan"), float("inf")]))
-junk_schedules = st.tuples(st.lists(sizes_item, min_size=1, max_size=4), st.lists(st.integers(-1, 2), min_size=1, max_size=4))
+junk_schedules = st.tuples(
+    st.lists(sizes_item, min_size=1, max_size=4), st.lists(st.integers(-1, 2), min_size=1, max_size=4)
+)
 
 
 @st.composite
@@ -72,8 +74,14 @@ def test_every_config_trains_or_is_refused_cleanly(topology, schedule, batch):
     sizes, epochs = schedule
     sizes_txt = "[" + ",".join(_literal(v) for v in sizes) + "]"
     overrides = [
-        f"topology.layers='{topology}'", f"schedule.sizes={sizes_txt}", f"schedule.epochs=[{','.join(map(str, epochs))}]",
-        f"optim.batch_size={batch}", "engine=torch", "replicas=2", "data.heldout=50", "eval.heldout_curve=50",
+        f"topology.layers='{topology}'",
+        f"schedule.sizes={sizes_txt}",
+        f"schedule.epochs=[{','.join(map(str, epochs))}]",
+        f"optim.batch_size={batch}",
+        "engine=torch",
+        "replicas=2",
+        "data.heldout=50",
+        "eval.heldout_curve=50",
         "logging.progress=false",
     ]
     try:

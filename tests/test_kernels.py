@@ -12,9 +12,10 @@ import sys
 import textwrap
 
 import pytest
-from conftest import REPO, requires_native
 
 from selpres import _kernels
+
+from conftest import REPO, requires_native
 
 SIZES = (5, 3, 2)  # a topology no other test loads: its library is mapped only by the tests below
 
@@ -32,16 +33,25 @@ def test_kernel_source_is_a_c_file_shipped_with_the_package():
     text = _kernels.SOURCE.read_text()
     assert "int selpres_train(" in text and "@" not in text  # no text-substitution placeholders left
     # P = (13*6 + 13) + (2*13 + 2), units 6 + 13 + 2
-    assert _kernels.macros((6, 13, 2)) == ["-DNL=2", "-DSIZES=6,13,2", "-DP_TOTAL=119", "-DTOT_UNITS=21",
-                                           "-DMAXW=13", f"-DNI={_kernels.INTERLEAVE}"]
+    assert _kernels.macros((6, 13, 2)) == [
+        "-DNL=2",
+        "-DSIZES=6,13,2",
+        "-DP_TOTAL=119",
+        "-DTOT_UNITS=21",
+        "-DMAXW=13",
+        f"-DNI={_kernels.INTERLEAVE}",
+    ]
 
 
 @requires_native
 def test_compiler_errors_point_at_real_lines_of_the_source(fresh_cache, monkeypatch):
     """Without its macros the file stops at its own #error; the message names sgd.c and that line."""
     monkeypatch.setattr(_kernels, "macros", lambda sizes: ["-DNL=1"])
-    line = next(i for i, ln in enumerate(_kernels.SOURCE.read_text().splitlines(), 1)
-                if ln.startswith("#error") and "-DNL" in ln)
+    line = next(
+        i
+        for i, ln in enumerate(_kernels.SOURCE.read_text().splitlines(), 1)
+        if ln.startswith("#error") and "-DNL" in ln
+    )
     with pytest.raises(_kernels.KernelUnavailable) as info:
         _kernels.build(SIZES)
     assert re.search(rf"sgd\.c:{line}:", str(info.value)), str(info.value)
@@ -49,6 +59,7 @@ def test_compiler_errors_point_at_real_lines_of_the_source(fresh_cache, monkeypa
 
 # ---------------------------------------------------------------- a bad cache never crashes; failures retried
 @requires_native
+@pytest.mark.slow  # builds the kernel afresh
 @pytest.mark.parametrize("damage", ["truncate", "flip"])
 def test_damaged_cached_library_is_rebuilt_not_loaded(fresh_cache, damage, caplog):
     path = _kernels.build(SIZES)
@@ -66,6 +77,7 @@ def test_damaged_cached_library_is_rebuilt_not_loaded(fresh_cache, damage, caplo
 
 
 @requires_native
+@pytest.mark.slow  # builds the kernel afresh
 def test_library_without_checksum_is_rebuilt(fresh_cache):
     """A library whose sidecar is missing was not finished (or predates the checksum): rebuilt."""
     path = _kernels.build(SIZES)
@@ -96,8 +108,7 @@ def test_cpu_check_names_what_is_missing():
 
 def test_cpu_flags_are_those_every_core_lists(monkeypatch, tmp_path):
     cpuinfo = tmp_path / "cpuinfo"
-    cpuinfo.write_text("processor\t: 0\nflags\t\t: fpu sse2 avx2 fma\n\n"
-                       "processor\t: 1\nflags\t\t: fpu sse2 fma\n")
+    cpuinfo.write_text("processor\t: 0\nflags\t\t: fpu sse2 avx2 fma\n\nprocessor\t: 1\nflags\t\t: fpu sse2 fma\n")
     real_open = open
 
     def fake_open(f, *a, **k):
@@ -108,6 +119,7 @@ def test_cpu_flags_are_those_every_core_lists(monkeypatch, tmp_path):
 
 
 @requires_native
+@pytest.mark.slow  # builds the kernel afresh
 def test_failed_build_is_reported_then_retried(fresh_cache, monkeypatch):
     """A compiler failure or a time-out is not remembered for the process: the next load() builds."""
     cc = os.environ.get("CC")
@@ -156,8 +168,9 @@ def test_wide_layer_does_not_overflow_the_stack(tmp_path):
         soft = 2 << 20 if hard == resource.RLIM_INFINITY else min(hard, 2 << 20)
         resource.setrlimit(resource.RLIMIT_STACK, (soft, hard))
 
-    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600,
-                          preexec_fn=two_mb_stack)
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600, preexec_fn=two_mb_stack
+    )
     assert proc.returncode == 0 and proc.stdout.strip() == "ok", (proc.returncode, proc.stderr[-2000:])
 
 
@@ -189,8 +202,10 @@ def test_small_calls_never_touch_the_pool_and_large_ones_do(monkeypatch):
     results = []
     for min_work in (_kernels.MIN_THREAD_WORK, 1):
         monkeypatch.setattr(_kernels, "MIN_THREAD_WORK", min_work)
-        one, five = (make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1,
-                                 threads=2) for R in (1, 5))
+        one, five = (
+            make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1, threads=2)
+            for R in (1, 5)
+        )
         small = [one.predict(X[:10]), one.squared_errors(X[:10], Y[:10]), five.train_epoch(X, Y, order)]
         results.append([*small, *five.params(), five.predict(X), five.squared_errors(X, Y)])
         # forced: R = 1's predict splits its 10 patterns, R = 5's calls their 2 groups; R = 1's squared

@@ -15,8 +15,11 @@ def _per_replica(sizes, params, X):
 
 
 @pytest.mark.parametrize("sizes", [(6, 13, 2), (6, 8, 8, 2), (3, 1, 1)], ids=lambda s: "-".join(map(str, s)))
-@pytest.mark.parametrize("blocks", [(1, 7, 7), (3, 7, 3), (1 << 20, 7, 1), (1, 2, 2)],
-                         ids=["blocks-of-1", "3-3-1", "one-block", "cap-2-blocks"])
+@pytest.mark.parametrize(
+    "blocks",
+    [(1, 7, 7), (3, 7, 3), (1 << 20, 7, 1), (1, 2, 2)],
+    ids=["blocks-of-1", "3-3-1", "one-block", "cap-2-blocks"],
+)
 def test_forward_replicas_matches_one_module_per_replica(monkeypatch, sizes, blocks):
     """R = 7 in blocks of 1, of 3 (3 + 3 + 1), in one, and in blocks of 4 when at most 2 are allowed."""
     R, N = 7, 11
@@ -67,8 +70,9 @@ def test_forward_replicas_keeps_autograd():
 
 def test_squared_errors_of_by_hand():
     """Two replicas, three patterns, two outputs, numbers summed by hand."""
-    out = torch.tensor([[[0.5, 0.2], [0.1, 0.9], [0.3, 0.3]],
-                        [[0.0, 0.0], [1.0, 1.0], [0.5, 0.5]]], dtype=torch.float64)
+    out = torch.tensor(
+        [[[0.5, 0.2], [0.1, 0.9], [0.3, 0.3]], [[0.0, 0.0], [1.0, 1.0], [0.5, 0.5]]], dtype=torch.float64
+    )
     Y = torch.tensor([[0.25, 0.2], [0.1, 0.4], [0.8, 0.3]], dtype=torch.float64)
     # replica 0: 0.25^2 + 0 + 0.5^2 = 0.3125, 0 + 0.5^2 + 0 = 0.25
     # replica 1: 0.25^2 + 0.9^2 + 0.3^2 = 0.9625, 0.2^2 + 0.6^2 + 0.2^2 = 0.44

@@ -52,8 +52,12 @@ def test_quickprop_three_steps_by_hand():
       w2: dw_prev < 0 but S < 0 (the minimum was crossed): no gradient term (sign rule);
           -0.96 > shrink * 2.4 = 1.527? no -> secant -0.96 / (2.4 + 0.96) * (-0.84) = 0.24 -> -1.0 (exact)
     """
-    ws, _, _ = _descend(lambda p: QuickProp(p, lr=0.1, mu=1.75, weight_decay=0.0),
-                        lambda w: 0.5 * (w[0] - 1) ** 2 + 2 * (w[1] + 1) ** 2, [0.0, 0.0], 3)
+    ws, _, _ = _descend(
+        lambda p: QuickProp(p, lr=0.1, mu=1.75, weight_decay=0.0),
+        lambda w: 0.5 * (w[0] - 1) ** 2 + 2 * (w[1] + 1) ** 2,
+        [0.0, 0.0],
+        3,
+    )
     expected = [[0.1, -0.4], [0.365, -1.24], [0.89225, -1.0]]
     for got, exp in zip(ws, expected):
         assert got == pytest.approx(exp, abs=1e-14)
@@ -66,8 +70,7 @@ def test_quickprop_weight_decay_is_folded_into_the_slope():
     step 2: S = 0.0199; dw_prev < 0, S > 0 -> add -0.00995; S > shrink * 0.02 = 0.012727 -> mu:
             1.75 * (-0.01) = -0.0175; dw = -0.02745                                  -> 1.96255
     """
-    ws, opt, w = _steps_with_grads(lambda p: QuickProp(p, lr=0.5, mu=1.75, weight_decay=0.01), [2.0],
-                                   [[0.0], [0.0]])
+    ws, opt, w = _steps_with_grads(lambda p: QuickProp(p, lr=0.5, mu=1.75, weight_decay=0.01), [2.0], [[0.0], [0.0]])
     assert ws[0] == pytest.approx([1.99], abs=1e-15)
     assert ws[1] == pytest.approx([1.96255], abs=1e-15)
     assert opt.state[w]["prev_slope"].tolist() == pytest.approx([0.0199], abs=1e-16)
@@ -111,8 +114,12 @@ def test_delta_bar_delta_three_steps_by_hand():
       w1: agree -> eps = 0.25; bar = -0.6775; dw = 0.17                                      -> 0.49
       w2: bar = 0 -> neither branch, eps stays 0.09; bar = -0.25; dw = 0.045                  -> -1.005
     """
-    ws, opt, w = _descend(lambda p: DeltaBarDelta(p, lr=0.15, kappa=0.05, phi=0.4, theta=0.5),
-                          lambda w: 0.5 * (w[0] - 1) ** 2 + 5 * (w[1] + 1) ** 2, [0.0, 0.0], 3)
+    ws, opt, w = _descend(
+        lambda p: DeltaBarDelta(p, lr=0.15, kappa=0.05, phi=0.4, theta=0.5),
+        lambda w: 0.5 * (w[0] - 1) ** 2 + 5 * (w[1] + 1) ** 2,
+        [0.0, 0.0],
+        3,
+    )
     expected = [[0.15, -1.5], [0.32, -1.05], [0.49, -1.005]]
     for got, exp in zip(ws, expected):
         assert got == pytest.approx(exp, abs=1e-14)
@@ -129,8 +136,12 @@ def test_delta_bar_delta_momentum_by_hand():
     step 3: d = -0.715, agree -> eps 0.2; dw = 0.143 + 0.5 * 0.185 = 0.2355;
             bar = 0.2 * (-0.715) + 0.8 * (-0.34) = -0.415                                   -> 0.5205
     """
-    ws, opt, w = _descend(lambda p: DeltaBarDelta(p, lr=0.1, kappa=0.05, phi=0.5, theta=0.8, momentum=0.5),
-                          lambda w: 0.5 * (w[0] - 1) ** 2, [0.0], 3)
+    ws, opt, w = _descend(
+        lambda p: DeltaBarDelta(p, lr=0.1, kappa=0.05, phi=0.5, theta=0.8, momentum=0.5),
+        lambda w: 0.5 * (w[0] - 1) ** 2,
+        [0.0],
+        3,
+    )
     assert [v[0] for v in ws] == pytest.approx([0.1, 0.285, 0.5205], abs=1e-14)
     assert opt.state[w]["delta_bar"].tolist() == pytest.approx([-0.415], abs=1e-15)
 
@@ -158,34 +169,40 @@ def test_offset_sigmoid_matches_a_second_formulation():
 
 
 # ----------------------------------------------------------------------------------- parameters
-@pytest.mark.parametrize("factory, key, value", [
-    (lambda p: QuickProp(p, lr=0.0), "lr", 0.0),
-    (lambda p: QuickProp(p, lr=float("nan")), "lr", "nan"),
-    (lambda p: QuickProp(p, mu=-1.0), "mu", -1.0),
-    (lambda p: QuickProp(p, weight_decay=-1e-4), "weight_decay", -1e-4),
-    (lambda p: QuickProp(p, mu="big"), "mu", "big"),
-    (lambda p: DeltaBarDelta(p, kappa=-0.1), "kappa", -0.1),
-    (lambda p: DeltaBarDelta(p, phi=1.0), "phi", 1.0),
-    (lambda p: DeltaBarDelta(p, theta=1.5), "theta", 1.5),
-    (lambda p: DeltaBarDelta(p, momentum=1.0), "momentum", 1.0),
-    (lambda p: offset_sigmoid(p[0], -0.1), "sigmoid_prime_offset", -0.1),
-])
+@pytest.mark.parametrize(
+    "factory, key, value",
+    [
+        (lambda p: QuickProp(p, lr=0.0), "lr", 0.0),
+        (lambda p: QuickProp(p, lr=float("nan")), "lr", "nan"),
+        (lambda p: QuickProp(p, mu=-1.0), "mu", -1.0),
+        (lambda p: QuickProp(p, weight_decay=-1e-4), "weight_decay", -1e-4),
+        (lambda p: QuickProp(p, mu="big"), "mu", "big"),
+        (lambda p: DeltaBarDelta(p, kappa=-0.1), "kappa", -0.1),
+        (lambda p: DeltaBarDelta(p, phi=1.0), "phi", 1.0),
+        (lambda p: DeltaBarDelta(p, theta=1.5), "theta", 1.5),
+        (lambda p: DeltaBarDelta(p, momentum=1.0), "momentum", 1.0),
+        (lambda p: offset_sigmoid(p[0], -0.1), "sigmoid_prime_offset", -0.1),
+    ],
+)
 def test_bad_parameters_name_key_value_and_range(factory, key, value):
     with pytest.raises(ConfigError) as err:
         factory([torch.zeros(2, dtype=torch.float64)])
     assert err.value.key == key and str(value) in str(err.value) and "expected" in str(err.value)
 
 
-@pytest.mark.parametrize("name, hparams, key", [
-    ("quickprop", {"mu": 0.0}, "optim.mu"),
-    ("delta_bar_delta", {"phi": -0.5}, "optim.phi"),
-    ("rprop", {"eta_plus": 1.0}, "optim.eta_plus"),
-    ("rprop", {"step_min": 1.0, "step_max": 0.5}, "optim.step_max"),
-    ("adam", {"beta2": 1.0}, "optim.beta2"),
-    ("sgd", {"momentum": 1.0}, "optim.momentum"),
-    ("quickprop", {"kappa": 0.1}, "optim.kappa"),       # a key the optimizer does not use
-    ("lbfgs", {}, "optim.name"),                         # an unknown optimizer
-])
+@pytest.mark.parametrize(
+    "name, hparams, key",
+    [
+        ("quickprop", {"mu": 0.0}, "optim.mu"),
+        ("delta_bar_delta", {"phi": -0.5}, "optim.phi"),
+        ("rprop", {"eta_plus": 1.0}, "optim.eta_plus"),
+        ("rprop", {"step_min": 1.0, "step_max": 0.5}, "optim.step_max"),
+        ("adam", {"beta2": 1.0}, "optim.beta2"),
+        ("sgd", {"momentum": 1.0}, "optim.momentum"),
+        ("quickprop", {"kappa": 0.1}, "optim.kappa"),  # a key the optimizer does not use
+        ("lbfgs", {}, "optim.name"),  # an unknown optimizer
+    ],
+)
 def test_make_optimizer_errors_carry_the_config_key(name, hparams, key):
     with pytest.raises(ConfigError) as err:
         make_optimizer(name, [torch.zeros(1, dtype=torch.float64, requires_grad=True)], hparams)
@@ -194,8 +211,9 @@ def test_make_optimizer_errors_carry_the_config_key(name, hparams, key):
 
 def test_make_optimizer_maps_flat_keys_and_skips_none():
     p = [torch.zeros(1, dtype=torch.float64, requires_grad=True)]
-    rprop = make_optimizer("rprop", p, {"lr": 0.2, "eta_minus": 0.4, "eta_plus": 1.3, "step_min": 0.0,
-                                        "step_max": 9.0, "momentum": None})
+    rprop = make_optimizer(
+        "rprop", p, {"lr": 0.2, "eta_minus": 0.4, "eta_plus": 1.3, "step_min": 0.0, "step_max": 9.0, "momentum": None}
+    )
     assert isinstance(rprop, torch.optim.Rprop)
     g = rprop.param_groups[0]
     assert (g["lr"], g["etas"], g["step_sizes"]) == (0.2, (0.4, 1.3), (0.0, 9.0))

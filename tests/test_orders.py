@@ -135,8 +135,9 @@ def test_prefixes_cover_better_than_random_and_stratified(X):
     P = _cube(X)
     mean = {}
     for kind in ("coverage", "random", "stratified"):
-        radii = [_prefix_radii(P, priority_order(X, kind, generator(s, "subset")).numpy(), PAPER_SIZES)
-                 for s in range(5)]
+        radii = [
+            _prefix_radii(P, priority_order(X, kind, generator(s, "subset")).numpy(), PAPER_SIZES) for s in range(5)
+        ]
         mean[kind] = np.mean(radii, axis=0)
     assert np.all(mean["coverage"] < 0.8 * mean["random"]), mean  # measured: 0.66-0.73
     assert np.all(mean["coverage"] < 0.9 * mean["stratified"]), mean  # measured: 0.69-0.82

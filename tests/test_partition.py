@@ -24,6 +24,7 @@ def test_paper_inputs_keep_the_grid_strata(exemplar, bins):
     assert torch.equal(P.strata(exemplar.X, bins), grid_strata(exemplar.X, bins))
 
 
+@pytest.mark.slow  # k-means on 18 inputs
 def test_many_inputs_get_64_nonempty_cells_deterministically(cube):
     sid = P.strata(cube, 2)
     assert sid.dtype == torch.long and sid.shape == (N,)
@@ -63,6 +64,7 @@ def _functions(U: torch.Tensor) -> list[torch.Tensor]:
     return [U.sum(1), U[:, 0], U[:, 17], U.square().sum(1), (U[:, :9] - U[:, 9:]).abs().sum(1)]
 
 
+@pytest.mark.slow  # k-means on 18 inputs
 def test_stratified_prefixes_estimate_averages_better_than_random(cube):
     """The measure of a uniform cover that matters for training on a prefix: how well the prefix's average
     of a smooth function matches U's. k-means strata cut that error to about 2/3 of a random prefix's in 18

@@ -50,6 +50,4 @@ def test_other_counts_are_refused_with_the_fraction_form():
 
     with pytest.raises(ConfigError) as ei:
         prepare(cfg_of(*SAMPLED, "schedule.sizes=[100,200,5000]", "schedule.epochs=[1,1,1]"))
-    assert ei.value.key == "schedule.sizes" and "schedule.sizes=[0.02,0.04,1.0]" in str(ei.value), str(
-        ei.value
-    )
+    assert ei.value.key == "schedule.sizes" and "schedule.sizes=[0.02,0.04,1.0]" in str(ei.value), str(ei.value)

@@ -37,28 +37,63 @@ def results(schedule, topology, heldout, test10=None, curves=None, diverged=(), 
     reps = []
     for r, s in enumerate(seeds):
         ok = s not in diverged
-        final = {name: {u: {j: (vals[r] * k if ok else None) for j in ("overall", "tau1", "tau2")}
-                        for u, k in (("nm", 1.0), ("scaled", 0.5))}
-                 for name, vals in (("test10", test10), ("heldout", heldout))}
-        reps.append({"seed": s, "status": "complete" if ok else "diverged",
-                     "diverged": None if ok else {"epoch": 3, "presentations": 150},
-                     "final": final, "train_mse": 0.01 if ok else None})
+        final = {
+            name: {
+                u: {j: (vals[r] * k if ok else None) for j in ("overall", "tau1", "tau2")}
+                for u, k in (("nm", 1.0), ("scaled", 0.5))
+            }
+            for name, vals in (("test10", test10), ("heldout", heldout))
+        }
+        reps.append(
+            {
+                "seed": s,
+                "status": "complete" if ok else "diverged",
+                "diverged": None if ok else {"epoch": 3, "presentations": 150},
+                "final": final,
+                "train_mse": 0.01 if ok else None,
+            }
+        )
     curves = curves or [(pres, list(heldout))]
-    recs = [{"epoch": i, "stage": 0, "size": sizes[0], "presentations": p, "train_mse": [0.1] * len(seeds),
-             "test10_rms_nm": [0.1] * len(seeds), "heldout_rms_nm": h} for i, (p, h) in enumerate(curves)]
+    recs = [
+        {
+            "epoch": i,
+            "stage": 0,
+            "size": sizes[0],
+            "presentations": p,
+            "train_mse": [0.1] * len(seeds),
+            "test10_rms_nm": [0.1] * len(seeds),
+            "heldout_rms_nm": h,
+        }
+        for i, (p, h) in enumerate(curves)
+    ]
     n_div = sum(r["status"] == "diverged" for r in reps)
     return {
-        "status": "diverged" if n_div == len(seeds) else "complete", "diverged_replicas": n_div,
-        "config_hash": "x", "schedule": {
-            "name": schedule, "order": "stratified", "p": len(sizes) - 1, "sizes": sizes, "epochs": epochs,
+        "status": "diverged" if n_div == len(seeds) else "complete",
+        "diverged_replicas": n_div,
+        "config_hash": "x",
+        "schedule": {
+            "name": schedule,
+            "order": "stratified",
+            "p": len(sizes) - 1,
+            "sizes": sizes,
+            "epochs": epochs,
             "extra_presentations": extra * len(sizes),
             "presentations_per_stage": [n * e for n, e in zip(sizes, epochs)],
-            "presentations": pres, "conventional_presentations": 1002 * sum(epochs),
-            "cost_ratio": pres / (1002 * sum(epochs))},
-        "topology": topology, "engine": "fast", "replicas": len(seeds), "seeds": seeds,
+            "presentations": pres,
+            "conventional_presentations": 1002 * sum(epochs),
+            "cost_ratio": pres / (1002 * sum(epochs)),
+        },
+        "topology": topology,
+        "engine": "fast",
+        "replicas": len(seeds),
+        "seeds": seeds,
         "presentations_done": pres,
-        "wall_seconds": {"total": 3.0, "train": 2.0, "loop": 2.5}, "seconds_per_presentation": 1e-6,
-        "summary": {}, "replica_results": reps, "curves": recs, "config": {},
+        "wall_seconds": {"total": 3.0, "train": 2.0, "loop": 2.5},
+        "seconds_per_presentation": 1e-6,
+        "summary": {},
+        "replica_results": reps,
+        "curves": recs,
+        "config": {},
     }
 
 
@@ -75,22 +110,45 @@ def write_job(sweep: Path, schedule: str, topology: str, res: dict | None) -> Pa
 PAPER_SGD = {"name": "paper", "lr": 0.15, "momentum": 0.9, "batch_size": 1}
 
 
-def write_setting(sweep: Path, folder: str, name: str, topology: str, heldout: list, sizes: list,
-                  epochs: list, optim: dict | None = None, order: str = "stratified", extra: int = 0,
-                  curves=None, diverged=(), seed0: int = 0) -> Path:
+def write_setting(
+    sweep: Path,
+    folder: str,
+    name: str,
+    topology: str,
+    heldout: list,
+    sizes: list,
+    epochs: list,
+    optim: dict | None = None,
+    order: str = "stratified",
+    extra: int = 0,
+    curves=None,
+    diverged=(),
+    seed0: int = 0,
+) -> Path:
     """One job of a parameter sweep: a results.json with the given stages (``extra`` presentations after the
     last full epoch, as a budget leaves), order, optimizer config and final held-out RMS per replica."""
     res = results("selective", topology, heldout, curves=curves, diverged=diverged, seed0=seed0)
     pres = sum(n * e for n, e in zip(sizes, epochs)) + extra
-    res["schedule"].update(name=name, order=order, p=len(sizes) - 1, sizes=sizes, epochs=epochs,
-                           extra_presentations=[0] * (len(sizes) - 1) + [extra],
-                           presentations_per_stage=[n * e for n, e in zip(sizes, epochs)], presentations=pres,
-                           conventional_presentations=sizes[-1] * sum(epochs),
-                           cost_ratio=pres / (sizes[-1] * sum(epochs)))
+    res["schedule"].update(
+        name=name,
+        order=order,
+        p=len(sizes) - 1,
+        sizes=sizes,
+        epochs=epochs,
+        extra_presentations=[0] * (len(sizes) - 1) + [extra],
+        presentations_per_stage=[n * e for n, e in zip(sizes, epochs)],
+        presentations=pres,
+        conventional_presentations=sizes[-1] * sum(epochs),
+        cost_ratio=pres / (sizes[-1] * sum(epochs)),
+    )
     res["presentations_done"] = pres
-    res["config"] = {"schedule": {"name": name, "sizes": sizes, "epochs": epochs, "order": order},
-                     "topology": {"layers": topology}, "optim": dict(optim or PAPER_SGD), "seed": seed0,
-                     "replicas": len(heldout)}
+    res["config"] = {
+        "schedule": {"name": name, "sizes": sizes, "epochs": epochs, "order": order},
+        "topology": {"layers": topology},
+        "optim": dict(optim or PAPER_SGD),
+        "seed": seed0,
+        "replicas": len(heldout),
+    }
     d = sweep / folder
     d.mkdir(parents=True)
     (d / "results.json").write_text(json.dumps(res))
@@ -130,8 +188,9 @@ def test_paired_difference_and_interval_by_hand(sweep):
     assert v["heldout_ci_hi"] == pytest.approx(mean + half, abs=1e-9)
     assert v["heldout_ci_hi"] < 0
     pct = 0.044 / (sum(CON) / 5) * 100
-    assert v["reading_heldout"] == (f"selective better by 0.0440 Nm ({pct:.1f} %; 95 % interval "
-                                    f"[{mean - half:+.4f}, {mean + half:+.4f}])")
+    assert v["reading_heldout"] == (
+        f"selective better by 0.0440 Nm ({pct:.1f} %; 95 % interval [{mean - half:+.4f}, {mean + half:+.4f}])"
+    )
     assert v["cost_ratio"] == pytest.approx(70560 / 150300)
     # CI containing 0 (d = −0.01 +0.01 −0.01 +0.01 −0.01: mean −0.002, sd √(480e-6 / 4)), and the 90 % TOST
     # interval −0.002 ± t(0.95, 4)·sd/√5 = −0.002 ± 2.131847·0.0048990 pokes out of ±5 % of selective's mean
@@ -139,10 +198,13 @@ def test_paired_difference_and_interval_by_hand(sweep):
     se = math.sqrt(480e-6 / 4) / math.sqrt(5)
     assert rg["heldout_margin"] == pytest.approx(0.05 * sum(SEL) / 5)  # 0.0055 Nm
     assert [rg["heldout_ci90_lo"], rg["heldout_ci90_hi"]] == pytest.approx(
-        [-0.002 - 2.131847 * se, -0.002 + 2.131847 * se], abs=1e-6)
-    assert rg["reading_heldout"] == ("no detectable difference (95 % interval "
-                                     f"[{rg['heldout_ci_lo']:+.4f}, {rg['heldout_ci_hi']:+.4f}]); "
-                                     "not shown equivalent within ±0.0055 Nm")
+        [-0.002 - 2.131847 * se, -0.002 + 2.131847 * se], abs=1e-6
+    )
+    assert rg["reading_heldout"] == (
+        "no detectable difference (95 % interval "
+        f"[{rg['heldout_ci_lo']:+.4f}, {rg['heldout_ci_hi']:+.4f}]); "
+        "not shown equivalent within ±0.0055 Nm"
+    )
     # failed other side
     assert rows[("6-4-2", "selective vs matched")]["reading_heldout"] == "no results for matched"
 
@@ -154,15 +216,20 @@ def test_reading_wording_three_readings_never_merged():
     same = {**base, "mean": 0.0003, "ci95": [-0.0016, 0.0021], "p": 0.76, "p_tost": 0.01}
     assert reading(same) == "equivalent within ±0.0040 Nm (90 % interval [-0.0013, +0.0018])"
     unsure = {**base, "mean": -0.0014, "ci95": [-0.0039, 0.0010], "p": 0.24, "p_tost": 0.42}
-    assert reading(unsure) == ("no detectable difference (95 % interval [-0.0039, +0.0010]); "
-                               "not shown equivalent within ±0.0040 Nm")
+    assert reading(unsure) == (
+        "no detectable difference (95 % interval [-0.0039, +0.0010]); not shown equivalent within ±0.0040 Nm"
+    )
     small = {**base, "mean": -0.001, "ci95": [-0.0018, -0.0002], "p": 0.02, "p_tost": 0.001}
-    assert reading(small, name="x") == ("x better by 0.0010 Nm (1.0 %; 95 % interval [-0.0018, -0.0002]); "
-                                        "yet within the margin: equivalent within ±0.0040 Nm")
+    assert reading(small, name="x") == (
+        "x better by 0.0010 Nm (1.0 %; 95 % interval [-0.0018, -0.0002]); "
+        "yet within the margin: equivalent within ±0.0040 Nm"
+    )
     # after Holm's correction an interval that excludes 0 no longer reads as a difference, and says why
     held = {**base, "mean": 0.0014, "ci95": [0.0002, 0.0025], "p": 0.074, "p_tost": 0.8, "holm": True}
-    assert reading(held) == ("no detectable difference after Holm's correction (95 % interval "
-                             "[+0.0002, +0.0025]; Holm p = 0.074); not shown equivalent within ±0.0040 Nm")
+    assert reading(held) == (
+        "no detectable difference after Holm's correction (95 % interval "
+        "[+0.0002, +0.0025]; Holm p = 0.074); not shown equivalent within ±0.0040 Nm"
+    )
     assert reading({"n": 1, "mean": 0.02, "ci95": [None, None], "p": None}).startswith("too few pairs (1)")
 
 
@@ -190,8 +257,9 @@ def test_equivalence_and_t_test_end_to_end_by_hand(tmp_path):
 def test_holm_adjusts_within_the_family_of_one_metric(sweep):
     groups, tops, methods = aggregate(load_jobs(sweep))
     plain = {r["comparison"]: r for r in verdict_rows(groups, tops, methods) if r["topology"] == "6-4-2"}
-    rows = {r["comparison"]: r for r in verdict_rows(groups, tops, methods, Options(holm=True))
-            if r["topology"] == "6-4-2"}
+    rows = {
+        r["comparison"]: r for r in verdict_rows(groups, tops, methods, Options(holm=True)) if r["topology"] == "6-4-2"
+    }
     con, rg = (plain[f"selective vs {m}"]["heldout_p"] for m in ("conventional", "random_growth"))
     assert con < rg  # by hand: k = 2 tested pairs (matched failed, 6-8-2 has no conventional)
     assert rows["selective vs conventional"]["heldout_family_size"] == 2
@@ -212,8 +280,7 @@ def test_cli_margin_and_holm(sweep, tmp_path, capsys):
     assert main([str(sweep), "--out", str(out), "--margin", "0.01", "--holm"]) == 0
     md = capsys.readouterr().out
     assert "Margin m = 0.01 Nm (fixed with --margin)" in md and "Holm-adjusted within each family" in md
-    verdict = {r["comparison"]: r for r in csv.DictReader((out / "verdict.csv").open())
-               if r["topology"] == "6-4-2"}
+    verdict = {r["comparison"]: r for r in csv.DictReader((out / "verdict.csv").open()) if r["topology"] == "6-4-2"}
     assert float(verdict["selective vs random_growth"]["heldout_margin"]) == 0.01
     assert verdict["selective vs random_growth"]["heldout_p_holm"] != ""
     for bad in ("abc", "0", "-1%", "150%"):
@@ -271,8 +338,7 @@ def test_runs_lists_failed_missing_diverged_and_files_written(sweep, tmp_path, c
     out = tmp_path / "rep"
     assert main([str(sweep), "--out", str(out)]) == 0
     md = capsys.readouterr().out
-    for f in ("report.md", "table1.csv", "verdict.csv", "time_to_target.csv", "runs.csv", "curves.png",
-              "cost.png"):
+    for f in ("report.md", "table1.csv", "verdict.csv", "time_to_target.csv", "runs.csv", "curves.png", "cost.png"):
         assert (out / f).stat().st_size > 0, f
     assert (out / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert md == (out / "report.md").read_text()
@@ -311,8 +377,9 @@ def test_cli_as_module_exit_code(tmp_path):
     import sys
 
     root = Path(__file__).resolve().parents[1]
-    p = subprocess.run([sys.executable, "-m", "selpres.report", str(tmp_path / "nope")], cwd=root,
-                       capture_output=True, text=True)
+    p = subprocess.run(
+        [sys.executable, "-m", "selpres.report", str(tmp_path / "nope")], cwd=root, capture_output=True, text=True
+    )
     assert p.returncode == 2 and "Traceback" not in p.stderr and p.stderr.startswith("error:")
 
 
@@ -321,9 +388,13 @@ def test_jobs_of_one_schedule_name_that_differ_become_separate_methods(tmp_path)
     for topology in ("6-4-2", "6-8-2"):
         for sizes in ([50, 1002], [100, 1002]):
             res = results("selective", topology, [0.1, 0.2])
-            res["config"] = {"schedule": {"name": "selective", "sizes": sizes},
-                             "topology": {"layers": topology},
-                             "optim": {"lr": 0.15}, "seed": 0, "replicas": 2}
+            res["config"] = {
+                "schedule": {"name": "selective", "sizes": sizes},
+                "topology": {"layers": topology},
+                "optim": {"lr": 0.15},
+                "seed": 0,
+                "replicas": 2,
+            }
             d = write_job(s, "selective", topology, res)
             d.rename(d.with_name(d.name + f",sizes={sizes[0]}"))
     groups, tops, methods = aggregate(load_jobs(s))
@@ -345,8 +416,10 @@ def test_an_optimizers_own_parameters_are_left_out_of_other_optimizers_labels(tm
         d = write_job(s, "conventional", "6-4-2", res)
         d.rename(d.with_name(d.name + f",optim={optim['name']}"))
     _, _, methods = aggregate(load_jobs(s))
-    assert methods == ["conventional optim.lr=0.001 optim.mu=1.75 optim.name=quickprop",
-                       "conventional optim.lr=0.15 optim.momentum=0.9 optim.name=paper"]
+    assert methods == [
+        "conventional optim.lr=0.001 optim.mu=1.75 optim.name=quickprop",
+        "conventional optim.lr=0.15 optim.momentum=0.9 optim.name=paper",
+    ]
 
 
 def test_jobs_pool_by_seed_union(tmp_path):
@@ -370,10 +443,19 @@ def test_flatten_joins_nested_keys_and_keeps_leaves():
     """The one flattening helper serves the report's method labels (".") and TensorBoard hparams ("/")."""
     from selpres.storage import flatten
 
-    cfg = {"schedule": {"sizes": [50, 1002], "budget": None}, "optim": {"lr": 0.15, "inner": {"x": 1}},
-           "seed": 0, "empty": {}}
-    assert flatten(cfg) == {"schedule.sizes": [50, 1002], "schedule.budget": None, "optim.lr": 0.15,
-                            "optim.inner.x": 1, "seed": 0}
+    cfg = {
+        "schedule": {"sizes": [50, 1002], "budget": None},
+        "optim": {"lr": 0.15, "inner": {"x": 1}},
+        "seed": 0,
+        "empty": {},
+    }
+    assert flatten(cfg) == {
+        "schedule.sizes": [50, 1002],
+        "schedule.budget": None,
+        "optim.lr": 0.15,
+        "optim.inner.x": 1,
+        "seed": 0,
+    }
     assert flatten(cfg, "/")["optim/inner/x"] == 1
 
 
@@ -410,8 +492,10 @@ def test_timing_names_the_engine_that_ran_and_the_fallback(tmp_path, capsys):
     out = tmp_path / "rep"
     assert main([str(s), "--out", str(out)]) == 0
     md = capsys.readouterr().out
-    runs = {(r["schedule"], r["topology"]): [r[k] for k in ("engine", "engine_requested", "engine_fallback")]
-            for r in csv.DictReader((out / "runs.csv").open())}
+    runs = {
+        (r["schedule"], r["topology"]): [r[k] for k in ("engine", "engine_requested", "engine_fallback")]
+        for r in csv.DictReader((out / "runs.csv").open())
+    }
     assert runs[("selective", "6-4-2")] == ["torch", "fast", "no AVX2 on this CPU"]
     assert runs[("conventional", "6-4-2")] == ["native", "fast", ""]
     assert runs[("conventional", "6-8-2")] == ["fast", "fast", ""]
@@ -454,8 +538,10 @@ def test_readme_block_is_generated_from_the_report(sweep, tmp_path, capsys):
     t1 = {(r["method"], r["topology"]): r for r in csv.DictReader((out / "table1.csv").open())}
     sel = t1[("selective", "6-4-2")]
     assert float(sel["heldout_nm_mean"]) == pytest.approx(sum(SEL) / 5)
-    cell = (f"{float(sel['heldout_nm_mean']):.4f} [{float(sel['heldout_nm_ci_lo']):.4f}, "
-            f"{float(sel['heldout_nm_ci_hi']):.4f}]")
+    cell = (
+        f"{float(sel['heldout_nm_mean']):.4f} [{float(sel['heldout_nm_ci_lo']):.4f}, "
+        f"{float(sel['heldout_nm_ci_hi']):.4f}]"
+    )
     (row,) = [line for line in block.splitlines() if line.startswith("| 6-4-2 |")]
     assert cell in row and "0.0554 / 0.0581" in row  # ours, and the paper's conv. / sel.
     assert "| topology | conventional, 150,300 t | selective, 70,560 t |" in block
@@ -473,12 +559,15 @@ def test_readme_block_is_generated_from_the_report(sweep, tmp_path, capsys):
     assert "already up to date" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("content", [
-    "# no markers at all\n",
-    "<!-- table1:begin -->\nonly the first marker\n",
-    "<!-- table1:end -->\nreversed\n<!-- table1:begin -->\n",
-    "<!-- table1:begin -->\n<!-- table1:end -->\n<!-- table1:begin -->\n<!-- table1:end -->\n",
-])
+@pytest.mark.parametrize(
+    "content",
+    [
+        "# no markers at all\n",
+        "<!-- table1:begin -->\nonly the first marker\n",
+        "<!-- table1:end -->\nreversed\n<!-- table1:begin -->\n",
+        "<!-- table1:begin -->\n<!-- table1:end -->\n<!-- table1:begin -->\n<!-- table1:end -->\n",
+    ],
+)
 def test_readme_without_one_marker_pair_is_refused_untouched(sweep, tmp_path, capsys, content):
     readme = tmp_path / "README.md"
     readme.write_bytes(content.encode())

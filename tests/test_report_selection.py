@@ -37,12 +37,12 @@ def sweep(tmp_path):
     write_setting(s, "cover1", "coverage", T, plus(M1, D_COVER), [50, 1002], [30, 30], order="coverage")
     write_setting(s, "strat2", "selective", T, plus(M2, D_STRAT2), [50, 1002], [60, 60])
     write_setting(s, "cover3", "coverage", T, [0.2] * 5, [100, 1002], [30, 30], order="coverage")  # 33,060 t
-    write_setting(s, "m1", "matched", T, M1, [1002], [31], extra=498,
-                  curves=[(10020, [0.4] * 5), (31560, [0.2] * 5)])
+    write_setting(s, "m1", "matched", T, M1, [1002], [31], extra=498, curves=[(10020, [0.4] * 5), (31560, [0.2] * 5)])
     write_setting(s, "m1lr", "matched", T, [0.5] * 5, [1002], [31], extra=498, optim={**PAPER_SGD, "lr": 0.1})
     write_setting(s, "m2", "matched", T, M2, [1002], [62], extra=996)
-    write_setting(s, "con", "conventional", T, [0.1] * 5, [1002], [150],
-                  curves=[(75150, [0.3] * 5), (150300, [0.1] * 5)])
+    write_setting(
+        s, "con", "conventional", T, [0.1] * 5, [1002], [150], curves=[(75150, [0.3] * 5), (150300, [0.1] * 5)]
+    )
     return s
 
 
@@ -61,8 +61,13 @@ def test_partner_is_the_one_stage_run_of_the_same_budget_and_settings(sweep):
 
 def test_paired_delta_interval_and_readings_by_hand(sweep):
     rows = rows_by(sweep)
-    assert list(rows) == [("stratified", 31560), ("stratified", 63120), ("random", 31560),
-                          ("coverage", 31560), ("coverage", 33060)]
+    assert list(rows) == [
+        ("stratified", 31560),
+        ("stratified", 63120),
+        ("random", 31560),
+        ("coverage", 31560),
+        ("coverage", 33060),
+    ]
     r = rows[("stratified", 31560)]
     # d: mean −0.012, squared deviations 4+64+4+9+49 = 130e-6, sd √(130e-6 / 4), t(0.975, 4) = 2.776445
     half = 2.776445 * math.sqrt(130e-6 / 4) / math.sqrt(5)
@@ -96,8 +101,12 @@ def test_time_to_conventional_and_matched_final(sweep):
 def test_holm_over_the_table(sweep):
     raw, adj = rows_by(sweep), rows_by(sweep, Options(holm=True))
     keys = [k for k in raw if "heldout_p" in raw[k]]
-    diffs = {("stratified", 31560): D_STRAT, ("random", 31560): D_RANDOM, ("coverage", 31560): D_COVER,
-             ("stratified", 63120): D_STRAT2}
+    diffs = {
+        ("stratified", 31560): D_STRAT,
+        ("random", 31560): D_RANDOM,
+        ("coverage", 31560): D_COVER,
+        ("stratified", 63120): D_STRAT2,
+    }
     p = {k: t_test(d)["p"] for k, d in diffs.items()}  # the paired test is the one-sample test of the Δs
     assert {k: raw[k]["heldout_p"] for k in keys} == pytest.approx(p)
     order = sorted(keys, key=lambda k: p[k])  # Holm by hand: k-th smallest × (4 − k), running maximum
@@ -115,9 +124,11 @@ def test_headline_names_the_winner_or_states_the_null(sweep, tmp_path):
     rows = selection_rows(groups, tops, options)
     text = headline(rows, options)
     half = 2.776445 * math.sqrt(130e-6 / 4) / math.sqrt(5)
-    assert text.startswith("**Beats compute-matched conventional training** (95 % interval of Δ below 0): "
-                           f"stratified order at 31,560 t on 6-4-2: lower by 0.0120 Nm (6.0 %; 95 % interval "
-                           f"[{-0.012 - half:+.4f}, {-0.012 + half:+.4f}])")
+    assert text.startswith(
+        "**Beats compute-matched conventional training** (95 % interval of Δ below 0): "
+        f"stratified order at 31,560 t on 6-4-2: lower by 0.0120 Nm (6.0 %; 95 % interval "
+        f"[{-0.012 - half:+.4f}, {-0.012 + half:+.4f}])"
+    )
     assert "4 comparisons: orders stratified, random, coverage; budgets 31,560, 63,120 t" in text
     assert "readings: 1 better, 1 equivalent, 1 no detectable difference, 1 worse" in text
     # without the winner: the null result, what was tried and how large an effect the intervals allow
@@ -125,8 +136,10 @@ def test_headline_names_the_winner_or_states_the_null(sweep, tmp_path):
     groups, tops, _ = aggregate(load_jobs(sweep))
     rows = selection_rows(groups, tops, Options(margin=Margin(0.001, relative=False)))
     text = headline(rows, Options())
-    assert text.startswith("**No order beats compute-matched conventional training** with a 95 % interval of "
-                           "Δ below 0 (3 comparisons: orders stratified, random, coverage;")
+    assert text.startswith(
+        "**No order beats compute-matched conventional training** with a 95 % interval of "
+        "Δ below 0 (3 comparisons: orders stratified, random, coverage;"
+    )
     lo = min(r["heldout_ci_lo"] for r in rows if "heldout_ci_lo" in r)
     assert f"The 95 % intervals reach from {lo:+.4f} to " in text
 

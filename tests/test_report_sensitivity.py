@@ -29,15 +29,27 @@ def sgd(lr, momentum):
 @pytest.fixture
 def sweep(tmp_path):
     s = tmp_path / "sens"
-    curves = {50: [(1500, [0.5] * 4), (31560, [0.1] * 4)],  # reaches 0.1 at its last point
-              100: [(3000, [0.5] * 4), (33060, [0.2] * 4)],  # never
-              200: [(6000, [0.3] * 4), (20000, [0.099] * 4), (36060, [0.08] * 4)]}  # at 20,000
+    curves = {
+        50: [(1500, [0.5] * 4), (31560, [0.1] * 4)],  # reaches 0.1 at its last point
+        100: [(3000, [0.5] * 4), (33060, [0.2] * 4)],  # never
+        200: [(6000, [0.3] * 4), (20000, [0.099] * 4), (36060, [0.08] * 4)],
+    }  # at 20,000
     for n1, vals in ((50, S1), (100, S2), (200, S3)):
         write_setting(s, f"sel{n1}", "selective", T, vals, [n1, 1002], [30, 30], curves=curves[n1])
     grid = {(0.15, 0.9): C_PAPER, (0.15, 0.8): C_M8, (0.3, 0.9): C_LR3, (0.3, 0.8): C_LR3}
     for (lr, m), vals in grid.items():
-        write_setting(s, f"con{lr}_{m}", "conventional", T, vals, [1002], [150], optim=sgd(lr, m),
-                      curves=CON_CURVE, diverged=(0, 1, 2, 3) if (lr, m) == (0.3, 0.8) else ())
+        write_setting(
+            s,
+            f"con{lr}_{m}",
+            "conventional",
+            T,
+            vals,
+            [1002],
+            [150],
+            optim=sgd(lr, m),
+            curves=CON_CURVE,
+            diverged=(0, 1, 2, 3) if (lr, m) == (0.3, 0.8) else (),
+        )
     return s
 
 
@@ -62,12 +74,16 @@ def test_family_statistics_by_hand(sweep):
     half = 3.182446 * math.sqrt(2e-4 / 3) / 2
     assert sel["worst_minus_best_nm"] == pytest.approx(0.02)
     assert [sel["worst_minus_best_ci_lo"], sel["worst_minus_best_ci_hi"]] == pytest.approx(
-        [0.02 - half, 0.02 + half], abs=1e-6)
+        [0.02 - half, 0.02 + half], abs=1e-6
+    )
     # time to conventional's final curve RMS 0.1: 31,560 / never / 20,000 → fastest 20,000, median 31,560
     assert sel["target_heldout_curve_rms_nm"] == pytest.approx(0.1)
     assert sel["target_method"] == "conventional optim.lr=0.15 optim.momentum=0.9"
-    assert (sel["reach_settings"], sel["presentations_to_target_fastest"],
-            sel["presentations_to_target_median"]) == (2, 20000, 31560)
+    assert (sel["reach_settings"], sel["presentations_to_target_fastest"], sel["presentations_to_target_median"]) == (
+        2,
+        20000,
+        31560,
+    )
 
 
 def test_a_setting_that_never_finished_is_infinitely_bad(sweep):
@@ -89,15 +105,25 @@ def test_a_setting_that_never_finished_is_infinitely_bad(sweep):
 def test_verdict_reads_consistent_mixed_and_not_supported(sweep, tmp_path):
     rows = list(rows_of(sweep).values())
     text = verdict_text(rows, T)
-    assert ("compared with the rival that reaches the best level at its cost, the sentence holds: selective "
-            "presentation is at least as insensitive by both measures") in text
+    assert (
+        "compared with the rival that reaches the best level at its cost, the sentence holds: selective "
+        "presentation is at least as insensitive by both measures"
+    ) in text
     assert "Selective presentation varies by worst ÷ best 1.182, with 2/3 (67 %) of its settings" in text
     assert "against conventional SGD at 150,300 t ∞ with 2/4 (50 %)." in text
     assert "1 of 2 families (selective presentation)" in text  # conventional's pair count is 0
     # a rival with a flatter response: QuickProp over lr × mu, means .100 .101 .102 .103 (ratio 1.03, 100 %)
     for k, (lr, mu) in enumerate([(0.001, 1.5), (0.001, 1.75), (0.002, 1.5), (0.002, 1.75)]):
-        write_setting(sweep, f"qp{k}", "conventional", T, [0.1 + k / 1000] * 4, [1002], [150],
-                      optim={"name": "quickprop", "lr": lr, "mu": mu})
+        write_setting(
+            sweep,
+            f"qp{k}",
+            "conventional",
+            T,
+            [0.1 + k / 1000] * 4,
+            [1002],
+            [150],
+            optim={"name": "quickprop", "lr": lr, "mu": mu},
+        )
     rows = list(rows_of(sweep).values())
     qp = next(r for r in rows if r["family"] == "quickprop at 150,300 t")
     assert qp["worst_over_best"] == pytest.approx(0.103 / 0.100) and qp["within_10pct_fraction"] == 1.0
@@ -106,11 +132,14 @@ def test_verdict_reads_consistent_mixed_and_not_supported(sweep, tmp_path):
     # only the within-10 % measure lost: a quickprop with a wide but mostly flat response (ratio 2, 3/4)
     (sweep / "qp3" / "results.json").unlink()
     (sweep / "qp3").rmdir()
-    write_setting(sweep, "qp3", "conventional", T, [0.2] * 4, [1002], [150],
-                  optim={"name": "quickprop", "lr": 0.002, "mu": 1.75})
+    write_setting(
+        sweep, "qp3", "conventional", T, [0.2] * 4, [1002], [150], optim={"name": "quickprop", "lr": 0.002, "mu": 1.75}
+    )
     text = verdict_text(list(rows_of(sweep).values()), T)
-    assert ("the sentence holds only in part: selective presentation is at least as insensitive by worst ÷ "
-            "best, not by the share within 10 %") in text
+    assert (
+        "the sentence holds only in part: selective presentation is at least as insensitive by worst ÷ "
+        "best, not by the share within 10 %"
+    ) in text
 
 
 def test_schedule_alone_rows_hold_the_learning_rate_fixed(tmp_path):
@@ -124,12 +153,15 @@ def test_schedule_alone_rows_hold_the_learning_rate_fixed(tmp_path):
     assert [(r["family"], r["kind"]) for r in rows] == [
         ("selective presentation", "family"),
         ("selective presentation at optim.lr=0.1", "at fixed other parameters"),
-        ("selective presentation at optim.lr=0.3", "at fixed other parameters")]
+        ("selective presentation at optim.lr=0.3", "at fixed other parameters"),
+    ]
     assert [r["worst_over_best"] for r in rows] == pytest.approx([0.21 / 0.10, 0.21 / 0.20, 0.12 / 0.10])
     assert rows[1]["swept"] == "schedule.sizes ∈ {[50,1002], [100,1002]}"
     text = verdict_text(rows, T)
-    assert ("With optim.lr held fixed (2 values), selective presentation's spread over the schedule alone "
-            "is worst ÷ best 1.050–1.200, with 50–100 % of settings within 10 % of the best.") in text
+    assert (
+        "With optim.lr held fixed (2 values), selective presentation's spread over the schedule alone "
+        "is worst ÷ best 1.050–1.200, with 50–100 % of settings within 10 % of the best."
+    ) in text
     assert "no rival family (one-stage training, an optimizer swept over its parameters) has more" in text
     assert "target_heldout_curve_rms_nm" in rows[0] and rows[0]["target_heldout_curve_rms_nm"] is None
     assert "no conventional run" in Report.build(s).markdown  # time to target without a target says so
@@ -138,8 +170,7 @@ def test_schedule_alone_rows_hold_the_learning_rate_fixed(tmp_path):
         write_setting(s, f"r{n1}", "random_growth", T, [0.3] * 2, [n1, 1002], [30, 30], order="random")
     groups, tops, _ = aggregate(load_jobs(s))
     rows = sensitivity_rows(groups, tops)
-    assert [r["family"] for r in rows if r["kind"] == "family"] == ["selective presentation",
-                                                                   "staged, random order"]
+    assert [r["family"] for r in rows if r["kind"] == "family"] == ["selective presentation", "staged, random order"]
     assert "no rival family" in verdict_text(rows, T)
 
 
@@ -152,9 +183,13 @@ def test_family_names_and_the_paper_conventional_target(tmp_path):
     write_setting(s, "e", "conventional", T, [0.1], [1002], [150], optim=sgd(0.3, 0.9))
     groups, tops, _ = aggregate(load_jobs(s))
     names = {g.used[0].path.name: family_name(g) for g in groups.values()}
-    assert names == {"a": "staged, random order", "b": "conventional SGD at 70,560 t",
-                     "c": "adam at 150,300 t", "d": "selective presentation with rprop",
-                     "e": "conventional SGD at 150,300 t"}
+    assert names == {
+        "a": "staged, random order",
+        "b": "conventional SGD at 70,560 t",
+        "c": "adam at 150,300 t",
+        "d": "selective presentation with rprop",
+        "e": "conventional SGD at 150,300 t",
+    }
     assert all(len(f.members) == 1 for f in families(groups, tops))
     # no run with the paper's lr: the one SGD run of 150 epochs is the target; a second makes it ambiguous
     assert paper_conventional(groups, T).used[0].path.name == "e"
@@ -193,12 +228,12 @@ def test_error_cost_rows_and_figures(sweep, tmp_path):
     half = 3.182446 * math.sqrt(2e-4 / 3) / 2
     assert (r["family"], r["presentations"], r["n"]) == ("selective presentation", 31560, 4)
     assert [r["heldout_nm_mean"], r["heldout_nm_ci_lo"], r["heldout_nm_ci_hi"]] == pytest.approx(
-        [0.11, 0.11 - half, 0.11 + half], abs=1e-6)
+        [0.11, 0.11 - half, 0.11 + half], abs=1e-6
+    )
     dead = rows["optim.lr=0.3 optim.momentum=0.8"]
     assert (dead["n"], dead["diverged"], dead["heldout_nm_mean"]) == (0, 4, None)
     files = Report.build(sweep).write(tmp_path / "out")
-    assert {"error_cost.csv", "error_cost.png", "heatmap_conventional_SGD_at_150_300_t_6-4-2.png"} \
-        <= set(files)
+    assert {"error_cost.csv", "error_cost.png", "heatmap_conventional_SGD_at_150_300_t_6-4-2.png"} <= set(files)
     assert "heatmap_selective_presentation_6-4-2.png" not in files  # one swept parameter: no grid
     assert (tmp_path / "out" / "error_cost.png").read_bytes()[:4] == b"\x89PNG"
 
@@ -215,9 +250,16 @@ def test_heat_map_grid_of_three_parameters_by_hand(tmp_path):
                     continue
                 v = 0.1 + 10 * kappa + phi / 100 + theta / 1000
                 done[(kappa, phi, theta)] = v
-                write_setting(s, f"k{kappa}p{phi}t{theta}", "conventional", T, [v - 0.001, v + 0.001],
-                              [1002], [150], optim={"name": "delta_bar_delta", "kappa": kappa, "phi": phi,
-                                                    "theta": theta})
+                write_setting(
+                    s,
+                    f"k{kappa}p{phi}t{theta}",
+                    "conventional",
+                    T,
+                    [v - 0.001, v + 0.001],
+                    [1002],
+                    [150],
+                    optim={"name": "delta_bar_delta", "kappa": kappa, "phi": phi, "theta": theta},
+                )
     groups, tops, _ = aggregate(load_jobs(s))
     (fam,) = families(groups, tops)
     gr = grid(fam)

@@ -21,18 +21,50 @@ from selpres.report.sections.sensitivity import sensitivity_rows, verdict_text
 
 T = "6-4-2"
 # what configs/optim/*.yaml leave unset for an optimizer that does not use the key
-UNSET = {k: None for k in ("mu", "weight_decay", "kappa", "phi", "theta", "eta_minus", "eta_plus", "step_min",
-                           "step_max", "beta1", "beta2", "eps")}
+UNSET = {
+    k: None
+    for k in (
+        "mu",
+        "weight_decay",
+        "kappa",
+        "phi",
+        "theta",
+        "eta_minus",
+        "eta_plus",
+        "step_min",
+        "step_max",
+        "beta1",
+        "beta2",
+        "eps",
+    )
+}
 
 
 def sgd(lr=0.15, momentum=0.9):
-    return {"name": "sgd", "lr": lr, "batch_size": 1, "momentum": momentum, **UNSET,
-            "sigmoid_prime_offset": 0.0, "reduction": "sum"}
+    return {
+        "name": "sgd",
+        "lr": lr,
+        "batch_size": 1,
+        "momentum": momentum,
+        **UNSET,
+        "sigmoid_prime_offset": 0.0,
+        "reduction": "sum",
+    }
 
 
 def dbd(kappa, phi):
-    return {"name": "delta_bar_delta", "lr": 0.001, "batch_size": 0, "momentum": None, **UNSET,
-            "kappa": kappa, "phi": phi, "theta": 0.7, "sigmoid_prime_offset": 0.0, "reduction": "sum"}
+    return {
+        "name": "delta_bar_delta",
+        "lr": 0.001,
+        "batch_size": 0,
+        "momentum": None,
+        **UNSET,
+        "kappa": kappa,
+        "phi": phi,
+        "theta": 0.7,
+        "sigmoid_prime_offset": 0.0,
+        "reduction": "sum",
+    }
 
 
 def flat(mean, n=4):
@@ -60,16 +92,34 @@ def study(tmp_path):
     s = tmp_path / "study"
     for name, (sizes, epochs, cost, mean) in SELECTIVE.items():
         assert sum(n * e for n, e in zip(sizes, epochs)) == cost
-        write_setting(s, name, "selective", T, flat(mean), sizes, epochs, optim=sgd(),
-                      curves=N300_CURVE if name == "sN300" else None)
-        write_setting(s, "m" + name, "matched", T, flat(MATCHED[name]), [1002], [cost // 1002],
-                      extra=cost % 1002, optim=sgd())
+        write_setting(
+            s,
+            name,
+            "selective",
+            T,
+            flat(mean),
+            sizes,
+            epochs,
+            optim=sgd(),
+            curves=N300_CURVE if name == "sN300" else None,
+        )
+        write_setting(
+            s, "m" + name, "matched", T, flat(MATCHED[name]), [1002], [cost // 1002], extra=cost % 1002, optim=sgd()
+        )
     for (lr, m), mean in SGD_GRID.items():
-        write_setting(s, f"c{lr}_{m}", "conventional", T, flat(mean), [1002], [150], optim=sgd(lr, m),
-                      curves=CON_CURVE if (lr, m) == (0.15, 0.9) else None)
+        write_setting(
+            s,
+            f"c{lr}_{m}",
+            "conventional",
+            T,
+            flat(mean),
+            [1002],
+            [150],
+            optim=sgd(lr, m),
+            curves=CON_CURVE if (lr, m) == (0.15, 0.9) else None,
+        )
     for (kappa, phi), mean in DBD_GRID.items():
-        write_setting(s, f"d{kappa}_{phi}", "conventional", T, flat(mean), [1002], [150],
-                      optim=dbd(kappa, phi))
+        write_setting(s, f"d{kappa}_{phi}", "conventional", T, flat(mean), [1002], [150], optim=dbd(kappa, phi))
     return s
 
 
@@ -90,16 +140,22 @@ def test_the_papers_conventional_run_is_found_under_optim_name_sgd(study):
 def test_labels_name_only_the_keys_that_are_set_and_differ(study):
     _, _, methods = grouped(study)
     assert "conventional optim.batch_size=1 optim.lr=0.15 optim.momentum=0.9 optim.name=sgd" in methods
-    assert ("conventional optim.batch_size=0 optim.kappa=0.01 optim.lr=0.001 optim.name=delta_bar_delta "
-            "optim.phi=0.2 optim.theta=0.7") in methods
+    assert (
+        "conventional optim.batch_size=0 optim.kappa=0.01 optim.lr=0.001 optim.name=delta_bar_delta "
+        "optim.phi=0.2 optim.theta=0.7"
+    ) in methods
     assert not [m for m in methods if "null" in m]
 
 
 def test_budget_matched_runs_are_one_family(study):
     groups, tops, _ = grouped(study)
     sizes = {f.name: len(f.members) for f in families(groups, tops)}
-    assert sizes == {"selective presentation": 5, "conventional SGD, budget-matched": 5,
-                     "conventional SGD at 150,300 t": 4, "delta_bar_delta at 150,300 t": 4}
+    assert sizes == {
+        "selective presentation": 5,
+        "conventional SGD, budget-matched": 5,
+        "conventional SGD at 150,300 t": 4,
+        "delta_bar_delta at 150,300 t": 4,
+    }
     fam = next(f for f in families(groups, tops) if f.name.endswith("budget-matched"))
     assert fam.label(by_folder(groups)["msA"]) == "schedule.epochs=[78]"
 
@@ -111,8 +167,10 @@ def test_spread_level_and_the_papers_total_by_hand(study):
     assert sel["worst_over_best"] == pytest.approx(0.40 / 0.18) and sel["within_10pct"] == 1  # ≤ .198: .18
     # the level: its best (sN300, .18 at 157,800 t) ÷ the best of anything at that cost (itself; m .19)
     assert sel["level"] == pytest.approx(1.0) and sel["level_presentations"] == 157_800
-    assert sel["swept_terms"] == ("p ∈ {1, 2}; n_i growth ∈ {geometric, one step, other}; N_i profile ∈ "
-                                  "{equal, increasing}; N = ΣN_i ∈ {75, 150, 300}")
+    assert sel["swept_terms"] == (
+        "p ∈ {1, 2}; n_i growth ∈ {geometric, one step, other}; N_i profile ∈ "
+        "{equal, increasing}; N = ΣN_i ∈ {75, 150, 300}"
+    )
     # at the paper's N = 150: sA .20, sB .22, sC .25 → 1.25, with .20 and .22 ≤ .22 within 10 %
     total = rows["selective presentation at ΣN_i = 150"]
     assert (total["kind"], total["settings"]) == ("at the paper's total epochs", 3)
@@ -128,7 +186,9 @@ def test_spread_level_and_the_papers_total_by_hand(study):
     assert d["worst_over_best"] == pytest.approx(1.76 / 1.70) and d["within_10pct_fraction"] == 1.0
     assert d["level"] == pytest.approx(10.0)
     assert (d["level_reference_family"], d["level_reference_setting"]) == (
-        "conventional SGD at 150,300 t", "optim.lr=0.15 optim.momentum=0.9")
+        "conventional SGD at 150,300 t",
+        "optim.lr=0.15 optim.momentum=0.9",
+    )
     con = rows["conventional SGD at 150,300 t"]
     assert con["worst_over_best"] == pytest.approx(3.0) and con["level"] == pytest.approx(1.0)
     # time to the paper's conventional final (0.17): only sN300's curve gets there, at 100,000
@@ -144,7 +204,12 @@ def test_each_selective_setting_beside_its_budget_matched_partner(study):
     assert len(rows) == 5
     b = rows["50 224 1002/50 50 50"]
     assert (b["p"], b["growth"], b["profile"], b["total_epochs"], b["presentations"]) == (
-        2, "geometric", "equal", 150, 63_800)
+        2,
+        "geometric",
+        "equal",
+        150,
+        63_800,
+    )
     assert b["matched_presentations"] == 63_800 and b["over_matched"] == pytest.approx(0.22 / 0.25)
     assert rows["50 100 1002/10 20 120"]["over_matched"] == pytest.approx(0.25 / 0.20)
     assert [r["total_epochs"] for r in versus_matched_rows(groups, tops)] == [75, 150, 150, 150, 300]
@@ -157,14 +222,17 @@ def test_verdict_separates_spread_from_level_and_answers_with_numbers(study):
     rows = sensitivity_rows(groups, tops)
     text = verdict_text(rows, T, versus_matched_rows(groups, tops))
     assert "not tested" not in text and "Least sensitive" not in text
-    assert ("compared with the rival that reaches the best level at its cost, the sentence holds: selective "
-            "presentation is at least as insensitive by both measures") in text
-    assert ("Selective presentation at the paper's N = ΣN_i = 150 (over p, n_i and the N_i profile) varies "
-            "by worst ÷ best 1.250, with 2/3 (67 %) of its settings within 10 % of its best, against "
-            "conventional SGD at 150,300 t 3.000 with 1/4 (25 %).") in text
+    assert (
+        "compared with the rival that reaches the best level at its cost, the sentence holds: selective "
+        "presentation is at least as insensitive by both measures"
+    ) in text
+    assert (
+        "Selective presentation at the paper's N = ΣN_i = 150 (over p, n_i and the N_i profile) varies "
+        "by worst ÷ best 1.250, with 2/3 (67 %) of its settings within 10 % of its best, against "
+        "conventional SGD at 150,300 t 3.000 with 1/4 (25 %)."
+    ) in text
     # the flat rival is set aside for its level, with its numbers
-    assert ("The other 1 rival family never gets within 1.1 × of the best at its cost (best 10.00 × it)"
-            in text)
+    assert "The other 1 rival family never gets within 1.1 × of the best at its cost (best 10.00 × it)" in text
     assert "delta_bar_delta at 150,300 t: 10.00" in text
     assert "delta_bar_delta at 150,300 t has worst ÷ best 1.035, but even its best is 10.00 ×" in text
     # cost: .20/.21 .22/.25 .25/.20 .40/.44 .18/.19 → 0.880–1.250, four of five lower
@@ -184,8 +252,11 @@ def test_a_studys_report_leads_with_its_sections_and_stays_short(study, tmp_path
     # time to target against the paper's conventional run, found by its settings, not by its label
     assert "no target" not in md
     groups, tops, methods = grouped(study)
-    rows = [r for r in time_to_target_rows(groups, tops, methods)
-            if r["target_method"] == paper_conventional(groups, T).schedule]
+    rows = [
+        r
+        for r in time_to_target_rows(groups, tops, methods)
+        if r["target_method"] == paper_conventional(groups, T).schedule
+    ]
     hit = [r for r in rows if r.get("reached") == "yes" and r["method"].startswith("selective")]
     assert [r["presentations_to_target"] for r in hit] == [100000]
     assert hit[0]["fraction_of_conventional_cost"] == pytest.approx(100000 / 150300)
@@ -206,8 +277,12 @@ def test_error_cost_plane_one_entry_per_family_legend_outside_frontier_drawn(stu
     assert ax.get_legend() is None and len(fig.legends) == 1
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
     assert labels[0].startswith("frontier: the paper's conventional run")
-    assert labels[1:] == ["selective presentation (5)", "conventional SGD, budget-matched (5)",
-                          "conventional SGD at 150,300 t (4)", "delta_bar_delta at 150,300 t (4)"]
+    assert labels[1:] == [
+        "selective presentation (5)",
+        "conventional SGD, budget-matched (5)",
+        "conventional SGD at 150,300 t (4)",
+        "delta_bar_delta at 150,300 t (4)",
+    ]
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     assert fig.legends[0].get_window_extent(renderer).x0 >= ax.get_window_extent(renderer).x1
@@ -225,14 +300,25 @@ def test_family_styles_are_distinct():
     styles = family_styles(names)
     assert len(set(styles.values())) == 132  # colour and marker together tell every family apart
     assert len({c for c, _ in list(styles.values())[:12]}) == 12  # the first twelve by colour alone
-    assert all(styles[a] != styles[b] and styles[a][0] != styles[b][0] and styles[a][1] != styles[b][1]
-               for a, b in zip(names, names[1:]))  # neighbours differ in both
+    assert all(
+        styles[a] != styles[b] and styles[a][0] != styles[b][0] and styles[a][1] != styles[b][1]
+        for a, b in zip(names, names[1:])
+    )  # neighbours differ in both
 
 
 def test_a_family_with_no_finished_setting_has_an_infinite_level(study):
     for k, lr in enumerate((0.1, 1.0)):
-        write_setting(study, f"rp{k}", "conventional", T, [0.1] * 4, [1002], [150],
-                      optim={**sgd(), "name": "rprop", "momentum": None, "lr": lr}, diverged=(0, 1, 2, 3))
+        write_setting(
+            study,
+            f"rp{k}",
+            "conventional",
+            T,
+            [0.1] * 4,
+            [1002],
+            [150],
+            optim={**sgd(), "name": "rprop", "momentum": None, "lr": lr},
+            diverged=(0, 1, 2, 3),
+        )
     groups, tops, _ = grouped(study)
     rp = {r["family"]: r for r in sensitivity_rows(groups, tops)}["rprop at 150,300 t"]
     assert rp["level"] == math.inf and rp["best_heldout_nm"] == math.inf

@@ -25,8 +25,7 @@ ENGINES = {
     "native": ["engine=native", "schedule.epochs=[2,2,4,6,200]", "replicas=61"],
     # an adaptive order: A_k depends on the network at the enlargement, so the checkpoint carries the orders
     # (killed mid stage 4, its A_4 chosen by loss; a resume that forgot it would train on the stratified one)
-    "loss_high": ["engine=reference", "schedule.epochs=[1,1,2,3,3]", "replicas=2",
-                  "schedule.order=loss_high"],
+    "loss_high": ["engine=reference", "schedule.epochs=[1,1,2,3,3]", "replicas=2", "schedule.order=loss_high"],
 }
 EPOCHS = {"reference": 10, "native": 214, "loss_high": 10}
 
@@ -35,7 +34,11 @@ def run(out: Path, args: list[str], wait: bool = True) -> subprocess.Popen:
     env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
     p = subprocess.Popen(
         [sys.executable, "train.py", *COMMON, *args, f"hydra.run.dir={out}"],
-        cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
     )
     if wait:
         p.wait(timeout=300)
@@ -43,8 +46,9 @@ def run(out: Path, args: list[str], wait: bool = True) -> subprocess.Popen:
     return p
 
 
-@pytest.mark.parametrize("engine", [pytest.param("reference"), pytest.param("native", marks=requires_native),
-                                    pytest.param("loss_high")])
+@pytest.mark.parametrize(
+    "engine", [pytest.param("reference"), pytest.param("native", marks=requires_native), pytest.param("loss_high")]
+)
 def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
     args = ENGINES[engine]
     killed = tmp_path / "killed"
@@ -73,8 +77,7 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
 
     a = json.loads((killed / "results.json").read_text())
     b = json.loads((straight / "results.json").read_text())
-    for key in ("summary", "replica_results", "curves", "presentations_done", "selection_presentations",
-                "config_hash"):
+    for key in ("summary", "replica_results", "curves", "presentations_done", "selection_presentations", "config_hash"):
         assert a[key] == b[key], key
     wa = torch.load(killed / "weights.pt")["params"]
     wb = torch.load(straight / "weights.pt")["params"]

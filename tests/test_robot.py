@@ -131,8 +131,10 @@ def test_static_equilibrium_gravity_only():
     """At rest with τ = G(q) the arm does not accelerate; horizontal arm carries the full lever arms."""
     q = torch.zeros(2, dtype=D)
     G = ARM.gravity(q)
-    torch.testing.assert_close(G, torch.tensor([(ARM.m1 + ARM.m2) * ARM.l1 * ARM.g + ARM.m2 * ARM.l2 * ARM.g,
-                                                ARM.m2 * ARM.l2 * ARM.g], dtype=D))
+    torch.testing.assert_close(
+        G,
+        torch.tensor([(ARM.m1 + ARM.m2) * ARM.l1 * ARM.g + ARM.m2 * ARM.l2 * ARM.g, ARM.m2 * ARM.l2 * ARM.g], dtype=D),
+    )
     torch.testing.assert_close(ARM.forward_dynamics(q, torch.zeros(2, dtype=D), G), torch.zeros(2, dtype=D))
 
 

@@ -259,10 +259,7 @@ def schedule_inputs(draw):
 def _valid_int_schedule(n, sizes, epochs, budget):
     """Independent validity rule for all-integer sizes (no fractions to round)."""
     ok_sizes = (
-        len(sizes) > 0
-        and all(s > 0 for s in sizes)
-        and all(b > a for a, b in zip(sizes, sizes[1:]))
-        and sizes[-1] == n
+        len(sizes) > 0 and all(s > 0 for s in sizes) and all(b > a for a, b in zip(sizes, sizes[1:])) and sizes[-1] == n
     )
     if budget is not None:
         return ok_sizes and len(sizes) == 1 and budget > 0 and epochs is None
@@ -392,7 +389,7 @@ def _crafted_hashes(n: int, shared_bits: int, runs: list[list[int]], seed: int) 
     low_bits = 64 - shared_bits
     for run in runs:
         top = int(h[run[0]]) >> low_bits
-        lows = rng.choice(2**min(low_bits, 62), len(run), replace=False).astype(np.uint64)
+        lows = rng.choice(2 ** min(low_bits, 62), len(run), replace=False).astype(np.uint64)
         h[run] = (np.uint64(top) << np.uint64(low_bits)) | lows
     assert len(np.unique(h)) == n
     return h

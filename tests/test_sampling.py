@@ -43,11 +43,7 @@ def test_inverse_route_targets_are_eq4_and_simulate_back(tmp_path):
     assert ((q >= limits[:, 0]) & (q <= limits[:, 1])).all()
     assert qd.abs().max() <= 1.0 and qdd.abs().max() <= 2.0
     assert task.info["candidates"] == 3000 and task.info["acceptance_rate"] == 1.0
-    assert (
-        task.input_names[:2] == ("q1", "q2")
-        and task.input_names[6] == "dq1"
-        and task.input_names[-1] == "ddq6"
-    )
+    assert task.input_names[:2] == ("q1", "q2") and task.input_names[6] == "dq1" and task.input_names[-1] == "ddq6"
     assert task.output_names == tuple(f"tau{i}" for i in range(1, 7))
 
 
@@ -56,9 +52,7 @@ def test_forward_route_acceptance_matches_change_of_variables():
     τ = Hq̈ + b maps the square |q̈| <= a onto a parallelogram of area (2a)² det H, so the acceptance rate is
     (2a)²/area(τ box) · E[det H(q) · 1(τ in box)] over q, q̇, q̈ uniform: estimated here from 10^6 draws of
     the closed form (eq. 6), independently of the route's simulation."""
-    task, cfg = task_of(
-        *PAPER_BOX, "data.route=forward", "data.draw=uniform", "data.n=2000", "data.heldout=200"
-    )
+    task, cfg = task_of(*PAPER_BOX, "data.route=forward", "data.draw=uniform", "data.n=2000", "data.heldout=200")
     arm = make_arm(cfg.robot)
     q, qd, qdd = split(task.exemplar.X, 2)
     assert qdd.abs().max() <= 2.0  # the filter

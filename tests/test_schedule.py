@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -51,8 +52,11 @@ def test_plan_matches_stages():
     s = build_schedule([50, 100, 1002], [2, 3, 1], N)
     plan = s.plan()
     assert [(p.index, p.stage, p.size, p.presentations) for p in plan] == [
-        (0, 0, 50, 50), (1, 0, 50, 50),
-        (2, 1, 100, 100), (3, 1, 100, 100), (4, 1, 100, 100),
+        (0, 0, 50, 50),
+        (1, 0, 50, 50),
+        (2, 1, 100, 100),
+        (3, 1, 100, 100),
+        (4, 1, 100, 100),
         (5, 2, 1002, 1002),
     ]
     assert s.stage_ends() == [1, 4, 5]
@@ -205,6 +209,6 @@ def test_error_message_explains_the_fix():
 
 def test_schedule_is_immutable():
     s = build_schedule([1002], [1], N)
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         s.stages[0].size = 5  # type: ignore[misc]
     assert isinstance(s, Schedule) and not math.isnan(s.describe()["cost_ratio"])

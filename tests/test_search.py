@@ -49,12 +49,17 @@ def test_tilt_and_growth_move_the_presentations_and_the_sizes():
 
 
 def test_p_zero_is_conventional_cut_to_the_budget():
-    assert shaped_schedule(0, 0.3, 1.0, 0.5, 1002, 70_560, "loss_high", 1 / 3) == \
-        {"sizes": [1002], "epochs": None, "budget": 70_560}
-    raw = {"search_p": "0", "search_first": "0.3", "search_growth": "1", "search_tilt": "0",
-           "search_budget": "70560"}
-    assert schedule_overrides(raw, 1002, "random", 0.0) == \
-        ["schedule.sizes=[1002]", "schedule.epochs=null", "schedule.budget=70560"]
+    assert shaped_schedule(0, 0.3, 1.0, 0.5, 1002, 70_560, "loss_high", 1 / 3) == {
+        "sizes": [1002],
+        "epochs": None,
+        "budget": 70_560,
+    }
+    raw = {"search_p": "0", "search_first": "0.3", "search_growth": "1", "search_tilt": "0", "search_budget": "70560"}
+    assert schedule_overrides(raw, 1002, "random", 0.0) == [
+        "schedule.sizes=[1002]",
+        "schedule.epochs=null",
+        "schedule.budget=70560",
+    ]
 
 
 def test_sizes_merged_by_rounding_reach_the_job_which_refuses_them():
@@ -68,8 +73,13 @@ def test_sizes_merged_by_rounding_reach_the_job_which_refuses_them():
         shaped_sizes(-1, 0.1, 1.0, 100)
 
 
-HAND = {"search_p": "2", "search_first": "0.1", "search_growth": "1", "search_tilt": "0",
-        "search_budget": "60000"}  # the schedule of test_a_loss_order_pays_for_its_choices_out_of_the_budget
+HAND = {
+    "search_p": "2",
+    "search_first": "0.1",
+    "search_growth": "1",
+    "search_tilt": "0",
+    "search_budget": "60000",
+}  # the schedule of test_a_loss_order_pays_for_its_choices_out_of_the_budget
 
 
 def test_total_cost_and_the_partner_of_the_confirmation_worked_by_hand():
@@ -81,8 +91,10 @@ def test_total_cost_and_the_partner_of_the_confirmation_worked_by_hand():
     commands = search.confirmation_commands([(HAND, "loss_high")], 1000, 1 / 3)
     staged, partner, paper, paper_partner, target, report = commands
     run = "python train.py -m name=search-confirm seed=0 replicas=30 eval.every=1"
-    assert staged == (f"{run} schedule.name=search schedule.order=loss_high 'schedule.sizes=[100,550,1000]' "
-                      "'schedule.epochs=[198,36,20]' 'schedule.budget=null'")
+    assert staged == (
+        f"{run} schedule.name=search schedule.order=loss_high 'schedule.sizes=[100,550,1000]' "
+        "'schedule.epochs=[198,36,20]' 'schedule.budget=null'"
+    )
     assert partner == f"{run} schedule=matched schedule.budget=60050"
     assert paper == f"{run} schedule=selective"  # the paper's schedule and its partner, the reference
     assert paper_partner == f"{run} schedule=matched schedule.budget=70560"
@@ -118,13 +130,18 @@ def test_the_validation_set_shares_no_pattern_with_the_held_out_set_and_seeds_no
     from selpres.task import load_task
     from selpres.train import train
 
-    base = ["replicas=2", "schedule.sizes=[50,1002]", "schedule.epochs=[3,2]", "schedule.order=loss_high",
-            "logging.progress=false", "logging.tensorboard=false"]
+    base = [
+        "replicas=2",
+        "schedule.sizes=[50,1002]",
+        "schedule.epochs=[3,2]",
+        "schedule.order=loss_high",
+        "logging.progress=false",
+        "logging.tensorboard=false",
+    ]
     val, test = compose(*base, "data.test_seed=7919"), compose(*base)
     tv, tt = load_task(val.robot, val.data), load_task(test.robot, test.data)
     assert torch.equal(tv.exemplar.X, tt.exemplar.X) and torch.equal(tv.exemplar.Y, tt.exemplar.Y)
-    assert all(torch.equal(getattr(tv.scaler, k), getattr(tt.scaler, k))
-               for k in ("x_min", "x_max", "y_min", "y_max"))
+    assert all(torch.equal(getattr(tv.scaler, k), getattr(tt.scaler, k)) for k in ("x_min", "x_max", "y_min", "y_max"))
     hv, ht = tv.tests.heldout.X, tt.tests.heldout.X
     assert hv.shape == ht.shape == (10_000, 6)
     shared = {tuple(r) for r in hv.tolist()} & {tuple(r) for r in ht.tolist()}
@@ -138,8 +155,13 @@ def test_the_validation_set_shares_no_pattern_with_the_held_out_set_and_seeds_no
 
 
 @settings(max_examples=200, deadline=None)
-@given(p=st.integers(1, 4), first=st.floats(0.02, 0.5), growth=st.floats(0.3, 3.0), tilt=st.floats(-1.0, 2.0),
-       order=st.sampled_from(["stratified", "loss_high", "reselect"]))
+@given(
+    p=st.integers(1, 4),
+    first=st.floats(0.02, 0.5),
+    growth=st.floats(0.3, 3.0),
+    tilt=st.floats(-1.0, 2.0),
+    order=st.sampled_from(["stratified", "loss_high", "reselect"]),
+)
 def test_every_searched_schedule_builds_and_spends_the_budget(p, first, growth, tilt, order):
     """Any point of the search space is a valid schedule (selpres.schedule accepts it) whose training and
     selection presentations sum to the budget within n / 2, unless one epoch a stage already exceeds it."""
@@ -159,13 +181,23 @@ def test_optuna_study_in_sqlite_runs_trials_as_jobs_and_resumes(tmp_path):
     pytest.importorskip("hydra_plugins.hydra_optuna_sweeper", reason="needs hydra-optuna-sweeper==1.3.0")
     optuna = pytest.importorskip("optuna")
     db = tmp_path / "study.db"
-    args = [sys.executable, "train.py", "experiment=search", "replicas=2", "logging.progress=false",
-            "hydra.sweeper.params.search_budget=4000", f"hydra.sweeper.storage=sqlite:///{db}",
-            f"hydra.sweep.dir={tmp_path / 'sweep'}", "data.heldout=300", "eval.heldout_curve=300"]
+    args = [
+        sys.executable,
+        "train.py",
+        "experiment=search",
+        "replicas=2",
+        "logging.progress=false",
+        "hydra.sweeper.params.search_budget=4000",
+        f"hydra.sweeper.storage=sqlite:///{db}",
+        f"hydra.sweep.dir={tmp_path / 'sweep'}",
+        "data.heldout=300",
+        "eval.heldout_curve=300",
+    ]
     env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
     for trials in (2, 3):
-        p = subprocess.run([*args, f"hydra.sweeper.n_trials={trials}"], cwd=ROOT, env=env,
-                           capture_output=True, text=True, timeout=600)
+        p = subprocess.run(
+            [*args, f"hydra.sweeper.n_trials={trials}"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600
+        )
         assert p.returncode == 0, p.stderr[-3000:]
     study = optuna.load_study(study_name="schedule-search", storage=f"sqlite:///{db}")
     assert len(study.trials) == 3 and all(t.state.name == "COMPLETE" for t in study.trials)
@@ -178,11 +210,17 @@ def test_optuna_study_in_sqlite_runs_trials_as_jobs_and_resumes(tmp_path):
     staged, after = lines[at], lines[at + 1]
     best = study.best_trial
     assert f"schedule.order={best.params['schedule.order']}" in staged
-    small = ["replicas=2", "data.heldout=300", "eval.heldout_curve=300", "logging.progress=false",
-             f"hydra.sweep.dir={tmp_path / 'confirm'}"]
+    small = [
+        "replicas=2",
+        "data.heldout=300",
+        "eval.heldout_curve=300",
+        "logging.progress=false",
+        f"hydra.sweep.dir={tmp_path / 'confirm'}",
+    ]
     overrides = [o.strip("'") for o in staged.split()[2:]]  # after "python train.py", from "-m" on
-    p = subprocess.run([sys.executable, "train.py", *overrides, *small], cwd=ROOT, env=env,
-                       capture_output=True, text=True, timeout=600)
+    p = subprocess.run(
+        [sys.executable, "train.py", *overrides, *small], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600
+    )
     assert p.returncode == 0, p.stderr[-3000:]
     (res,) = [json.loads(f.read_text()) for f in (tmp_path / "confirm").glob("*/results.json")]
     assert res["seeds"] == [0, 1] and res["config"]["data"]["test_seed"] == 0

@@ -90,8 +90,7 @@ def test_each_enlargement_adds_the_candidates_the_current_network_errs_most_or_l
     of that replica's network at that moment, computed here by a plain loop over BPN forward passes, ties
     by the stratified order; the chosen join A_k, and the other candidates stay, in the stratified order."""
     hard = kind == "loss_high"
-    cfg = cfg_of(f"schedule.order={kind}", "replicas=3", "schedule.epochs=[2,1,1,1,1]", "engine=torch",
-                 "seed=7")
+    cfg = cfg_of(f"schedule.order={kind}", "replicas=3", "schedule.epochs=[2,1,1,1,1]", "engine=torch", "seed=7")
     clock = Clock()
     job = start(cfg, None, clock)
     prob = job.prob
@@ -208,8 +207,15 @@ def test_selection_is_charged_per_candidate_at_the_configured_fraction():
     """loss_high, stages 50/100/400/800/1002, one epoch each, selection_cost 0.25: the enlargements score
     952, 902, 602 and 202 candidates, charged 238, 225.5, 150.5 and 50.5 presentations, rounded up to 238,
     226, 151 and 51 (666 in all) on top of 2352 training presentations; the curve's cost axis carries both."""
-    res = train(cfg_of("schedule.order=loss_high", "schedule.selection_cost=0.25", "replicas=2",
-                       "schedule.epochs=[1,1,1,1,1]", "engine=torch"))
+    res = train(
+        cfg_of(
+            "schedule.order=loss_high",
+            "schedule.selection_cost=0.25",
+            "replicas=2",
+            "schedule.epochs=[1,1,1,1,1]",
+            "engine=torch",
+        )
+    )
     assert res["training_presentations"] == 2352
     assert res["selection_presentations"] == 666
     assert res["presentations_done"] == 3018

@@ -118,8 +118,9 @@ def test_each_point_validates_and_costs_what_its_file_says(point):
 
 def _outside_schedule(cfg) -> dict:
     """What a compute-matched partner must share: the config outside schedule.* (and the job's name)."""
-    return {k: v for k, v in flatten(OmegaConf.to_container(cfg, resolve=True)).items()
-            if not k.startswith("schedule.")}
+    return {
+        k: v for k, v in flatten(OmegaConf.to_container(cfg, resolve=True)).items() if not k.startswith("schedule.")
+    }
 
 
 def test_every_staged_run_has_a_one_stage_partner_at_exactly_its_total_cost_and_the_same_other_settings():
@@ -167,16 +168,37 @@ def tiny(tmp_path_factory):
     picked = ["b25_stratified", "b25_matched", "b25_loss_high", "b25_matched_charged"]
     env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
     run = subprocess.run(
-        [sys.executable, "train.py", "experiment=selection", "design/selection=" + ",".join(picked),
-         "topology=6-4-2", "replicas=2", "data.heldout=200", "eval.heldout_curve=200",
-         "logging.progress=false", f"hydra.sweep.dir={out / 'sweep'}"],
-        cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+        [
+            sys.executable,
+            "train.py",
+            "experiment=selection",
+            "design/selection=" + ",".join(picked),
+            "topology=6-4-2",
+            "replicas=2",
+            "data.heldout=200",
+            "eval.heldout_curve=200",
+            "logging.progress=false",
+            f"hydra.sweep.dir={out / 'sweep'}",
+        ],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert run.returncode == 0, run.stderr[-3000:]
-    jobs = {re.search(r"design_selection=([^,]+)", p.parent.name).group(1): json.loads(p.read_text())
-            for p in (out / "sweep").glob("*/results.json")}
-    report = subprocess.run([sys.executable, "-m", "selpres.report", str(out / "sweep"), "--out",
-                             str(out / "report")],
-                            cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    jobs = {
+        re.search(r"design_selection=([^,]+)", p.parent.name).group(1): json.loads(p.read_text())
+        for p in (out / "sweep").glob("*/results.json")
+    }
+    report = subprocess.run(
+        [sys.executable, "-m", "selpres.report", str(out / "sweep"), "--out", str(out / "report")],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert report.returncode == 0, report.stderr[-3000:]
     return picked, jobs, out / "report"
 
@@ -207,9 +229,6 @@ def test_the_report_pairs_the_stratified_run_with_conventional_training_at_its_c
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the report's matched_partner compares training presentations only, "
-                   "so a loss order (37,632 trained + 888 charged) is paired with conventional at 37,632; "
-                   "see docs/selection.md")
 def test_the_report_pairs_a_loss_order_with_conventional_training_at_its_total_cost(tiny):
     _, _, report = tiny
     rows = (report / "selection.csv").read_text().splitlines()

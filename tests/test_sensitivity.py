@@ -30,8 +30,13 @@ EXPERIMENT = CONFIGS / "experiment" / "sensitivity.yaml"
 N = 1002  # the exemplar set's size (configs/robot/two_link.yaml + configs/data/paper.yaml)
 PAPER_COST, SELECTIVE_COST = 150 * N, 70_560  # conventional 150 epochs; the paper's selective schedule
 RIVALS = {"sgd": "sgd", "qp": "quickprop", "dbd": "delta_bar_delta", "adam": "adam", "rprop": "rprop"}
-SWEPT = {"sgd": ("lr", "momentum"), "quickprop": ("lr", "mu"), "delta_bar_delta": ("kappa", "phi", "theta"),
-         "adam": ("lr",), "rprop": ("lr", "eta_plus")}  # the critical parameters each rival is swept over
+SWEPT = {
+    "sgd": ("lr", "momentum"),
+    "quickprop": ("lr", "mu"),
+    "delta_bar_delta": ("kappa", "phi", "theta"),
+    "adam": ("lr",),
+    "rprop": ("lr", "eta_plus"),
+}  # the critical parameters each rival is swept over
 
 
 def design_files() -> list[str]:
@@ -78,10 +83,21 @@ def family(name: str) -> str:
 
 POINTS = design_points()
 # the fast tier's points: the paper's two runs and one point of every family at each of its costs
-REPRESENTATIVE = {"sel_paper", "sel_p1", "matched_78900", "sgd_c150300_lr0.15_m0.9", "sgd_c70560_lr0.15_m0.9",
-                  "qp_c150300_eps0.003_mu2.25", "qp_c70560_eps0.001_mu1.75", "dbd_c150300_k0.01_phi0.8_th0.9",
-                  "dbd_c70560_k0.001_phi0.2_th0.5", "adam_c150300_lr0.3", "adam_c70560_lr0.001",
-                  "rprop_c150300_lr1_etap1.5", "rprop_c70560_lr0.01_etap1.1"}
+REPRESENTATIVE = {
+    "sel_paper",
+    "sel_p1",
+    "matched_78900",
+    "sgd_c150300_lr0.15_m0.9",
+    "sgd_c70560_lr0.15_m0.9",
+    "qp_c150300_eps0.003_mu2.25",
+    "qp_c70560_eps0.001_mu1.75",
+    "dbd_c150300_k0.01_phi0.8_th0.9",
+    "dbd_c70560_k0.001_phi0.2_th0.5",
+    "adam_c150300_lr0.3",
+    "adam_c70560_lr0.001",
+    "rprop_c150300_lr1_etap1.5",
+    "rprop_c70560_lr0.01_etap1.1",
+}
 
 
 def test_the_experiment_is_a_two_at_a_time_multirun_of_ten_paired_seeds_under_outputs_sweeps():
@@ -121,7 +137,8 @@ def test_costs_worked_by_hand():
 
 
 @pytest.mark.parametrize(
-    "name", [n if n in REPRESENTATIVE else pytest.param(n, marks=pytest.mark.slow) for n in POINTS])
+    "name", [n if n in REPRESENTATIVE else pytest.param(n, marks=pytest.mark.slow) for n in POINTS]
+)
 def test_each_design_point_validates_and_costs_what_its_file_says(name):
     cfg = composed(name)
     validate(cfg)
@@ -162,8 +179,9 @@ def test_every_rival_runs_its_whole_grid_at_the_papers_cost_and_at_the_selective
         assert grid[PAPER_COST] == grid[SELECTIVE_COST] and len(grid[PAPER_COST]) >= 5, prefix
         for values in zip(*grid[PAPER_COST]):  # each critical parameter takes >= 3 values
             assert len(set(values)) >= 3 or len(SWEPT[optim]) == 1, prefix
-    assert (0.15, 0.9) in {(point(p)["optim"]["lr"], point(p)["optim"]["momentum"]) for p in POINTS
-                           if family(p) == "sgd"}  # the paper's own setting is in the SGD grid
+    assert (0.15, 0.9) in {
+        (point(p)["optim"]["lr"], point(p)["optim"]["momentum"]) for p in POINTS if family(p) == "sgd"
+    }  # the paper's own setting is in the SGD grid
 
 
 @pytest.mark.slow
@@ -182,21 +200,42 @@ def test_a_tiny_sweep_runs_end_to_end_and_reports(tmp_path):
     sweep = tmp_path / "sweep"
     env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
     out = subprocess.run(
-        [sys.executable, "train.py", "experiment=sensitivity", f"design=glob([{','.join(picked)}])",
-         "replicas=2", "data.heldout=200", "eval.heldout_curve=200", "logging.progress=false",
-         f"hydra.sweep.dir={sweep}"], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+        [
+            sys.executable,
+            "train.py",
+            "experiment=sensitivity",
+            f"design=glob([{','.join(picked)}])",
+            "replicas=2",
+            "data.heldout=200",
+            "eval.heldout_curve=200",
+            "logging.progress=false",
+            f"hydra.sweep.dir={sweep}",
+        ],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert out.returncode == 0, out.stderr[-3000:]
     # a job's folder is named by its overrides, the design point among them
-    jobs = {re.search(r"(?:^|,)design=([^,]+)", p.parent.name).group(1): json.loads(p.read_text())
-            for p in sweep.glob("*/results.json")}
+    jobs = {
+        re.search(r"(?:^|,)design=([^,]+)", p.parent.name).group(1): json.loads(p.read_text())
+        for p in sweep.glob("*/results.json")
+    }
     assert sorted(jobs) == sorted(picked)
     for name in picked:
         res = jobs[name]
         assert res["status"] == "complete" and res["seeds"] == [0, 1]
         assert res["presentations_done"] == res["schedule"]["presentations"] == stated_cost(name)
         assert res["config"]["optim"]["name"] == point(name)["optim"]["name"]
-    report = subprocess.run([sys.executable, "-m", "selpres.report", str(sweep), "--out",
-                             str(tmp_path / "r")],
-                            cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    report = subprocess.run(
+        [sys.executable, "-m", "selpres.report", str(sweep), "--out", str(tmp_path / "r")],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert report.returncode == 0, report.stderr[-3000:]
     assert (tmp_path / "r" / "report.md").is_file()

@@ -35,11 +35,13 @@ def _quat_rot(axis: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
     """Rotation by ``angle`` about unit ``axis`` from the unit quaternion (cos θ/2, sin θ/2 axis)."""
     w = torch.cos(angle / 2)
     x, y, z = axis * torch.sin(angle / 2)
-    return torch.stack([
-        torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)]),
-        torch.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)]),
-        torch.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]),
-    ])
+    return torch.stack(
+        [
+            torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)]),
+            torch.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)]),
+            torch.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]),
+        ]
+    )
 
 
 def _homogeneous(rot: torch.Tensor, xyz: torch.Tensor) -> torch.Tensor:
@@ -121,14 +123,22 @@ def random_arm(n: int, seed: int, *, point_masses: bool = False) -> SerialArm:
         if not point_masses:  # a cloud of 4 point masses about the com: a realisable tensor
             for r in 0.2 * u(4, 3):
                 inertia += 0.5 * (r.dot(r) * torch.eye(3, dtype=D) - torch.outer(r, r))
-        links.append(Link(f"l{i}", float(0.2 + 2.8 * torch.rand((), dtype=D, generator=g)),
-                          tuple((0.3 * u(3)).tolist()), tuple(map(tuple, inertia.tolist())), joint=f"j{i}",
-                          xyz=tuple((0.4 * u(3)).tolist()),
-                          rotation=serial.rpy_matrix((math.pi * u(3)).tolist()),
-                          axis=tuple((axis / axis.norm()).tolist())))
+        links.append(
+            Link(
+                f"l{i}",
+                float(0.2 + 2.8 * torch.rand((), dtype=D, generator=g)),
+                tuple((0.3 * u(3)).tolist()),
+                tuple(map(tuple, inertia.tolist())),
+                joint=f"j{i}",
+                xyz=tuple((0.4 * u(3)).tolist()),
+                rotation=serial.rpy_matrix((math.pi * u(3)).tolist()),
+                axis=tuple((axis / axis.norm()).tolist()),
+            )
+        )
     gravity = u(3)
-    return SerialArm(links, tuple((9.81 * gravity / gravity.norm()).tolist()), tuple((0.2 * u(3)).tolist()),
-                     name=f"rand{n}")
+    return SerialArm(
+        links, tuple((9.81 * gravity / gravity.norm()).tolist()), tuple((0.2 * u(3)).tolist()), name=f"rand{n}"
+    )
 
 
 def states(n_states: int, dof: int, seed: int) -> tuple[torch.Tensor, ...]:
@@ -215,8 +225,12 @@ def test_terms_of_eq4_add_up(name):
     """τ = H q̈ + C q̇ + G + Kᵀk, each term from its own method, b = τ at q̈ = 0 (eq. 5)."""
     arm = ARMS[name]()
     q, qd, qdd, k = states(64, arm.dof, seed=6)
-    parts = ((arm.mass_matrix(q) @ qdd[..., None]).squeeze(-1) + arm.coriolis(q, qd) + arm.gravity(q)
-             + arm.wrench_torque(q, k))
+    parts = (
+        (arm.mass_matrix(q) @ qdd[..., None]).squeeze(-1)
+        + arm.coriolis(q, qd)
+        + arm.gravity(q)
+        + arm.wrench_torque(q, k)
+    )
     assert_rel(arm.inverse_dynamics(q, qd, qdd, k), parts, 1e-12)
     assert_rel(arm.bias(q, qd, k), arm.inverse_dynamics(q, qd, torch.zeros_like(qdd), k), 1e-14)
 
@@ -263,11 +277,16 @@ def test_wrench_sign_follows_eq4():
     x, takes the torques of a downward turn. By hand: joint i at x_i gives −10·(0.46 − x_i) Nm."""
     arm = SerialArm.two_link(**PAPER)
     k = torch.tensor([0.0, -10.0, 0.0, 0.0, 0.0, 0.0], dtype=D)
-    assert torch.allclose(arm.wrench_torque(torch.zeros(2, dtype=D), k), torch.tensor([-4.6, -2.6], dtype=D),
-                          rtol=0, atol=1e-14)
+    assert torch.allclose(
+        arm.wrench_torque(torch.zeros(2, dtype=D), k), torch.tensor([-4.6, -2.6], dtype=D), rtol=0, atol=1e-14
+    )
     twist = torch.tensor([0.0, 0.0, 0.0, 0.0, 0.0, 3.0], dtype=D)  # a pure moment about z: 3 Nm on each joint
-    assert torch.allclose(arm.wrench_torque(torch.tensor([0.3, -1.2], dtype=D), twist),
-                          torch.tensor([3.0, 3.0], dtype=D), rtol=0, atol=1e-14)
+    assert torch.allclose(
+        arm.wrench_torque(torch.tensor([0.3, -1.2], dtype=D), twist),
+        torch.tensor([3.0, 3.0], dtype=D),
+        rtol=0,
+        atol=1e-14,
+    )
 
 
 # -------------------------------------------------------------------------------- simulator (eq. 5, 4d)
@@ -290,8 +309,7 @@ def test_mass_matrix_is_symmetric_positive_definite(name):
 def test_singular_mass_matrix_is_a_clear_error():
     massless = SerialArm.two_link(0.0, 0.0, 0.2, 0.26)
     with pytest.raises(ValueError, match=r"not positive definite at q=\[0.5, 0.25\] \(joint 1"):
-        massless.forward_dynamics(torch.tensor([0.5, 0.25], dtype=D), torch.zeros(2, dtype=D),
-                                  torch.zeros(2, dtype=D))
+        massless.forward_dynamics(torch.tensor([0.5, 0.25], dtype=D), torch.zeros(2, dtype=D), torch.zeros(2, dtype=D))
 
 
 # ---------------------------------------------------------------------------------- the PUMA 560 data
@@ -301,15 +319,18 @@ def test_puma560_matches_the_toolbox_published_values():
     armature Jm·G², which selpres leaves out (the toolbox's Jm, G per joint)."""
     arm = load("puma560")
     qn = torch.tensor([0.0, math.pi / 4, math.pi, 0.0, math.pi / 4, 0.0], dtype=D)
-    assert torch.allclose(arm.gravity(qn), torch.tensor([0, 31.6399, 6.0351, 0, 0.0283, 0], dtype=D),
-                          atol=5e-5, rtol=0)
-    toolbox_inertia = torch.tensor([
-        [3.6594, -0.4044, 0.1006, -0.0025, 0.0000, -0.0000],
-        [-0.4044, 4.4137, 0.3509, 0.0000, 0.0024, 0.0000],
-        [0.1006, 0.3509, 0.9378, 0.0000, 0.0015, 0.0000],
-        [-0.0025, 0.0000, 0.0000, 0.1925, 0.0000, 0.0000],
-        [0.0000, 0.0024, 0.0015, 0.0000, 0.1713, 0.0000],
-        [-0.0000, 0.0000, 0.0000, 0.0000, 0.0000, 0.1941]], dtype=D)
+    assert torch.allclose(arm.gravity(qn), torch.tensor([0, 31.6399, 6.0351, 0, 0.0283, 0], dtype=D), atol=5e-5, rtol=0)
+    toolbox_inertia = torch.tensor(
+        [
+            [3.6594, -0.4044, 0.1006, -0.0025, 0.0000, -0.0000],
+            [-0.4044, 4.4137, 0.3509, 0.0000, 0.0024, 0.0000],
+            [0.1006, 0.3509, 0.9378, 0.0000, 0.0015, 0.0000],
+            [-0.0025, 0.0000, 0.0000, 0.1925, 0.0000, 0.0000],
+            [0.0000, 0.0024, 0.0015, 0.0000, 0.1713, 0.0000],
+            [-0.0000, 0.0000, 0.0000, 0.0000, 0.0000, 0.1941],
+        ],
+        dtype=D,
+    )
     jm = torch.tensor([200e-6, 200e-6, 200e-6, 33e-6, 33e-6, 33e-6], dtype=D)
     gear = torch.tensor([-62.6111, 107.815, -53.7063, 76.0364, 71.923, 76.686], dtype=D)
     assert torch.allclose(arm.mass_matrix(qn) + torch.diag(jm * gear**2), toolbox_inertia, atol=5e-5, rtol=0)
@@ -317,18 +338,26 @@ def test_puma560_matches_the_toolbox_published_values():
 
 def test_dh_rows_reproduce_the_dh_product():
     """from_dh's URDF-style frames against the textbook product Π Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i)."""
-    rows = [dict(a=0.3, alpha=0.7, d=0.1, offset=0.2), dict(a=-0.2, alpha=-1.1, d=0.25, offset=-0.4),
-            dict(a=0.15, alpha=math.pi / 2, d=0.0, offset=0.0)]
-    arm = SerialArm.from_dh([{**r, "mass": 1.0, "com": [0.0, 0.0, 0.0]} for r in rows], (0.0, 0.0, -9.81),
-                            end_point=(0.05, -0.02, 0.1))
+    rows = [
+        dict(a=0.3, alpha=0.7, d=0.1, offset=0.2),
+        dict(a=-0.2, alpha=-1.1, d=0.25, offset=-0.4),
+        dict(a=0.15, alpha=math.pi / 2, d=0.0, offset=0.0),
+    ]
+    arm = SerialArm.from_dh(
+        [{**r, "mass": 1.0, "com": [0.0, 0.0, 0.0]} for r in rows], (0.0, 0.0, -9.81), end_point=(0.05, -0.02, 0.1)
+    )
     q = states(16, 3, seed=12)[0]
     rot_w, _, end = arm.forward_kinematics(q)
 
     def dh(theta, r):
         c, s, ca, sa = torch.cos(theta), torch.sin(theta), math.cos(r["alpha"]), math.sin(r["alpha"])
         z, o = torch.zeros_like(c), torch.ones_like(c)
-        rows_ = [[c, -s * ca, s * sa, r["a"] * c], [s, c * ca, -c * sa, r["a"] * s],
-                 [z, z + sa, z + ca, z + r["d"]], [z, z, z, o]]
+        rows_ = [
+            [c, -s * ca, s * sa, r["a"] * c],
+            [s, c * ca, -c * sa, r["a"] * s],
+            [z, z + sa, z + ca, z + r["d"]],
+            [z, z, z, o],
+        ]
         return torch.stack([torch.stack(row) for row in rows_]).permute(2, 0, 1)
 
     pose = torch.eye(4, dtype=D).expand(16, 4, 4)
@@ -347,9 +376,12 @@ def test_any_leading_shape_and_chunks(monkeypatch):
     whole = arm.inverse_dynamics(q, qd, qdd, k)
     monkeypatch.setattr(serial, "CHUNK", 7)
     assert torch.equal(arm.inverse_dynamics(q, qd, qdd, k), whole)
-    assert torch.equal(arm.inverse_dynamics(q.reshape(3, 10, 10, 6), qd.reshape(3, 10, 10, 6),
-                                            qdd.reshape(3, 10, 10, 6), k.reshape(3, 10, 10, 6)),
-                       whole.reshape(3, 10, 10, 6))
+    assert torch.equal(
+        arm.inverse_dynamics(
+            q.reshape(3, 10, 10, 6), qd.reshape(3, 10, 10, 6), qdd.reshape(3, 10, 10, 6), k.reshape(3, 10, 10, 6)
+        ),
+        whole.reshape(3, 10, 10, 6),
+    )
     tau_grid = torch.rand(4, 5, 6, dtype=D)  # states [S, 1, 1, N] against torques [T1, T2, N] (selpres.data)
     acc = arm.forward_dynamics(q[:3, None, None], qd[:3, None, None], tau_grid)
     assert acc.shape == (3, 4, 5, 6)
@@ -360,8 +392,7 @@ def test_any_leading_shape_and_chunks(monkeypatch):
 def test_wrong_shapes_name_the_argument():
     arm = load("planar3")
     with pytest.raises(ValueError, match=r"qd has shape \(4, 2\): expected a tensor \[\.\.\., 3\]"):
-        arm.inverse_dynamics(torch.zeros(4, 3, dtype=D), torch.zeros(4, 2, dtype=D),
-                             torch.zeros(4, 3, dtype=D))
+        arm.inverse_dynamics(torch.zeros(4, 3, dtype=D), torch.zeros(4, 2, dtype=D), torch.zeros(4, 3, dtype=D))
     with pytest.raises(ValueError, match=r"k has shape \(3,\): expected a tensor \[\.\.\., 6\]"):
         arm.wrench_torque(torch.zeros(3, dtype=D), torch.zeros(3, dtype=D))
 
@@ -391,21 +422,26 @@ def _planar3_with(path: tuple, value):
     return spec
 
 
-@pytest.mark.parametrize("path, value, message", [
-    (("links", 1, "mass"), -1.0, "robot.links[1].mass=-1.0 is not allowed: expected a finite mass >= 0 kg"),
-    (("links", 0, "joint", "axis"), [0, 0, 0], "robot.links[0].joint.axis=(0.0, 0.0, 0.0) is not allowed"),
-    (("links", 0, "joint", "axis"), KeyError,
-     "robot.links[0].joint.axis=None is not allowed: expected a value"),
-    (("links", 2, "com"), [0.1, 0.0], "robot.links[2].com=[0.1, 0.0] is not allowed: expected a list of 3"),
-    (("links", 2, "inertia"), {"ixx": 1.0, "iyy": 1.0, "izz": 1.0, "ixy": 5.0},
-     "robot.links[2].inertia=((1.0, 5.0, 0.0), (5.0, 1.0, 0.0), (0.0, 0.0, 1.0)) is not allowed: expected a "
-     "positive semi-definite"),
-    (("links", 1, "masss"), 1.0, "robot.links[1].masss=1.0 is not allowed: expected one of the keys"),
-    (("links", 1, "joint", "limits"), [1.0, -1.0], "robot.links[1].joint.limits=(1.0, -1.0) is not allowed"),
-    (("gravity",), "down", "robot.gravity='down' is not allowed: expected a list of 3 finite numbers"),
-    (("kind",), "two_link", "robot.kind='two_link' is not allowed: expected 'serial'"),
-    (("links",), [], "robot.links=[] is not allowed: expected a non-empty list"),
-])
+@pytest.mark.parametrize(
+    "path, value, message",
+    [
+        (("links", 1, "mass"), -1.0, "robot.links[1].mass=-1.0 is not allowed: expected a finite mass >= 0 kg"),
+        (("links", 0, "joint", "axis"), [0, 0, 0], "robot.links[0].joint.axis=(0.0, 0.0, 0.0) is not allowed"),
+        (("links", 0, "joint", "axis"), KeyError, "robot.links[0].joint.axis=None is not allowed: expected a value"),
+        (("links", 2, "com"), [0.1, 0.0], "robot.links[2].com=[0.1, 0.0] is not allowed: expected a list of 3"),
+        (
+            ("links", 2, "inertia"),
+            {"ixx": 1.0, "iyy": 1.0, "izz": 1.0, "ixy": 5.0},
+            "robot.links[2].inertia=((1.0, 5.0, 0.0), (5.0, 1.0, 0.0), (0.0, 0.0, 1.0)) is not allowed: expected a "
+            "positive semi-definite",
+        ),
+        (("links", 1, "masss"), 1.0, "robot.links[1].masss=1.0 is not allowed: expected one of the keys"),
+        (("links", 1, "joint", "limits"), [1.0, -1.0], "robot.links[1].joint.limits=(1.0, -1.0) is not allowed"),
+        (("gravity",), "down", "robot.gravity='down' is not allowed: expected a list of 3 finite numbers"),
+        (("kind",), "two_link", "robot.kind='two_link' is not allowed: expected 'serial'"),
+        (("links",), [], "robot.links=[] is not allowed: expected a non-empty list"),
+    ],
+)
 def test_bad_config_names_key_value_and_what_is_allowed(path, value, message):
     with pytest.raises(ConfigError) as err:
         SerialArm.from_config(_planar3_with(path, value))

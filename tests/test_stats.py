@@ -10,10 +10,19 @@ import pytest
 from selpres.stats import holm, median, summarize, t_cdf, t_quantile, t_test, tost
 
 
-@pytest.mark.parametrize("p, df, q", [
-    (0.975, 9, 2.262157), (0.95, 29, 1.699127), (0.975, 29, 2.045230), (0.975, 4, 2.776445),
-    (0.95, 9, 1.833113), (0.95, 2, 2.919986), (0.995, 1, 63.656741), (0.975, 100, 1.983972),
-])
+@pytest.mark.parametrize(
+    "p, df, q",
+    [
+        (0.975, 9, 2.262157),
+        (0.95, 29, 1.699127),
+        (0.975, 29, 2.045230),
+        (0.975, 4, 2.776445),
+        (0.95, 9, 1.833113),
+        (0.95, 2, 2.919986),
+        (0.995, 1, 63.656741),
+        (0.975, 100, 1.983972),
+    ],
+)
 def test_t_quantile_matches_printed_tables(p, df, q):
     assert t_quantile(p, df) == pytest.approx(q, abs=1e-6)
     assert t_quantile(1 - p, df) == pytest.approx(-q, abs=1e-6)

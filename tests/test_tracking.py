@@ -5,8 +5,9 @@ from __future__ import annotations
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensorboard.plugins.hparams import plugin_data_pb2
 
-from conftest import cfg_of
 from selpres.train import train
+
+from conftest import cfg_of
 
 
 def load(tb_dir) -> EventAccumulator:

@@ -6,8 +6,11 @@ import math
 
 import pytest
 import torch
-from conftest import NATIVE_REASON, cfg_of, requires_native
+
 from selpres.train import train
+
+from conftest import NATIVE_REASON, cfg_of, requires_native
+
 
 @pytest.mark.parametrize("engine", ["reference", "fast"])
 def test_loss_falls_and_results_are_complete(engine):
@@ -24,8 +27,10 @@ def test_loss_falls_and_results_are_complete(engine):
     assert h1 < 0.7 * h0
 
 
-@pytest.mark.parametrize("engine", [pytest.param("reference", marks=pytest.mark.slow),
-                                    pytest.param("native", marks=requires_native), "torch"])
+@pytest.mark.parametrize(
+    "engine",
+    [pytest.param("reference", marks=pytest.mark.slow), pytest.param("native", marks=requires_native), "torch"],
+)
 def test_replica_r_equals_single_run_with_seed_plus_r(tmp_path, engine):
     """Weights are bit-identical (reference, native); metrics agree to rounding (evaluation batches all replicas
     in one GEMM). The torch engine's batched matmuls may round differently for R = 3 than for R = 1, so there the
@@ -46,12 +51,15 @@ def test_replica_r_equals_single_run_with_seed_plus_r(tmp_path, engine):
             assert a["final"][name][unit] == pytest.approx(b["final"][name][unit], rel=1e-12)
 
 
-@pytest.mark.parametrize("overrides", [
-    ["schedule=conventional", "schedule.epochs=[2]"],
-    ["schedule=matched", "schedule.budget=1500"],  # one epoch + a partial one of 498
-    ["schedule.sizes=[50,200,1002]", "schedule.epochs=[2,1,1]", "topology=6-8-8-2"],
-    ["schedule.sizes=[0.1,1.0]", "schedule.epochs=[1,1]", "optim.batch_size=7", "topology=6-4-2"],
-])
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ["schedule=conventional", "schedule.epochs=[2]"],
+        ["schedule=matched", "schedule.budget=1500"],  # one epoch + a partial one of 498
+        ["schedule.sizes=[50,200,1002]", "schedule.epochs=[2,1,1]", "topology=6-8-8-2"],
+        ["schedule.sizes=[0.1,1.0]", "schedule.epochs=[1,1]", "optim.batch_size=7", "topology=6-4-2"],
+    ],
+)
 @pytest.mark.slow
 def test_fast_engine_matches_the_reference_through_the_whole_pipeline(tmp_path, overrides):
     """Same sampler streams, same updates: final weights of the fast engines equal the reference's to 1e-9."""

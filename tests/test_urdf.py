@@ -157,21 +157,52 @@ def test_fixed_joints_merge_into_their_moving_body(tmp_path):
     a2_in_a = _frame(rot_z(math.pi / 2), (0.2, 0.0, 0.0))
     # body "a" = a + a2 (via the fixed joint, its inertial turned 0.4 rad about x) + the camera; the 50 kg
     # stand hangs off the base and does not move
-    body_a = _body(_pseudo(1.0, (0.01, 0.02, 0.03), _frame(eye, (0.1, 0.0, 0.0)))
-                   + _pseudo(0.5, (0.001, 0.002, 0.003),
-                             a2_in_a @ _frame(rpy_matrix((0.4, 0.0, 0.0)), (0.05, 0.0, 0.0)))
-                   + _pseudo(0.2, (0.0, 0.0, 0.0), _frame(eye, (0.0, 0.1, 0.0))))
-    expected = SerialArm([
-        Link("a", *body_a, joint="j1", xyz=(0.0, 0.0, 0.1), rotation=rpy_matrix((0.3, 0.0, 0.0)),
-             axis=(0.0, 0.0, 1.0), limits=(-1.0, 2.0)),
-        Link("b", 2.0, (0.0, 0.0, 0.3), ((0.05, 0, 0), (0, 0.05, 0), (0, 0, 0.01)), joint="j2",
-             xyz=(0.2, 0.1, 0.0), rotation=rot_z(math.pi / 2), axis=(0.0, 1.0, 0.0)),  # by hand: a2 ∘ origin
-    ], gravity=(0.0, 0.0, -9.81), end_point=(0.0, 0.0, 0.4))
+    body_a = _body(
+        _pseudo(1.0, (0.01, 0.02, 0.03), _frame(eye, (0.1, 0.0, 0.0)))
+        + _pseudo(0.5, (0.001, 0.002, 0.003), a2_in_a @ _frame(rpy_matrix((0.4, 0.0, 0.0)), (0.05, 0.0, 0.0)))
+        + _pseudo(0.2, (0.0, 0.0, 0.0), _frame(eye, (0.0, 0.1, 0.0)))
+    )
+    expected = SerialArm(
+        [
+            Link(
+                "a",
+                *body_a,
+                joint="j1",
+                xyz=(0.0, 0.0, 0.1),
+                rotation=rpy_matrix((0.3, 0.0, 0.0)),
+                axis=(0.0, 0.0, 1.0),
+                limits=(-1.0, 2.0),
+            ),
+            Link(
+                "b",
+                2.0,
+                (0.0, 0.0, 0.3),
+                ((0.05, 0, 0), (0, 0.05, 0), (0, 0, 0.01)),
+                joint="j2",
+                xyz=(0.2, 0.1, 0.0),
+                rotation=rot_z(math.pi / 2),
+                axis=(0.0, 1.0, 0.0),
+            ),  # by hand: a2 ∘ origin
+        ],
+        gravity=(0.0, 0.0, -9.81),
+        end_point=(0.0, 0.0, 0.4),
+    )
     assert math.isclose(arm.links[0].mass, 1.7) and (arm.base, arm.tip) == ("base", "flange")
     same_dynamics(arm, expected)
-    lighter = SerialArm([Link("a", *_body(_pseudo(1.0, (0.01, 0.02, 0.03), _frame(eye, (0.1, 0.0, 0.0)))),
-                              joint="j1", xyz=(0.0, 0.0, 0.1), rotation=rpy_matrix((0.3, 0.0, 0.0))),
-                         expected.links[1]], gravity=(0.0, 0.0, -9.81), end_point=(0.0, 0.0, 0.4))
+    lighter = SerialArm(
+        [
+            Link(
+                "a",
+                *_body(_pseudo(1.0, (0.01, 0.02, 0.03), _frame(eye, (0.1, 0.0, 0.0)))),
+                joint="j1",
+                xyz=(0.0, 0.0, 0.1),
+                rotation=rpy_matrix((0.3, 0.0, 0.0)),
+            ),
+            expected.links[1],
+        ],
+        gravity=(0.0, 0.0, -9.81),
+        end_point=(0.0, 0.0, 0.4),
+    )
     q, qd, qdd, _ = states(50, 2, seed=4)  # the comparison can fail: without the merged parts it does
     assert (lighter.inverse_dynamics(q, qd, qdd) - arm.inverse_dynamics(q, qd, qdd)).abs().max() > 1e-3
 
@@ -192,40 +223,72 @@ def test_axis_defaults_to_x_and_damping_is_reported(tmp_path, caplog):
     with caplog.at_level(logging.WARNING, logger="selpres.urdf"):
         arm = load_urdf(path)
     assert arm.links[1].axis == (1.0, 0.0, 0.0)
-    assert any('<joint name="j1"> <dynamics damping="0.5"' in r.getMessage() and "ignored" in r.getMessage()
-               for r in caplog.records)
+    assert any(
+        '<joint name="j1"> <dynamics damping="0.5"' in r.getMessage() and "ignored" in r.getMessage()
+        for r in caplog.records
+    )
 
 
 # ------------------------------------------------------------------------------------------------ errors
-@pytest.mark.parametrize("edit, element, problem", [
-    (('type="continuous"', 'type="prismatic"'), '<joint name="j2">',
-     "type 'prismatic' (a sliding joint) is not supported"),
-    (('type="continuous"', 'type="floating"'), '<joint name="j2">', "type 'floating'"),
-    (('type="continuous"', 'type="planar"'), '<joint name="j2">', "type 'planar'"),
-    (('type="continuous"', 'type="ball"'), '<joint name="j2">', "unknown type 'ball'"),
-    (('<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><mimic joint="j1"/>'), '<joint name="j2">', "<mimic>"),
-    (('<child link="flange"/>', '<child link="flang"/>'), '<joint name="tool_joint">',
-     "<child link='flang'> names a link that no <link> defines"),
-    (('<parent link="a"/><child link="camera"/>', '<parent link="b"/><child link="a"/>'), '<link name="a">',
-     "is the child of joints 'j1' and 'camera_joint': a closed loop"),
-    (('<link name="flange"/>', '<link name="flange"/><joint name="j3" type="revolute"><parent link="a"/>'
-      '<child link="c"/></joint><link name="c"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" '
-      'iyy="1" iyz="0" izz="1"/></inertial></link>'), '<link name="a">', "branches into joints"),
-    (('<link name="b"><inertial><origin xyz="0 0 0.3"/><mass value="2"/>\n    <inertia ixx="0.05" ixy="0" '
-      'ixz="0" iyy="0.05" iyz="0" izz="0.01"/></inertial></link>', '<link name="b"/>'), '<link name="b">',
-     "has no <inertial> but joint 'j2' moves it"),
-    (('<mass value="2"/>', '<mass value="-2"/>'), '<link name="b">', "mass=-2.0 is not allowed"),
-    (('<mass value="2"/>', '<mass/>'), '<link name="b"> <inertial> <mass>', "missing attribute 'value'"),
-    (('ixx="0.05" ixy="0"', 'ixx="0.05" ixy="0.9"'), '<link name="b">', "positive semi-definite"),
-    (('izz="0.01"', 'izz="abc"'), '<link name="b"> <inertial> <inertia izz>',
-     "'abc' is not a finite number"),
-    (('<origin xyz="0 0 0.4"/>', '<origin xyz="0 0.4"/>'), '<joint name="tool_joint"> <origin xyz>',
-     "'0 0.4' is not 3 finite numbers"),
-    (('lower="-1" upper="2"', 'lower="2" upper="-1"'), '<joint name="j1">', "need lower < upper"),
-    (('<link name="camera">', '<link name="a">'), '<link name="a">', "defined twice"),
-    (('<robot name="hand">', '<robot name="hand"><link name="loose"/>'), "<robot>",
-     "have no parent joint: the file holds more than one tree"),
-])
+@pytest.mark.parametrize(
+    "edit, element, problem",
+    [
+        (
+            ('type="continuous"', 'type="prismatic"'),
+            '<joint name="j2">',
+            "type 'prismatic' (a sliding joint) is not supported",
+        ),
+        (('type="continuous"', 'type="floating"'), '<joint name="j2">', "type 'floating'"),
+        (('type="continuous"', 'type="planar"'), '<joint name="j2">', "type 'planar'"),
+        (('type="continuous"', 'type="ball"'), '<joint name="j2">', "unknown type 'ball'"),
+        (('<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><mimic joint="j1"/>'), '<joint name="j2">', "<mimic>"),
+        (
+            ('<child link="flange"/>', '<child link="flang"/>'),
+            '<joint name="tool_joint">',
+            "<child link='flang'> names a link that no <link> defines",
+        ),
+        (
+            ('<parent link="a"/><child link="camera"/>', '<parent link="b"/><child link="a"/>'),
+            '<link name="a">',
+            "is the child of joints 'j1' and 'camera_joint': a closed loop",
+        ),
+        (
+            (
+                '<link name="flange"/>',
+                '<link name="flange"/><joint name="j3" type="revolute"><parent link="a"/>'
+                '<child link="c"/></joint><link name="c"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" '
+                'iyy="1" iyz="0" izz="1"/></inertial></link>',
+            ),
+            '<link name="a">',
+            "branches into joints",
+        ),
+        (
+            (
+                '<link name="b"><inertial><origin xyz="0 0 0.3"/><mass value="2"/>\n    <inertia ixx="0.05" ixy="0" '
+                'ixz="0" iyy="0.05" iyz="0" izz="0.01"/></inertial></link>',
+                '<link name="b"/>',
+            ),
+            '<link name="b">',
+            "has no <inertial> but joint 'j2' moves it",
+        ),
+        (('<mass value="2"/>', '<mass value="-2"/>'), '<link name="b">', "mass=-2.0 is not allowed"),
+        (('<mass value="2"/>', "<mass/>"), '<link name="b"> <inertial> <mass>', "missing attribute 'value'"),
+        (('ixx="0.05" ixy="0"', 'ixx="0.05" ixy="0.9"'), '<link name="b">', "positive semi-definite"),
+        (('izz="0.01"', 'izz="abc"'), '<link name="b"> <inertial> <inertia izz>', "'abc' is not a finite number"),
+        (
+            ('<origin xyz="0 0 0.4"/>', '<origin xyz="0 0.4"/>'),
+            '<joint name="tool_joint"> <origin xyz>',
+            "'0 0.4' is not 3 finite numbers",
+        ),
+        (('lower="-1" upper="2"', 'lower="2" upper="-1"'), '<joint name="j1">', "need lower < upper"),
+        (('<link name="camera">', '<link name="a">'), '<link name="a">', "defined twice"),
+        (
+            ('<robot name="hand">', '<robot name="hand"><link name="loose"/>'),
+            "<robot>",
+            "have no parent joint: the file holds more than one tree",
+        ),
+    ],
+)
 def test_unsupported_files_name_the_element(edit, element, problem, tmp_path):
     path = tmp_path / "bad.urdf"
     assert edit[0] in HAND
@@ -238,14 +301,18 @@ def test_unsupported_files_name_the_element(edit, element, problem, tmp_path):
 
 def test_loops_without_a_root_and_files_that_are_not_urdf(tmp_path):
     loop = tmp_path / "loop.urdf"
-    loop.write_text('<robot name="r"><link name="a"/><link name="b"/>'
-                    '<joint name="ab" type="revolute"><parent link="a"/><child link="b"/></joint>'
-                    '<joint name="ba" type="revolute"><parent link="b"/><child link="a"/></joint></robot>')
+    loop.write_text(
+        '<robot name="r"><link name="a"/><link name="b"/>'
+        '<joint name="ab" type="revolute"><parent link="a"/><child link="b"/></joint>'
+        '<joint name="ba" type="revolute"><parent link="b"/><child link="a"/></joint></robot>'
+    )
     with pytest.raises(UrdfError, match="<robot>: every link is some joint's child: a closed loop"):
         load_urdf(loop)
     frozen = tmp_path / "frozen.urdf"
-    frozen.write_text('<robot name="r"><link name="a"/><link name="b"/>'
-                      '<joint name="ab" type="fixed"><parent link="a"/><child link="b"/></joint></robot>')
+    frozen.write_text(
+        '<robot name="r"><link name="a"/><link name="b"/>'
+        '<joint name="ab" type="fixed"><parent link="a"/><child link="b"/></joint></robot>'
+    )
     with pytest.raises(UrdfError, match="has no revolute or continuous joint"):
         load_urdf(frozen)
     broken = tmp_path / "broken.urdf"
@@ -265,7 +332,7 @@ def test_urdf_error_is_a_config_error_that_survives_pickling(tmp_path):
     err = UrdfError(tmp_path / "x.urdf", '<joint name="j">', "bad")
     assert isinstance(err, ConfigError)
     again = pickle.loads(pickle.dumps(err))
-    assert str(again) == str(err) == f"{tmp_path / 'x.urdf'}: <joint name=\"j\">: bad"
+    assert str(again) == str(err) == f'{tmp_path / "x.urdf"}: <joint name="j">: bad'
 
 
 def test_export_refuses_a_tip_named_like_a_link(tmp_path):

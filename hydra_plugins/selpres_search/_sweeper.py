@@ -68,15 +68,17 @@ class ShapedScheduleSweeper(OptunaSweeper):
         self._order = sweep_order
         done = _finished_trials(impl.storage, impl.study_name)
         if done:
-            log.info("study %s has %d finished trials; running %d more", impl.study_name, done,
-                     max(0, impl.n_trials - done))
+            log.info(
+                "study %s has %d finished trials; running %d more", impl.study_name, done, max(0, impl.n_trials - done)
+            )
             impl.n_trials = max(0, impl.n_trials - done)
             seed = config.hydra.sweeper.sampler.get("seed")
             if seed is not None and isinstance(impl.sampler, optuna.samplers.BaseSampler):
                 # a seeded sampler would propose the same first points again: seed + finished trials
                 impl.sampler = instantiate(config.hydra.sweeper.sampler, seed=seed + done)
-                log.info("sampler seed %d (hydra.sweeper.sampler.seed %d + %d finished trials)", seed + done,
-                         seed, done)
+                log.info(
+                    "sampler seed %d (hydra.sweeper.sampler.seed %d + %d finished trials)", seed + done, seed, done
+                )
 
     def sweep(self, arguments: list[str]) -> None:
         """The study's trials, then the commands that confirm the best schedule of the study and the best of
@@ -90,12 +92,21 @@ class ShapedScheduleSweeper(OptunaSweeper):
         commands = self._confirm([(raw, order) for _, raw, order in best])
         notes = [f"# {order}: trial {t.number}, validation RMS {t.value:.6f} Nm" for t, _, order in best]
         script = Path(impl.config.hydra.sweep.dir) / "confirm.sh"
-        script.write_text(f"# study {impl.study_name}: the best trial, then the best of each other order, "
-                          "to confirm on fresh seeds and the held-out set\n" + "\n".join(notes)
-                          + "\nset -e\n" + "\n".join(commands) + "\n")
-        log.info("best schedules (%s); confirm them on fresh seeds and the held-out set against "
-                 "compute-matched conventional training (also in %s):\n%s",
-                 "; ".join(n[2:] for n in notes), script, "\n".join(commands))
+        script.write_text(
+            f"# study {impl.study_name}: the best trial, then the best of each other order, "
+            "to confirm on fresh seeds and the held-out set\n"
+            + "\n".join(notes)
+            + "\nset -e\n"
+            + "\n".join(commands)
+            + "\n"
+        )
+        log.info(
+            "best schedules (%s); confirm them on fresh seeds and the held-out set against "
+            "compute-matched conventional training (also in %s):\n%s",
+            "; ".join(n[2:] for n in notes),
+            script,
+            "\n".join(commands),
+        )
 
 
 def best_trials(study, default_order: str) -> list[tuple]:

@@ -63,8 +63,9 @@ def _rprop(params, lr=0.1, eta_minus=0.5, eta_plus=1.2, step_min=1e-6, step_max=
     eta_minus = require("eta_minus", eta_minus, "a decrease factor in (0, 1) (0.5)", lambda v: 0 < v < 1)
     eta_plus = require("eta_plus", eta_plus, "an increase factor > 1 (1.2)", lambda v: v > 1)
     step_min = require("step_min", step_min, "a smallest update value >= 0 (1e-6)", lambda v: v >= 0)
-    step_max = require("step_max", step_max, f"a largest update value >= step_min = {step_min:g} (50)",
-                       lambda v: v >= step_min)
+    step_max = require(
+        "step_max", step_max, f"a largest update value >= step_min = {step_min:g} (50)", lambda v: v >= step_min
+    )
     return torch.optim.Rprop(params, lr=lr, etas=(eta_minus, eta_plus), step_sizes=(step_min, step_max))
 
 
@@ -77,12 +78,10 @@ def _adam(params, lr=1e-3, beta1=0.9, beta2=0.999, eps=1e-8, weight_decay=0.0):
     return torch.optim.Adam(params, lr=lr, betas=(beta1, beta2), eps=eps, weight_decay=weight_decay)
 
 
-_FACTORIES = {"sgd": _sgd, "quickprop": QuickProp, "delta_bar_delta": DeltaBarDelta, "rprop": _rprop,
-              "adam": _adam}
+_FACTORIES = {"sgd": _sgd, "quickprop": QuickProp, "delta_bar_delta": DeltaBarDelta, "rprop": _rprop, "adam": _adam}
 
 
-def make_optimizer(name: str, params, hparams: dict | None = None,
-                   prefix: str = "optim") -> torch.optim.Optimizer:
+def make_optimizer(name: str, params, hparams: dict | None = None, prefix: str = "optim") -> torch.optim.Optimizer:
     """The optimizer ``name`` (a key of :data:`OPTIMIZER_KEYS`) over ``params``, from flat config keys.
 
     Every error is a :class:`~selpres.errors.ConfigError` naming ``<prefix>.<key>``, the value and what
@@ -94,9 +93,11 @@ def make_optimizer(name: str, params, hparams: dict | None = None,
     given = {k: v for k, v in (hparams or {}).items() if v is not None}
     for key in given:
         if key not in OPTIMIZER_KEYS[name]:
-            raise ConfigError(f"{prefix}.{key}", given[key],
-                              f"no value: {name} does not use it "
-                              f"(its keys: {', '.join(OPTIMIZER_KEYS[name])})")
+            raise ConfigError(
+                f"{prefix}.{key}",
+                given[key],
+                f"no value: {name} does not use it (its keys: {', '.join(OPTIMIZER_KEYS[name])})",
+            )
     try:
         return _FACTORIES[name](params, **given)
     except ConfigError as e:

@@ -40,8 +40,9 @@ class DeltaBarDelta(PerWeightOptimizer):
     values for this project's problem.
     """
 
-    def __init__(self, params, lr: float = 0.1, kappa: float = 0.25, phi: float = 0.5, theta: float = 0.7,
-                 momentum: float = 0.0):
+    def __init__(
+        self, params, lr: float = 0.1, kappa: float = 0.25, phi: float = 0.5, theta: float = 0.7, momentum: float = 0.0
+    ):
         lr = require("lr", lr, "an initial learning rate > 0", lambda v: v > 0)
         kappa = require("kappa", kappa, "an additive rate increase kappa >= 0", lambda v: v >= 0)
         phi = require("phi", phi, "a multiplicative rate decrease phi in [0, 1)", lambda v: 0 <= v < 1)

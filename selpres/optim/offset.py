@@ -30,8 +30,7 @@ class _OffsetSigmoid(torch.autograd.Function):
 
 def offset_sigmoid(x: torch.Tensor, offset: float = 0.1) -> torch.Tensor:
     """``sigmoid(x)`` whose backward uses ``sigma'(x) + offset`` (``offset = 0``: plain ``torch.sigmoid``)."""
-    offset = require("sigmoid_prime_offset", offset, "an offset >= 0 added to sigma' (Fahlman: 0.1)",
-                     lambda v: v >= 0)
+    offset = require("sigmoid_prime_offset", offset, "an offset >= 0 added to sigma' (Fahlman: 0.1)", lambda v: v >= 0)
     if offset == 0:
         return torch.sigmoid(x)
     return _OffsetSigmoid.apply(x, offset)

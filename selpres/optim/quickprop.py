@@ -51,11 +51,9 @@ class QuickProp(PerWeightOptimizer):
     """
 
     def __init__(self, params, lr: float = 0.55, mu: float = 1.75, weight_decay: float = 1e-4):
-        lr = require("lr", lr, "a gradient-descent rate epsilon > 0 (Fahlman's program: 0.55)",
-                     lambda v: v > 0)
+        lr = require("lr", lr, "a gradient-descent rate epsilon > 0 (Fahlman's program: 0.55)", lambda v: v > 0)
         mu = require("mu", mu, "a maximum growth factor mu > 0 (Fahlman: 1.75)", lambda v: v > 0)
-        weight_decay = require("weight_decay", weight_decay, "a weight decay >= 0 (Fahlman: 1e-4)",
-                               lambda v: v >= 0)
+        weight_decay = require("weight_decay", weight_decay, "a weight decay >= 0 (Fahlman: 1e-4)", lambda v: v >= 0)
         super().__init__(params, dict(lr=lr, mu=mu, weight_decay=weight_decay))
 
     def update(self, p, grad, state, group):
@@ -64,8 +62,7 @@ class QuickProp(PerWeightOptimizer):
             state["prev_slope"] = torch.zeros_like(p)
         mu, decay = group["mu"], group["weight_decay"]
         slope = grad.add(p, alpha=decay) if decay else grad.clone()
-        step = _quickprop_step(slope, state["prev_slope"], state["prev_step"], group["lr"], mu,
-                               mu / (1.0 + mu))
+        step = _quickprop_step(slope, state["prev_slope"], state["prev_step"], group["lr"], mu, mu / (1.0 + mu))
         p.add_(step)
         state["prev_step"] = step
         state["prev_slope"] = slope

@@ -8,8 +8,8 @@ import shlex
 import sys
 from pathlib import Path
 
-from selpres.report import __doc__ as package_doc
 from selpres.errors import ConfigError
+from selpres.report import __doc__ as package_doc
 from selpres.report.build import Report
 from selpres.report.compare import Margin, Options
 from selpres.report.jobs import job_folders
@@ -25,16 +25,27 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m selpres.report", description=package_doc.split("\n\n")[0])
     ap.add_argument("dir", type=Path, help="sweep directory, e.g. outputs/sweeps/table1")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: DIR/report)")
-    ap.add_argument("--readme", type=Path, default=None, metavar="FILE",
-                    help=f"also rewrite the block between {BEGIN} and {END} in FILE with the Table 1 section "
-                         "generated from this report (nothing is written if the markers are missing)")
-    ap.add_argument("--margin", default="5%",
-                    help="equivalence margin m of the verdicts: a percentage of selective's (in the "
-                         "selection verdict: the staged run's) mean final RMS over the paired seeds (default "
-                         "5%%) or a value in Nm (e.g. 0.002)")
-    ap.add_argument("--holm", action="store_true",
-                    help="Holm-adjust the paired tests' p-values within each family (one metric across the "
-                         "verdict table; the selection verdict table)")
+    ap.add_argument(
+        "--readme",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help=f"also rewrite the block between {BEGIN} and {END} in FILE with the Table 1 section "
+        "generated from this report (nothing is written if the markers are missing)",
+    )
+    ap.add_argument(
+        "--margin",
+        default="5%",
+        help="equivalence margin m of the verdicts: a percentage of selective's (in the "
+        "selection verdict: the staged run's) mean final RMS over the paired seeds (default "
+        "5%%) or a value in Nm (e.g. 0.002)",
+    )
+    ap.add_argument(
+        "--holm",
+        action="store_true",
+        help="Holm-adjust the paired tests' p-values within each family (one metric across the "
+        "verdict table; the selection verdict table)",
+    )
     a = ap.parse_args(argv)
     try:
         options = Options(margin=Margin.parse(a.margin), holm=a.holm)
@@ -52,17 +63,20 @@ def main(argv: list[str] | None = None) -> int:
     out = a.out if a.out is not None else a.dir / "report"
     report = Report.build(a.dir, options)
     if a.readme is not None and not report.ctx.table1_like:
-        return _error(f"--readme {a.readme}: {a.dir} is not Table 1's grid of the paper's methods (its "
-                      "methods are labelled by swept settings), so it has no Table 1 block to write; run the "
-                      "report without --readme, or with it on a Table 1 sweep such as outputs/sweeps/table1")
+        return _error(
+            f"--readme {a.readme}: {a.dir} is not Table 1's grid of the paper's methods (its "
+            "methods are labelled by swept settings), so it has no Table 1 block to write; run the "
+            "report without --readme, or with it on a Table 1 sweep such as outputs/sweeps/table1"
+        )
     files = report.write(out)
     print(report.markdown, end="")
     print(f"report written to {out}/ ({', '.join(files)})", file=sys.stderr)
     if a.readme is not None:
         flags = [f"--margin {shlex.quote(a.margin)}"] if a.margin != "5%" else []
         flags += ["--holm"] if a.holm else []
-        command = " ".join(["python -m selpres.report", shlex.quote(str(a.dir)), *flags, "--readme",
-                            shlex.quote(str(a.readme))])
+        command = " ".join(
+            ["python -m selpres.report", shlex.quote(str(a.dir)), *flags, "--readme", shlex.quote(str(a.readme))]
+        )
         changed = update_readme(a.readme, report, command)
         state = "rewritten" if changed else "already up to date"
         print(f"{a.readme}: Table 1 block {state}", file=sys.stderr)

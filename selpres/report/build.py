@@ -13,16 +13,31 @@ from pathlib import Path
 from selpres.report.compare import Options
 from selpres.report.context import Context, Section
 from selpres.report.markdown import to_csv
-from selpres.report.sections import (error_cost, plots, runs, selection, sensitivity, table1, time_to_target,
-                                     verdict)
+from selpres.report.sections import error_cost, plots, runs, selection, sensitivity, table1, time_to_target, verdict
 from selpres.storage import atomic_write
 
 # a section that has nothing to show for a sweep returns None and is left out
-SECTIONS = [table1.section, verdict.section, selection.section, sensitivity.section, error_cost.section,
-            time_to_target.section, plots.section, runs.section]
+SECTIONS = [
+    table1.section,
+    verdict.section,
+    selection.section,
+    sensitivity.section,
+    error_cost.section,
+    time_to_target.section,
+    plots.section,
+    runs.section,
+]
 # a study of parameters (not Table 1's grid): the sections it is about first, Table 1's (compact) last
-STUDY_SECTIONS = [sensitivity.section, error_cost.section, selection.section, time_to_target.section,
-                  plots.section, table1.section, verdict.section, runs.section]
+STUDY_SECTIONS = [
+    sensitivity.section,
+    error_cost.section,
+    selection.section,
+    time_to_target.section,
+    plots.section,
+    table1.section,
+    verdict.section,
+    runs.section,
+]
 
 
 def write_text(path: Path, text: str) -> None:
@@ -45,8 +60,7 @@ class Report:
     @property
     def markdown(self) -> str:
         what = "Table 1 reproduction" if self.ctx.table1_like else "Sweep report"
-        return "\n\n".join([f"# {what}: `{self.ctx.sweep}`",
-                            *(s.markdown() for s in self.sections)]) + "\n"
+        return "\n\n".join([f"# {what}: `{self.ctx.sweep}`", *(s.markdown() for s in self.sections)]) + "\n"
 
     def rows(self, csv_name: str) -> list[dict]:
         """The rows behind one CSV file of the report (e.g. "verdict.csv")."""

@@ -33,7 +33,7 @@ class Margin:
 
     @classmethod
     def parse(cls, text: str) -> Margin:
-        """"5%" (of the reference's mean) or "0.002" (Nm)."""
+        """ "5%" (of the reference's mean) or "0.002" (Nm)."""
         t = str(text).strip()
         rel = t.endswith("%")
         try:
@@ -41,8 +41,11 @@ class Margin:
         except ValueError:
             v = math.nan
         if not (math.isfinite(v) and v > 0 and (v < 100 or not rel)):
-            raise ConfigError("--margin", text, f"a percentage of {REFERENCE}'s mean such as 5% "
-                              "(0 < p < 100) or a value in Nm such as 0.002 (> 0)")
+            raise ConfigError(
+                "--margin",
+                text,
+                f"a percentage of {REFERENCE}'s mean such as 5% (0 < p < 100) or a value in Nm such as 0.002 (> 0)",
+            )
         return cls(v / 100, True) if rel else cls(v, False)
 
     def of(self, ref_mean: float | None) -> float | None:
@@ -53,8 +56,7 @@ class Margin:
     def describe(self, of: str = REFERENCE) -> str:
         """The margin in words; ``of``: whose mean a relative margin is a fraction of."""
         if self.relative:
-            return (f"{self.value * 100:g} % of {of}'s mean final RMS over the paired seeds (per row "
-                    "and metric)")
+            return f"{self.value * 100:g} % of {of}'s mean final RMS over the paired seeds (per row and metric)"
         return f"{self.value:g} Nm (fixed with --margin)"
 
 
@@ -101,8 +103,17 @@ def paired(a: dict[int, float], b: dict[int, float], margin: Margin = Margin()) 
 
     m = margin.of(mean(a))
     eq = tost(diffs, m, ALPHA) if m else {"p": None, "ci": [None, None]}
-    return {"n": st["n"], "mean": st["mean"], "std": st["std"], "ci95": st["ci95"], "other_mean": mean(b),
-            "margin": m, "p": t_test(diffs)["p"], "p_tost": eq["p"], "ci90": eq["ci"]}
+    return {
+        "n": st["n"],
+        "mean": st["mean"],
+        "std": st["std"],
+        "ci95": st["ci95"],
+        "other_mean": mean(b),
+        "margin": m,
+        "p": t_test(diffs)["p"],
+        "p_tost": eq["p"],
+        "ci90": eq["ci"],
+    }
 
 
 def comparisons(methods: list[str]) -> list[tuple[str, str]]:
@@ -144,11 +155,19 @@ def verdict_rows(groups, topologies, methods, options: Options = Options()) -> l
 
 def paired_columns(prefix: str, v: dict) -> dict:
     """A :func:`paired` result as CSV columns named ``<prefix>_…`` (prefix: the metric, e.g. "heldout")."""
-    return {f"{prefix}_pairs": v["n"], f"{prefix}_diff_mean": v["mean"], f"{prefix}_diff_std": v["std"],
-            f"{prefix}_ci_lo": v["ci95"][0], f"{prefix}_ci_hi": v["ci95"][1],
-            f"{prefix}_other_mean": v["other_mean"], f"{prefix}_margin": v["margin"], f"{prefix}_p": v["p"],
-            f"{prefix}_tost_p": v["p_tost"], f"{prefix}_ci90_lo": v["ci90"][0],
-            f"{prefix}_ci90_hi": v["ci90"][1]}
+    return {
+        f"{prefix}_pairs": v["n"],
+        f"{prefix}_diff_mean": v["mean"],
+        f"{prefix}_diff_std": v["std"],
+        f"{prefix}_ci_lo": v["ci95"][0],
+        f"{prefix}_ci_hi": v["ci95"][1],
+        f"{prefix}_other_mean": v["other_mean"],
+        f"{prefix}_margin": v["margin"],
+        f"{prefix}_p": v["p"],
+        f"{prefix}_tost_p": v["p_tost"],
+        f"{prefix}_ci90_lo": v["ci90"][0],
+        f"{prefix}_ci90_hi": v["ci90"][1],
+    }
 
 
 def adjust_family(found: list[tuple[dict, dict]], prefix: str, options: Options) -> None:
@@ -190,9 +209,12 @@ def reach(curve: list, target: float, base_cost: float | None) -> dict:
     if hit is None:
         return {"reached": "not reached"}
     pres = curve[hit][0]
-    return {"reached": "yes", "presentations_to_target": pres,
-            "previous_curve_point": curve[hit - 1][0] if hit else 0,
-            "fraction_of_conventional_cost": pres / base_cost if base_cost else None}
+    return {
+        "reached": "yes",
+        "presentations_to_target": pres,
+        "previous_curve_point": curve[hit - 1][0] if hit else 0,
+        "fraction_of_conventional_cost": pres / base_cost if base_cost else None,
+    }
 
 
 def time_to_target_rows(groups, topologies, methods) -> list[dict]:
@@ -213,17 +235,28 @@ def time_to_target_rows(groups, topologies, methods) -> list[dict]:
             tgt_curve = mean_curve(tgt) if tgt else []
             base_curve = mean_curve(base_group) if base_group else []
             if not tgt_curve:
-                rows.append({"target_method": target_method, "topology": t, "method": "all",
-                             "reached": f"no {target_method} held-out curve: no target"})
+                rows.append(
+                    {
+                        "target_method": target_method,
+                        "topology": t,
+                        "method": "all",
+                        "reached": f"no {target_method} held-out curve: no target",
+                    }
+                )
                 continue
             base_cost, target = (base_curve[-1][0] if base_curve else None), tgt_curve[-1][1]
             for m in methods:
                 g = groups.get((t, m))
                 curve = mean_curve(g) if g else []
-                row = {"target_method": target_method, "topology": t, "method": m,
-                       "target_heldout_curve_rms_nm": target, f"{BASELINE}_presentations": base_cost,
-                       "final_curve_rms_nm": curve[-1][1] if curve else None,
-                       "method_presentations": g.sched["presentations"] if g and g.sched else None}
+                row = {
+                    "target_method": target_method,
+                    "topology": t,
+                    "method": m,
+                    "target_heldout_curve_rms_nm": target,
+                    f"{BASELINE}_presentations": base_cost,
+                    "final_curve_rms_nm": curve[-1][1] if curve else None,
+                    "method_presentations": g.sched["presentations"] if g and g.sched else None,
+                }
                 row.update(reach(curve, target, base_cost))
                 rows.append(row)
     return rows

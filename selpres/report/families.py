@@ -55,7 +55,7 @@ def family_name(g: Group) -> str:
     "selective presentation", "conventional SGD at 150,300 t", "quickprop at 70,560 t", "staged, random
     order"."""
     if stages(g) == 1:
-        return f"{_method(g)} at {g.sched['presentations']:,} t"
+        return f"{_method(g)} at {g.cost:,} t"
     order = g.sched.get("order") or PAPER_ORDER
     name = SELECTIVE if order == PAPER_ORDER else f"staged, {order} order"
     return name if optimizer(g) == SGD else f"{name} with {optimizer(g)}"
@@ -74,11 +74,13 @@ def same_cost(a: float, b: float) -> bool:
 def matched_partner(groups: dict[tuple[str, str], Group], g: Group) -> Group | None:
     """The one-stage run of the same topology and settings (outside the schedule) whose presentations are
     closest to ``g``'s, if within 1 %; None if there is none."""
-    cost, rest = g.sched["presentations"], _rest(g)
-    candidates = [h for (t, _), h in groups.items()
-                  if t == g.topology and h.sched is not None and stages(h) == 1
-                  and same_cost(h.sched["presentations"], cost) and _rest(h) == rest]
-    return min(candidates, key=lambda h: (abs(h.sched["presentations"] - cost), h.schedule), default=None)
+    cost, rest = g.cost, _rest(g)
+    candidates = [
+        h
+        for (t, _), h in groups.items()
+        if t == g.topology and h.sched is not None and stages(h) == 1 and same_cost(h.cost, cost) and _rest(h) == rest
+    ]
+    return min(candidates, key=lambda h: (abs(h.cost - cost), h.schedule), default=None)
 
 
 @dataclass
@@ -109,7 +111,7 @@ class Family:
         return {k: self.values(k) for k in self.keys}
 
     def ranges_text(self) -> str:
-        """"optim.lr ∈ {0.1, 0.15, 0.3}; schedule.sizes ∈ {…}": the ranges a verdict depends on."""
+        """ "optim.lr ∈ {0.1, 0.15, 0.3}; schedule.sizes ∈ {…}": the ranges a verdict depends on."""
         return "; ".join(f"{k} ∈ {{{', '.join(map(_shown, vals))}}}" for k, vals in self.ranges().items())
 
     def swept_text(self) -> str:
@@ -119,14 +121,18 @@ class Family:
         if stages(self.members[0]) == 1:
             return self.ranges_text()
         terms = [schedule_terms(g.sched) for g in self.members]
-        parts = [f"{name} ∈ {{{', '.join(map(str, vals))}}}" for name in terms[0]
-                 if len(vals := sorted({t[name] for t in terms}, key=_term_rank)) > 1]
-        parts += [f"{k} ∈ {{{', '.join(_shown(v) for v in self.values(k))}}}"
-                  for k in self.keys if not k.startswith(SCHEDULE)]
+        parts = [
+            f"{name} ∈ {{{', '.join(map(str, vals))}}}"
+            for name in terms[0]
+            if len(vals := sorted({t[name] for t in terms}, key=_term_rank)) > 1
+        ]
+        parts += [
+            f"{k} ∈ {{{', '.join(_shown(v) for v in self.values(k))}}}" for k in self.keys if not k.startswith(SCHEDULE)
+        ]
         return "; ".join(parts)
 
     def presentations(self) -> tuple[int, int]:
-        costs = [g.sched["presentations"] for g in self.members]
+        costs = [g.cost for g in self.members]
         return min(costs), max(costs)
 
 
@@ -170,8 +176,13 @@ def _profile(epochs: list[int]) -> str:
 def schedule_terms(sched: dict) -> dict:
     """A staged schedule in the paper's terms (section 3): p, n_1, the growth of n_i, the profile of N_i
     and the total number of epochs N = ΣN_i."""
-    return {"p": sched["p"], "n_1": sched["sizes"][0], "n_i growth": _growth(sched["sizes"]),
-            "N_i profile": _profile(sched["epochs"]), "N = ΣN_i": sum(sched["epochs"])}
+    return {
+        "p": sched["p"],
+        "n_1": sched["sizes"][0],
+        "n_i growth": _growth(sched["sizes"]),
+        "N_i profile": _profile(sched["epochs"]),
+        "N = ΣN_i": sum(sched["epochs"]),
+    }
 
 
 def _sort_key(text: str) -> tuple:
@@ -189,8 +200,12 @@ def _sort_key(text: str) -> tuple:
 def family_rank(name: str) -> tuple:
     """Selective presentation first, then conventional SGD budget-matched to it, then conventional SGD at
     fixed costs, then the rest by name."""
-    return (not name.startswith(SELECTIVE), name != f"{CONVENTIONAL_SGD}, {BUDGET_MATCHED}",
-            not name.startswith(CONVENTIONAL_SGD), name)
+    return (
+        not name.startswith(SELECTIVE),
+        name != f"{CONVENTIONAL_SGD}, {BUDGET_MATCHED}",
+        not name.startswith(CONVENTIONAL_SGD),
+        name,
+    )
 
 
 def families(groups: dict[tuple[str, str], Group], topologies: list[str]) -> list[Family]:
@@ -223,8 +238,7 @@ def at_paper_total_epochs(fam: Family) -> Family | None:
     at = [g for g in fam.members if sum(g.sched["epochs"]) == total]
     if len(at) < 2 or len(at) == len(fam.members):
         return None
-    return Family(f"{fam.name} at ΣN_i = {total}", fam.topology, at,
-                  {g.schedule: fam.settings[g.schedule] for g in at})
+    return Family(f"{fam.name} at ΣN_i = {total}", fam.topology, at, {g.schedule: fam.settings[g.schedule] for g in at})
 
 
 def at_fixed_other_parameters(fam: Family) -> list[Family]:
@@ -254,10 +268,17 @@ def paper_run(groups: dict[tuple[str, str], Group], topology: str, method: str) 
     grown in the paper's order, trained by SGD with the paper's lr and momentum (Note 1 of Table 1). Without
     one, the single SGD run with the paper's stages, if there is exactly one; else None."""
     ref = PAPER[method]
-    candidates = [g for (t, _), g in sorted(groups.items()) if t == topology and g.sched is not None
-                  and optimizer(g) == SGD and g.sched["sizes"] == ref["sizes"]
-                  and g.sched["epochs"] == ref["epochs"] and g.sched["presentations"] == ref["presentations"]
-                  and (stages(g) == 1 or (g.sched.get("order") or PAPER_ORDER) == PAPER_ORDER)]
+    candidates = [
+        g
+        for (t, _), g in sorted(groups.items())
+        if t == topology
+        and g.sched is not None
+        and optimizer(g) == SGD
+        and g.sched["sizes"] == ref["sizes"]
+        and g.sched["epochs"] == ref["epochs"]
+        and g.sched["presentations"] == ref["presentations"]
+        and (stages(g) == 1 or (g.sched.get("order") or PAPER_ORDER) == PAPER_ORDER)
+    ]
     exact = [g for g in candidates if _is_paper_optim(g)]
     if len(exact) == 1:
         return exact[0]

@@ -20,8 +20,18 @@ SETS = (("test10", "test-10"), ("heldout", "held-out"))  # results.json key, nam
 UNITS = (("nm", "Nm"), ("scaled", "scaled"))
 
 # settings that never make two jobs different methods: bookkeeping, or what a group pools over
-_NOT_A_METHOD = ("seed", "replicas", "name", "threads", "overwrite", "engine", "topology.", "logging.",
-                 "checkpoint.", "eval.")
+_NOT_A_METHOD = (
+    "seed",
+    "replicas",
+    "name",
+    "threads",
+    "overwrite",
+    "engine",
+    "topology.",
+    "logging.",
+    "checkpoint.",
+    "eval.",
+)
 
 
 @dataclass
@@ -40,6 +50,13 @@ class Group:
     @property
     def sched(self) -> dict | None:
         return self.used[0].results["schedule"] if self.used else None
+
+    @property
+    def cost(self) -> int | None:
+        """Presentations charged in all: training plus the forward passes spent choosing A_i (selpres.selection)."""
+        if self.sched is None:
+            return None
+        return self.sched["presentations"] + (self.used[0].results.get("selection_presentations") or 0)
 
     @property
     def complete_seeds(self) -> list[int]:
@@ -62,8 +79,10 @@ class Group:
         """The pooled jobs' engines, joined with "+" where they differ: the timing of a group is only as
         meaningful as the name of what produced it."""
         recs = [j.engine for j in self.used]
-        return {k: "+".join(sorted({str(r[k]) for r in recs if r[k] is not None})) or None
-                for k in ("engine", "engine_requested", "engine_fallback")}
+        return {
+            k: "+".join(sorted({str(r[k]) for r in recs if r[k] is not None})) or None
+            for k in ("engine", "engine_requested", "engine_fallback")
+        }
 
     def wall(self) -> dict:
         """Summed over the pooled jobs: train seconds, total seconds, replicas; per replica-run = train / R
@@ -94,15 +113,13 @@ def _add_job(g: Group, job: Job) -> None:
     if job.results is None:
         return
     if g.used and _sched_key(job.results["schedule"]) != _sched_key(g.sched):
-        g.warnings.append(f"{job.path.name}: a different {g.schedule} schedule than {g.used[0].path.name}; "
-                          "not pooled")
+        g.warnings.append(f"{job.path.name}: a different {g.schedule} schedule than {g.used[0].path.name}; not pooled")
         return
     g.used.append(job)
     for r, rep in enumerate(job.replicas):
         if rep["seed"] in g.by_seed:
             if not _same_final(g.by_seed[rep["seed"]], rep):
-                g.warnings.append(f"{job.path.name}: seed {rep['seed']} disagrees with an earlier job; "
-                                  "kept the first")
+                g.warnings.append(f"{job.path.name}: seed {rep['seed']} disagrees with an earlier job; kept the first")
             continue
         g.by_seed[rep["seed"]] = rep
         g.curves[rep["seed"]] = [
@@ -131,8 +148,11 @@ def settings(job: Job) -> dict[str, str]:
     partner are read from."""
     if not (job.results and "config" in job.results):
         return {}
-    return {k: json.dumps(v, separators=(",", ":")) for k, v in flatten(job.results["config"]).items()
-            if not k.startswith(_NOT_A_METHOD)}
+    return {
+        k: json.dumps(v, separators=(",", ":"))
+        for k, v in flatten(job.results["config"]).items()
+        if not k.startswith(_NOT_A_METHOD)
+    }
 
 
 def varying(members: list[dict[str, str]]) -> list[str]:
@@ -143,7 +163,7 @@ def varying(members: list[dict[str, str]]) -> list[str]:
 
 
 def setting_text(f: dict[str, str], keys: list[str]) -> str:
-    """"k=v k=v" for ``keys`` set in ``f``; a key a config does not have, or has as null (not set: an
+    """ "k=v k=v" for ``keys`` set in ``f``; a key a config does not have, or has as null (not set: an
     optimizer's own parameter in another optimizer's job), is left out. Labels stay distinct: two settings
     with the same text agree on every key set in either, and on the rest neither sets it."""
     return " ".join(f"{k}={f[k]}".replace('"', "") for k in keys if f.get(k, "null") != "null")

@@ -36,8 +36,11 @@ class Job:
         ``engine``, which then stands for both (an unrecorded fallback cannot be recovered)."""
         res = self.results or {}
         ran = res.get("engine")
-        return {"engine": ran, "engine_requested": res.get("engine_requested", ran),
-                "engine_fallback": res.get("engine_fallback")}
+        return {
+            "engine": ran,
+            "engine_requested": res.get("engine_requested", ran),
+            "engine_fallback": res.get("engine_fallback"),
+        }
 
 
 def _hydra_identity(folder: Path) -> tuple[str | None, str | None]:

@@ -33,7 +33,7 @@ def diff_text(r: dict, prefix: str) -> str:
 
 
 def pvalues_text(r: dict, prefix: str, holm: bool) -> str:
-    """"t-test p / TOST p" of such a row; the Holm-adjusted ones with ``holm``."""
+    """ "t-test p / TOST p" of such a row; the Holm-adjusted ones with ``holm``."""
     suffix = "_holm" if holm else ""
     return f"{pvalue(r.get(f'{prefix}_p{suffix}'))} / {pvalue(r.get(f'{prefix}_tost_p{suffix}'))}"
 

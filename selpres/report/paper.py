@@ -7,11 +7,18 @@ from selpres.report.groups import base
 # T_con/t = 1002·150 = 150,300 (the paper prints "1,50,000t"); its RMS units are unstated.
 PAPER = {
     "conventional": {
-        "p": 0, "sizes": [1002], "epochs": [150], "presentations": 150_300, "printed": "1,50,000t",
+        "p": 0,
+        "sizes": [1002],
+        "epochs": [150],
+        "presentations": 150_300,
+        "printed": "1,50,000t",
         "rms": {"6-4-2": 0.0554, "6-8-2": 0.1039, "6-13-2": 0.0872},
     },
     "selective": {
-        "p": 4, "sizes": [50, 100, 400, 800, 1002], "epochs": [30] * 5, "presentations": 70_560,
+        "p": 4,
+        "sizes": [50, 100, 400, 800, 1002],
+        "epochs": [30] * 5,
+        "presentations": 70_560,
         "printed": "70,560t",
         "rms": {"6-4-2": 0.0581, "6-8-2": 0.0659, "6-13-2": 0.0824},
     },

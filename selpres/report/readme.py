@@ -26,8 +26,10 @@ def _span(text: str, path: Path) -> tuple[int, int]:
     """(end of the BEGIN marker, start of the END marker): the part the generator owns."""
     nb, ne = text.count(BEGIN), text.count(END)
     if nb != 1 or ne != 1 or text.index(BEGIN) > text.index(END):
-        raise ReadmeError(f"{path}: needs exactly one '{BEGIN}' line followed by one '{END}' line (found "
-                          f"{nb} begin and {ne} end marker(s)); add them around the Table 1 section")
+        raise ReadmeError(
+            f"{path}: needs exactly one '{BEGIN}' line followed by one '{END}' line (found "
+            f"{nb} begin and {ne} end marker(s)); add them around the Table 1 section"
+        )
     return text.index(BEGIN) + len(BEGIN), text.index(END)
 
 
@@ -55,8 +57,7 @@ def _seeds_text(report: Report) -> str:
 
 
 def _heldout_patterns(report: Report) -> str:
-    ns = {((j.results or {}).get("tests") or {}).get("heldout", {}).get("n") for j in report.ctx.jobs
-          if j.results}
+    ns = {((j.results or {}).get("tests") or {}).get("heldout", {}).get("n") for j in report.ctx.jobs if j.results}
     return f", {ns.pop():,} held-out patterns" if len(ns) == 1 and None not in ns else ""
 
 
@@ -64,16 +65,17 @@ def numbers_table(report: Report) -> str:
     """Final held-out RMS (Nm), mean [95 % interval], one row per topology, one column per method."""
     t1 = {(r["method"], r["topology"]): r for r in report.rows("table1.csv")}
     methods, topologies = report.ctx.methods, report.ctx.topologies
-    cost = {m: next((t1[(m, t)]["presentations"] for t in topologies if t1[(m, t)].get("presentations")),
-                    None) for m in methods}
+    cost = {
+        m: next((t1[(m, t)]["presentations"] for t in topologies if t1[(m, t)].get("presentations")), None)
+        for m in methods
+    }
     head = ["topology"] + [f"{m}, {cost[m]:,} t" if cost[m] else m for m in methods]
     head.append("paper, conv. / sel. (units unstated)")
     body = []
     for t in topologies:
         st = [stat_of(t1[(m, t)], "heldout_nm") for m in methods]
         cells = [f"{s['mean']:.4f} {ci(s)}" if s["mean"] is not None else "no results" for s in st]
-        paper = " / ".join(f"{PAPER[m]['rms'][t]:.4f}" if t in PAPER[m]["rms"] else "—"
-                           for m in (BASELINE, REFERENCE))
+        paper = " / ".join(f"{PAPER[m]['rms'][t]:.4f}" if t in PAPER[m]["rms"] else "—" for m in (BASELINE, REFERENCE))
         body.append([t, *cells, paper])
     return table(head, body)
 
@@ -84,8 +86,10 @@ def findings(report: Report) -> list[str]:
     t1 = report.rows("table1.csv")
     cost = {r["method"]: r["presentations"] for r in t1 if r.get("presentations")}
     if BASELINE in cost and REFERENCE in cost:
-        out.append(f"**Cost.** {REFERENCE}: T = {cost[REFERENCE]:,}·t against {BASELINE}: "
-                   f"T_con = {cost[BASELINE]:,}·t (ratio {cost[REFERENCE] / cost[BASELINE]:.3f}).")
+        out.append(
+            f"**Cost.** {REFERENCE}: T = {cost[REFERENCE]:,}·t against {BASELINE}: "
+            f"T_con = {cost[BASELINE]:,}·t (ratio {cost[REFERENCE] / cost[BASELINE]:.3f})."
+        )
     by_comparison: dict[str, list[dict]] = {}
     for r in report.rows("verdict.csv"):
         by_comparison.setdefault(r["comparison"], []).append(r)
@@ -93,27 +97,35 @@ def findings(report: Report) -> list[str]:
         ratio = next((f"; cost ratio {r['cost_ratio']:.3f}" for r in rows if r.get("cost_ratio")), "")
         readings = "; ".join(f"{r['topology']}: {r.get('reading_heldout', '')}" for r in rows)
         out.append(f"**{comparison}** (paired by seed, final held-out RMS{ratio}): {readings}.")
-    reached = [r for r in report.rows("time_to_target.csv")
-               if r["target_method"] == REFERENCE and r["method"] == BASELINE and r.get("reached") == "yes"]
+    reached = [
+        r
+        for r in report.rows("time_to_target.csv")
+        if r["target_method"] == REFERENCE and r["method"] == BASELINE and r.get("reached") == "yes"
+    ]
     if reached:
-        where = "; ".join(f"{r['presentations_to_target']:,} presentations for {r['topology']} (previous "
-                          f"curve point {r['previous_curve_point']:,})" for r in reached)
-        out.append(f"**Time to target.** {BASELINE}'s mean held-out curve first reaches {REFERENCE}'s final "
-                   f"value at {where}.")
+        where = "; ".join(
+            f"{r['presentations_to_target']:,} presentations for {r['topology']} (previous "
+            f"curve point {r['previous_curve_point']:,})"
+            for r in reached
+        )
+        out.append(
+            f"**Time to target.** {BASELINE}'s mean held-out curve first reaches {REFERENCE}'s final value at {where}."
+        )
     return [f"* {line}" for line in out]
 
 
 def readme_block(report: Report, command: str) -> str:
     """The generated README section: the numbers table and the findings, each from the report."""
-    return "\n\n".join([
-        f"<!-- generated by `{command}`: edit the generator (selpres/report/readme.py), not this block -->",
-        f"Final held-out RMS in Nm, mean over {_seeds_text(report)} [95 % t-interval]"
-        f"{_heldout_patterns(report)}:",
-        numbers_table(report),
-        "What the report's statistics say:",
-        "\n".join(findings(report)),
-        method_note(report.rows("verdict.csv"), report.ctx.options),
-    ])
+    return "\n\n".join(
+        [
+            f"<!-- generated by `{command}`: edit the generator (selpres/report/readme.py), not this block -->",
+            f"Final held-out RMS in Nm, mean over {_seeds_text(report)} [95 % t-interval]{_heldout_patterns(report)}:",
+            numbers_table(report),
+            "What the report's statistics say:",
+            "\n".join(findings(report)),
+            method_note(report.rows("verdict.csv"), report.ctx.options),
+        ]
+    )
 
 
 def update_readme(path: Path, report: Report, command: str) -> bool:
@@ -124,4 +136,3 @@ def update_readme(path: Path, report: Report, command: str) -> bool:
         return False
     write_text(path, new)
     return True
-

@@ -41,10 +41,20 @@ def plane_rows(groups, topologies, fams: list[Family] | None = None) -> list[dic
     for fam in fams if fams is not None else families(groups, topologies):
         for g in fam.members:
             st = summarize(g.values("heldout").values())
-            rows.append({"topology": fam.topology, "family": fam.name, "method": g.schedule,
-                         "setting": fam.label(g), "presentations": g.sched["presentations"], "n": st["n"],
-                         "diverged": g.n_diverged, "heldout_nm_mean": st["mean"],
-                         "heldout_nm_ci_lo": st["ci95"][0], "heldout_nm_ci_hi": st["ci95"][1]})
+            rows.append(
+                {
+                    "topology": fam.topology,
+                    "family": fam.name,
+                    "method": g.schedule,
+                    "setting": fam.label(g),
+                    "presentations": g.cost,
+                    "n": st["n"],
+                    "diverged": g.n_diverged,
+                    "heldout_nm_mean": st["mean"],
+                    "heldout_nm_ci_lo": st["ci95"][0],
+                    "heldout_nm_ci_hi": st["ci95"][1],
+                }
+            )
     return rows
 
 
@@ -77,7 +87,8 @@ def grid(fam: Family) -> Grid | None:
         f = fam.settings[g.schedule]
         panel = " ".join(f"{k}={f.get(k, 'absent')}".replace('"', "") for k in rest)
         panels.setdefault(panel, {})[(f.get(x, "absent"), f.get(y, "absent"))] = summarize(
-            g.values("heldout").values())["mean"]
+            g.values("heldout").values()
+        )["mean"]
     return Grid(fam, x, y, fam.values(x), fam.values(y), dict(sorted(panels.items())))
 
 
@@ -94,8 +105,9 @@ def draw_plane(rows: list[dict], groups, topologies: list[str], fams: list[Famil
     from matplotlib.ticker import FuncFormatter
 
     styles = family_styles(list(dict.fromkeys(r["family"] for r in rows)))
-    fig, axes = plt.subplots(1, len(topologies), figsize=(6 * len(topologies) + 4, 5.2), squeeze=False,
-                             layout="constrained")
+    fig, axes = plt.subplots(
+        1, len(topologies), figsize=(6 * len(topologies) + 4, 5.2), squeeze=False, layout="constrained"
+    )
     legend: dict[str, object] = {}
     for ax, t in zip(axes[0], topologies):
         ref = paper_conventional(groups, t)
@@ -113,8 +125,19 @@ def draw_plane(rows: list[dict], groups, topologies: list[str], fams: list[Famil
             lo = [r["heldout_nm_mean"] - (r["heldout_nm_ci_lo"] or r["heldout_nm_mean"]) for r in pts]
             hi = [(r["heldout_nm_ci_hi"] or r["heldout_nm_mean"]) - r["heldout_nm_mean"] for r in pts]
             color, marker = styles[fam]
-            handle = ax.errorbar(x, y, yerr=[lo, hi], fmt=marker, ms=5, capsize=2, color=color, mec="k",
-                                 mew=0.4, elinewidth=0.8, alpha=0.9)
+            handle = ax.errorbar(
+                x,
+                y,
+                yerr=[lo, hi],
+                fmt=marker,
+                ms=5,
+                capsize=2,
+                color=color,
+                mec="k",
+                mew=0.4,
+                elinewidth=0.8,
+                alpha=0.9,
+            )
             legend.setdefault(f"{fam} ({len(pts)})", handle)
         ax.set_yscale("log")
         ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
@@ -122,10 +145,19 @@ def draw_plane(rows: list[dict], groups, topologies: list[str], fams: list[Famil
         ax.set_xlabel("presentations (units of t)")
         ax.set_ylabel("held-out RMS (Nm)")
         ax.grid(True, which="both", alpha=0.3)
-    fig.legend(list(legend.values()), list(legend), loc="outside right center", fontsize=7,
-               title="family (configurations)", title_fontsize=7)
-    fig.suptitle("Error–cost plane: every configuration (mean final held-out RMS, 95 % interval)\n"
-                 "over conventional training's mean learning curve", fontsize=9)
+    fig.legend(
+        list(legend.values()),
+        list(legend),
+        loc="outside right center",
+        fontsize=7,
+        title="family (configurations)",
+        title_fontsize=7,
+    )
+    fig.suptitle(
+        "Error–cost plane: every configuration (mean final held-out RMS, 95 % interval)\n"
+        "over conventional training's mean learning curve",
+        fontsize=9,
+    )
     return fig
 
 
@@ -139,21 +171,21 @@ def plot_grid(gr: Grid, path: Path) -> None:
     import numpy as np
 
     n = len(gr.panels)
-    fig, axes = plt.subplots(1, n, figsize=(1.2 * len(gr.xs) + 3.2 * n, 0.7 * len(gr.ys) + 2.4),
-                             squeeze=False)
+    fig, axes = plt.subplots(1, n, figsize=(1.2 * len(gr.xs) + 3.2 * n, 0.7 * len(gr.ys) + 2.4), squeeze=False)
     finite = [v for cells in gr.panels.values() for v in cells.values() if v is not None]
     best = min(finite) if finite else None
     vmin, vmax = (min(finite), max(finite)) if finite else (0.0, 1.0)
     for ax, (panel, cells) in zip(axes[0], gr.panels.items()):
-        z = np.array([[cells.get((xv, yv)) if cells.get((xv, yv)) is not None else math.nan for xv in gr.xs]
-                      for yv in gr.ys], dtype=float)
+        z = np.array(
+            [[cells.get((xv, yv)) if cells.get((xv, yv)) is not None else math.nan for xv in gr.xs] for yv in gr.ys],
+            dtype=float,
+        )
         im = ax.imshow(z, cmap="viridis", vmin=vmin, vmax=vmax, aspect="auto", origin="lower")
-        for i, yv in enumerate(gr.ys):
-            for j, xv in enumerate(gr.xs):
+        for i in range(len(gr.ys)):
+            for j in range(len(gr.xs)):
                 if not math.isnan(z[i, j]):
                     light = (z[i, j] - vmin) > 0.6 * (vmax - vmin)  # viridis is light at the top
-                    ax.text(j, i, f"{z[i, j]:.4f}", ha="center", va="center", fontsize=7,
-                            color="k" if light else "w")
+                    ax.text(j, i, f"{z[i, j]:.4f}", ha="center", va="center", fontsize=7, color="k" if light else "w")
                     if z[i, j] == best:
                         ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="r", lw=2))
         ax.set_xticks(range(len(gr.xs)), [v.replace('"', "") for v in gr.xs], fontsize=7, rotation=20)
@@ -177,12 +209,9 @@ def section(ctx: Context) -> Section | None:
     if not any(len(f.members) > 1 for f in fams):
         return None
     rows = plane_rows(ctx.groups, ctx.topologies, fams)
-    figures = {"error_cost.png": ("error–cost plane",
-                                  lambda p: plot_plane(rows, ctx.groups, ctx.topologies, fams, p))}
+    figures = {"error_cost.png": ("error–cost plane", lambda p: plot_plane(rows, ctx.groups, ctx.topologies, fams, p))}
     for gr in filter(None, (grid(f) for f in fams)):
         name = f"heatmap_{slug(gr.family.name)}_{gr.family.topology}.png"
-        figures[name] = (f"{gr.family.name}, {gr.family.topology}: {gr.x} × {gr.y}",
-                         lambda p, gr=gr: plot_grid(gr, p))
+        figures[name] = (f"{gr.family.name}, {gr.family.topology}: {gr.x} × {gr.y}", lambda p, gr=gr: plot_grid(gr, p))
     images = "\n\n".join(f"![{caption}]({name})" for name, (caption, _) in figures.items())
-    return Section("Error–cost plane and heat maps", [images, NOTE], csv={"error_cost.csv": rows},
-                   figures=figures)
+    return Section("Error–cost plane and heat maps", [images, NOTE], csv={"error_cost.csv": rows}, figures=figures)

@@ -49,8 +49,9 @@ def plot_curves(groups, topologies, methods, path: Path, labels: dict[str, str] 
     from matplotlib.ticker import FuncFormatter
 
     if labels:
-        fig, axes = plt.subplots(1, len(topologies), figsize=(5.2 * len(topologies) + 5, 4.6), squeeze=False,
-                                 layout="constrained")
+        fig, axes = plt.subplots(
+            1, len(topologies), figsize=(5.2 * len(topologies) + 5, 4.6), squeeze=False, layout="constrained"
+        )
         colors = [c for c, _ in family_styles(methods).values()]
     else:
         fig, axes = plt.subplots(1, len(topologies), figsize=(5.2 * len(topologies), 4.2), squeeze=False)
@@ -63,8 +64,9 @@ def plot_curves(groups, topologies, methods, path: Path, labels: dict[str, str] 
                 continue
             c = colors[i % len(colors)]
             x = [p for p, _, _ in curve]
-            ax.plot(x, [v for _, v, _ in curve], color=c,
-                    label=f"{labels[m] if labels else m} (n={len(g.complete_seeds)})")
+            ax.plot(
+                x, [v for _, v, _ in curve], color=c, label=f"{labels[m] if labels else m} (n={len(g.complete_seeds)})"
+            )
             lo = [st["ci95"][0] if st["ci95"][0] is not None else v for _, v, st in curve]
             hi = [st["ci95"][1] if st["ci95"][1] is not None else v for _, v, st in curve]
             ax.fill_between(x, [max(v, 1e-12) for v in lo], hi, color=c, alpha=0.2, lw=0)
@@ -74,8 +76,16 @@ def plot_curves(groups, topologies, methods, path: Path, labels: dict[str, str] 
                     ax.axvline(sum(per_stage[: k + 1]), color=c, ls=":", lw=0.8)
             paper = PAPER.get(m, {})
             if t in paper.get("rms", {}):
-                ax.plot([paper["presentations"]], [paper["rms"][t]], marker="_", ms=18, mew=2.5, color=c,
-                        ls="none", label=f"{PAPER_UNITS_NOTE}: {m}")
+                ax.plot(
+                    [paper["presentations"]],
+                    [paper["rms"][t]],
+                    marker="_",
+                    ms=18,
+                    mew=2.5,
+                    color=c,
+                    ls="none",
+                    label=f"{PAPER_UNITS_NOTE}: {m}",
+                )
         ax.set_yscale("log")
         ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:g}k"))
         ax.set_title(f"{t}")
@@ -84,8 +94,11 @@ def plot_curves(groups, topologies, methods, path: Path, labels: dict[str, str] 
         ax.grid(True, which="both", alpha=0.3)
         if not labels:
             ax.legend(fontsize=7)
-    fig.suptitle("Held-out RMS vs cost: mean over seeds, band = 95 % t-interval of the mean"
-                 + ("" if labels else f"; dotted = {REFERENCE} stage boundaries"), fontsize=9)
+    fig.suptitle(
+        "Held-out RMS vs cost: mean over seeds, band = 95 % t-interval of the mean"
+        + ("" if labels else f"; dotted = {REFERENCE} stage boundaries"),
+        fontsize=9,
+    )
     if labels:  # one legend for all panels, outside them
         handles = {h.get_label(): h for ax in axes[0] for h in ax.get_legend_handles_labels()[0]}
         fig.legend(list(handles.values()), list(handles), loc="outside right center", fontsize=7)
@@ -107,8 +120,15 @@ def plot_cost(groups, topologies, methods, path: Path) -> None:
     a1.bar(list(pres), list(pres.values()), color="tab:blue", label="ours")
     for k, m in enumerate(pres):
         if m in PAPER:
-            a1.plot([k], [PAPER[m]["presentations"]], marker="_", ms=30, mew=2, color="k",
-                    label="paper" if k == 0 or "paper" not in a1.get_legend_handles_labels()[1] else None)
+            a1.plot(
+                [k],
+                [PAPER[m]["presentations"]],
+                marker="_",
+                ms=30,
+                mew=2,
+                color="k",
+                label="paper" if k == 0 or "paper" not in a1.get_legend_handles_labels()[1] else None,
+            )
     a1.set_ylabel("presentations T/t")
     a1.set_title("cost in presentations")
     a1.legend(fontsize=8)
@@ -150,16 +170,24 @@ def section(ctx: Context) -> Section | None:
     (None when it has none)."""
     if ctx.table1_like:
         args = (ctx.groups, ctx.topologies, ctx.methods)
-        figures = {"curves.png": ("held-out RMS vs presentations", lambda p: plot_curves(*args, p)),
-                   "cost.png": ("cost", lambda p: plot_cost(*args, p))}
+        figures = {
+            "curves.png": ("held-out RMS vs presentations", lambda p: plot_curves(*args, p)),
+            "cost.png": ("cost", lambda p: plot_cost(*args, p)),
+        }
         images = "\n\n".join(f"![{caption}]({name})" for name, (caption, _) in figures.items())
         return Section("Plots", [images], figures=figures)
     labels = study_methods(ctx)
     if not labels:
         return None
-    figures = {"curves.png": ("held-out RMS vs presentations: the paper's runs and each family's best",
-                              lambda p: plot_curves(ctx.groups, ctx.topologies, list(labels), p, labels))}
+    figures = {
+        "curves.png": (
+            "held-out RMS vs presentations: the paper's runs and each family's best",
+            lambda p: plot_curves(ctx.groups, ctx.topologies, list(labels), p, labels),
+        )
+    }
     images = "\n\n".join(f"![{caption}]({name})" for name, (caption, _) in figures.items())
-    note = ("The paper's two runs and the best setting of each family with two or more settings; every "
-            "setting's final error is on the error–cost plane.")
+    note = (
+        "The paper's two runs and the best setting of each family with two or more settings; every "
+        "setting's final error is on the error–cost plane."
+    )
     return Section("Plots", [images, note], figures=figures)

@@ -17,41 +17,75 @@ def _diverged_epoch(rep: dict):
 def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path) -> list[dict]:
     """Every job folder with its status, plus (topology, method) cells of the sweep's grid with no folder."""
     rows = []
-    order = sorted(jobs, key=lambda j: (topology_rank(j.topology or "?"), method_rank(j.schedule or "?"),
-                                        str(j.path)))
+    order = sorted(jobs, key=lambda j: (topology_rank(j.topology or "?"), method_rank(j.schedule or "?"), str(j.path)))
     for j in order:
-        row = {"job": str(j.path.relative_to(sweep)) if j.path != sweep else ".", "schedule": j.schedule,
-               "topology": j.topology, "status": j.status, "error": j.error}
+        row = {
+            "job": str(j.path.relative_to(sweep)) if j.path != sweep else ".",
+            "schedule": j.schedule,
+            "topology": j.topology,
+            "status": j.status,
+            "error": j.error,
+        }
         if j.results:
             reps = j.replicas
             bad = sum(r["status"] != "complete" for r in reps)
-            row.update(replicas=f"{len(reps) - bad}/{len(reps)}" + (f" ({bad} diverged)" if bad else ""),
-                       seeds=f"{min(r['seed'] for r in reps)}..{max(r['seed'] for r in reps)}" if reps
-                       else "",
-                       **j.engine, wall_total_s=j.results["wall_seconds"]["total"])
+            row.update(
+                replicas=f"{len(reps) - bad}/{len(reps)}" + (f" ({bad} diverged)" if bad else ""),
+                seeds=f"{min(r['seed'] for r in reps)}..{max(r['seed'] for r in reps)}" if reps else "",
+                **j.engine,
+                wall_total_s=j.results["wall_seconds"]["total"],
+            )
             if bad:
-                row["error"] = "; ".join(f"seed {r['seed']} diverged at epoch {_diverged_epoch(r)}"
-                                         for r in reps if r["status"] != "complete")
+                row["error"] = "; ".join(
+                    f"seed {r['seed']} diverged at epoch {_diverged_epoch(r)}"
+                    for r in reps
+                    if r["status"] != "complete"
+                )
         rows.append(row)
     for t in topologies:
         for m in methods:
             if (t, m) not in groups:
-                rows.append({"job": "(no folder)", "schedule": m, "topology": t, "status": "missing",
-                             "error": "no job folder for this cell of the grid"})
+                rows.append(
+                    {
+                        "job": "(no folder)",
+                        "schedule": m,
+                        "topology": t,
+                        "status": "missing",
+                        "error": "no job folder for this cell of the grid",
+                    }
+                )
     return rows
 
 
 def runs_markdown(rows: list[dict], warnings: list[str]) -> str:
-    head = ["job", "schedule", "topology", "status", "replicas complete", "seeds", "engine that ran",
-            "wall s", "errors / notes"]
+    head = [
+        "job",
+        "schedule",
+        "topology",
+        "status",
+        "replicas complete",
+        "seeds",
+        "engine that ran",
+        "wall s",
+        "errors / notes",
+    ]
     body = []
     for r in rows:
         fallback = r.get("engine_fallback") and f"engine fallback: {r['engine_fallback']}"
         err = "; ".join(n for n in (r.get("error"), fallback) if n).replace("\n", " ").replace("|", "\\|")
-        body.append([f"`{r['job']}`", str(r.get("schedule")), str(r.get("topology")), r["status"],
-                     r.get("replicas", ""), r.get("seeds", ""), engine_text(r, 0) if r.get("engine") else "",
-                     fmt(r.get("wall_total_s"), 1) if r.get("wall_total_s") else "",
-                     err[:300] + ("…" if len(err) > 300 else "")])
+        body.append(
+            [
+                f"`{r['job']}`",
+                str(r.get("schedule")),
+                str(r.get("topology")),
+                r["status"],
+                r.get("replicas", ""),
+                r.get("seeds", ""),
+                engine_text(r, 0) if r.get("engine") else "",
+                fmt(r.get("wall_total_s"), 1) if r.get("wall_total_s") else "",
+                err[:300] + ("…" if len(err) > 300 else ""),
+            ]
+        )
     return table(head, body) + "".join(f"\n\n- warning: {w}" for w in warnings)
 
 

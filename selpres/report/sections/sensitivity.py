@@ -18,9 +18,20 @@ import math
 
 from selpres.report.compare import mean_curve, paired, reach
 from selpres.report.context import Context, Section
-from selpres.report.families import (BUDGET_MATCHED, SCHEDULE, SELECTIVE, Family, at_fixed_other_parameters,
-                                     at_paper_total_epochs, families, matched_partner, paper_conventional,
-                                     same_cost, schedule_terms, stages)
+from selpres.report.families import (
+    BUDGET_MATCHED,
+    SCHEDULE,
+    SELECTIVE,
+    Family,
+    at_fixed_other_parameters,
+    at_paper_total_epochs,
+    families,
+    matched_partner,
+    paper_conventional,
+    same_cost,
+    schedule_terms,
+    stages,
+)
 from selpres.report.groups import Group
 from selpres.report.markdown import fmt, signed_interval, table
 from selpres.stats import median, summarize
@@ -82,12 +93,18 @@ def level(best: float, cost: int, points: list[tuple[int, float, str, str]]) -> 
     if not math.isfinite(best) or not at:
         return {"level": math.inf if not math.isfinite(best) else None, "level_presentations": cost}
     ref = min(at, key=lambda p: p[1])
-    return {"level": best / ref[1], "level_presentations": cost, "level_reference_family": ref[2],
-            "level_reference_setting": ref[3], "level_reference_heldout_nm": ref[1]}
+    return {
+        "level": best / ref[1],
+        "level_presentations": cost,
+        "level_reference_family": ref[2],
+        "level_reference_setting": ref[3],
+        "level_reference_heldout_nm": ref[1],
+    }
 
 
-def family_row(fam: Family, reference: Group | None, kind: str = FAMILY,
-               points: list[tuple[int, float, str, str]] | None = None) -> dict:
+def family_row(
+    fam: Family, reference: Group | None, kind: str = FAMILY, points: list[tuple[int, float, str, str]] | None = None
+) -> dict:
     """Best / median / worst over a family's settings, worst ÷ best, the fraction within 10 % of its best,
     its level against ``points`` (every setting of the topology), and time to the conventional run's final
     error."""
@@ -103,28 +120,44 @@ def family_row(fam: Family, reference: Group | None, kind: str = FAMILY,
     rel = median(s["rel_half"] for _, s in per)
     spread = paired(worst_g.values("heldout"), best_g.values("heldout"))
     row = {
-        "kind": kind, "family": fam.name, "topology": fam.topology, "staged": stages(fam.members[0]) > 1,
+        "kind": kind,
+        "family": fam.name,
+        "topology": fam.topology,
+        "staged": stages(fam.members[0]) > 1,
         "settings": len(per),
-        "swept": fam.ranges_text(), "swept_terms": fam.swept_text(), "swept_keys": " ".join(fam.keys),
-        "presentations_min": lo, "presentations_max": hi,
-        "seeds_min": min(s["n"] for _, s in per), "seeds_max": max(s["n"] for _, s in per),
-        "best_heldout_nm": best["mean"], "best_setting": fam.label(best_g),
+        "swept": fam.ranges_text(),
+        "swept_terms": fam.swept_text(),
+        "swept_keys": " ".join(fam.keys),
+        "presentations_min": lo,
+        "presentations_max": hi,
+        "seeds_min": min(s["n"] for _, s in per),
+        "seeds_max": max(s["n"] for _, s in per),
+        "best_heldout_nm": best["mean"],
+        "best_setting": fam.label(best_g),
         "median_heldout_nm": median(means),
-        "worst_heldout_nm": worst["mean"], "worst_setting": fam.label(worst_g),
+        "worst_heldout_nm": worst["mean"],
+        "worst_setting": fam.label(worst_g),
         "worst_over_best": worst["mean"] / best["mean"] if math.isfinite(best["mean"]) else None,
-        "within_10pct": within, "within_10pct_fraction": within / len(per),
+        "within_10pct": within,
+        "within_10pct_fraction": within / len(per),
         **level(best["mean"], best_g.sched["presentations"], points or []),
         "ci95_half_width_pct": None if rel is None else 100 * rel,
-        "worst_minus_best_pairs": spread["n"], "worst_minus_best_nm": spread["mean"],
-        "worst_minus_best_ci_lo": spread["ci95"][0], "worst_minus_best_ci_hi": spread["ci95"][1],
+        "worst_minus_best_pairs": spread["n"],
+        "worst_minus_best_nm": spread["mean"],
+        "worst_minus_best_ci_lo": spread["ci95"][0],
+        "worst_minus_best_ci_hi": spread["ci95"][1],
         "diverged_settings": sum(s["diverged"] > 0 for _, s in per),
         "diverged_replicas": sum(s["diverged"] for _, s in per),
-        "target_method": reference.schedule if reference else None, "target_heldout_curve_rms_nm": target,
+        "target_method": reference.schedule if reference else None,
+        "target_heldout_curve_rms_nm": target,
     }
     if target is not None:
         hits = [s["to_target"] for _, s in per]
-        row.update(reach_settings=sum(math.isfinite(h) for h in hits),
-                   presentations_to_target_fastest=min(hits), presentations_to_target_median=median(hits))
+        row.update(
+            reach_settings=sum(math.isfinite(h) for h in hits),
+            presentations_to_target_fastest=min(hits),
+            presentations_to_target_median=median(hits),
+        )
     return row
 
 
@@ -156,23 +189,37 @@ def versus_matched_rows(groups, topologies) -> list[dict]:
             continue
         stats = {g.schedule: summarize(g.values("heldout").values()) for g in fam.members}
         best = min((st["mean"] for st in stats.values() if st["n"]), default=None)
-        for g in sorted(fam.members, key=lambda g: (sum(g.sched["epochs"]), g.sched["p"], g.sched["sizes"],
-                                                     g.sched["presentations"])):
+        for g in sorted(
+            fam.members,
+            key=lambda g: (sum(g.sched["epochs"]), g.sched["p"], g.sched["sizes"], g.sched["presentations"]),
+        ):
             st, partner, terms = stats[g.schedule], matched_partner(groups, g), schedule_terms(g.sched)
             pst = summarize(partner.values("heldout").values()) if partner else {"n": 0, "mean": None}
-            row = {"topology": fam.topology, "family": fam.name, "setting": fam.label(g),
-                   "p": terms["p"], "n1": terms["n_1"], "growth": terms["n_i growth"],
-                   "profile": terms["N_i profile"], "total_epochs": terms["N = ΣN_i"],
-                   "sizes": " ".join(map(str, g.sched["sizes"])),
-                   "epochs": " ".join(map(str, g.sched["epochs"])),
-                   "presentations": g.sched["presentations"], "n": st["n"], "heldout_nm_mean": st["mean"],
-                   "heldout_nm_ci_lo": st["ci95"][0], "heldout_nm_ci_hi": st["ci95"][1],
-                   "within_10pct_of_family_best": None if best is None or st["mean"] is None
-                   else st["mean"] <= (1 + TOLERANCE) * best,
-                   "matched": partner.schedule if partner else None,
-                   "matched_presentations": partner.sched["presentations"] if partner else None,
-                   "matched_n": pst["n"], "matched_heldout_nm_mean": pst["mean"],
-                   "over_matched": st["mean"] / pst["mean"] if st["mean"] and pst["mean"] else None}
+            row = {
+                "topology": fam.topology,
+                "family": fam.name,
+                "setting": fam.label(g),
+                "p": terms["p"],
+                "n1": terms["n_1"],
+                "growth": terms["n_i growth"],
+                "profile": terms["N_i profile"],
+                "total_epochs": terms["N = ΣN_i"],
+                "sizes": " ".join(map(str, g.sched["sizes"])),
+                "epochs": " ".join(map(str, g.sched["epochs"])),
+                "presentations": g.sched["presentations"],
+                "n": st["n"],
+                "heldout_nm_mean": st["mean"],
+                "heldout_nm_ci_lo": st["ci95"][0],
+                "heldout_nm_ci_hi": st["ci95"][1],
+                "within_10pct_of_family_best": None
+                if best is None or st["mean"] is None
+                else st["mean"] <= (1 + TOLERANCE) * best,
+                "matched": partner.schedule if partner else None,
+                "matched_presentations": partner.sched["presentations"] if partner else None,
+                "matched_n": pst["n"],
+                "matched_heldout_nm_mean": pst["mean"],
+                "over_matched": st["mean"] / pst["mean"] if st["mean"] and pst["mean"] else None,
+            }
             rows.append(row)
     return rows
 
@@ -195,8 +242,9 @@ def _to_target(r: dict) -> str:
     fastest, med = r["presentations_to_target_fastest"], r["presentations_to_target_median"]
     if fastest == math.inf:
         return f"0/{r['settings']} reach"
-    return (f"{r['reach_settings']}/{r['settings']} reach; fastest {fastest:,.0f}; median "
-            + ("never" if med == math.inf else f"{med:,.0f}"))
+    return f"{r['reach_settings']}/{r['settings']} reach; fastest {fastest:,.0f}; median " + (
+        "never" if med == math.inf else f"{med:,.0f}"
+    )
 
 
 def _resolved(r: dict) -> bool:
@@ -216,37 +264,84 @@ def _within(r: dict) -> str:
 
 
 def sensitivity_markdown(rows: list[dict]) -> str:
-    head = ["family", "topology", "settings", "swept (ranges)", "presentations", "best (setting)", "median",
-            "worst (setting)", "worst ÷ best", "within 10 % of best", "level: best ÷ best at that cost",
-            "worst − best, paired [95 % CI]", "±95 %", "time to conventional's final",
-            "diverged settings (replicas)"]
+    head = [
+        "family",
+        "topology",
+        "settings",
+        "swept (ranges)",
+        "presentations",
+        "best (setting)",
+        "median",
+        "worst (setting)",
+        "worst ÷ best",
+        "within 10 % of best",
+        "level: best ÷ best at that cost",
+        "worst − best, paired [95 % CI]",
+        "±95 %",
+        "time to conventional's final",
+        "diverged settings (replicas)",
+    ]
     body = []
     for r in rows:
         lo, hi = r["presentations_min"], r["presentations_max"]
         cost = f"{lo:,}" if lo == hi else f"{lo:,}–{hi:,}"
-        body.append([
-            r["family"], r["topology"], str(r["settings"]), r["swept_terms"] or "—", cost,
-            f"{_nm(r['best_heldout_nm'])} ({r['best_setting']})", _nm(r["median_heldout_nm"]),
-            f"{_nm(r['worst_heldout_nm'])} ({r['worst_setting']})", _ratio(r["worst_over_best"]), _within(r),
-            _level(r["level"]), _spread(r),
-            "n/a" if r["ci95_half_width_pct"] is None else f"{r['ci95_half_width_pct']:.1f} %",
-            _to_target(r), f"{r['diverged_settings']} ({r['diverged_replicas']})"])
+        body.append(
+            [
+                r["family"],
+                r["topology"],
+                str(r["settings"]),
+                r["swept_terms"] or "—",
+                cost,
+                f"{_nm(r['best_heldout_nm'])} ({r['best_setting']})",
+                _nm(r["median_heldout_nm"]),
+                f"{_nm(r['worst_heldout_nm'])} ({r['worst_setting']})",
+                _ratio(r["worst_over_best"]),
+                _within(r),
+                _level(r["level"]),
+                _spread(r),
+                "n/a" if r["ci95_half_width_pct"] is None else f"{r['ci95_half_width_pct']:.1f} %",
+                _to_target(r),
+                f"{r['diverged_settings']} ({r['diverged_replicas']})",
+            ]
+        )
     return table(head, body)
 
 
 def versus_matched_markdown(rows: list[dict]) -> str:
     """Each staged setting beside conventional training at the same cost."""
-    head = ["family", "topology", "p", "n_i", "N_i", "N", "presentations", "held-out RMS Nm [95 % CI]",
-            "within 10 % of family best", "budget-matched conventional Nm", "÷ budget-matched"]
+    head = [
+        "family",
+        "topology",
+        "p",
+        "n_i",
+        "N_i",
+        "N",
+        "presentations",
+        "held-out RMS Nm [95 % CI]",
+        "within 10 % of family best",
+        "budget-matched conventional Nm",
+        "÷ budget-matched",
+    ]
     body = []
     for r in rows:
-        ci = ("" if r["heldout_nm_ci_lo"] is None
-              else f" [{fmt(r['heldout_nm_ci_lo'])}, {fmt(r['heldout_nm_ci_hi'])}]")
+        ci = "" if r["heldout_nm_ci_lo"] is None else f" [{fmt(r['heldout_nm_ci_lo'])}, {fmt(r['heldout_nm_ci_hi'])}]"
         within = {True: "yes", False: "no", None: "n/a"}[r["within_10pct_of_family_best"]]
         matched = "none at this cost" if r["matched"] is None else fmt(r["matched_heldout_nm_mean"])
-        body.append([r["family"], r["topology"], str(r["p"]), r["sizes"].replace(" ", ", "),
-                     r["epochs"].replace(" ", ", "), str(r["total_epochs"]), f"{r['presentations']:,}",
-                     fmt(r["heldout_nm_mean"]) + ci, within, matched, _ratio(r["over_matched"])])
+        body.append(
+            [
+                r["family"],
+                r["topology"],
+                str(r["p"]),
+                r["sizes"].replace(" ", ", "),
+                r["epochs"].replace(" ", ", "),
+                str(r["total_epochs"]),
+                f"{r['presentations']:,}",
+                fmt(r["heldout_nm_mean"]) + ci,
+                within,
+                matched,
+                _ratio(r["over_matched"]),
+            ]
+        )
     return table(head, body)
 
 
@@ -262,15 +357,20 @@ def _span(values: list[float], show) -> str:
 
 def _schedule_alone(rows: list[dict], sel: dict) -> str:
     """Selective presentation's spread over p, N_i, n_i alone, from its rows at fixed other parameters."""
-    parts = [r for r in rows if r["topology"] == sel["topology"] and r["kind"] == FIXED
-             and r["family"].startswith(SELECTIVE + " at ")]
+    parts = [
+        r
+        for r in rows
+        if r["topology"] == sel["topology"] and r["kind"] == FIXED and r["family"].startswith(SELECTIVE + " at ")
+    ]
     if not parts:
         return ""
     fixed = ", ".join(k for k in sel["swept_keys"].split() if not k.startswith(SCHEDULE))
     ratios = _span([_inf(r["worst_over_best"]) for r in parts], _ratio)
     within = _span([100 * r["within_10pct_fraction"] for r in parts], lambda x: f"{x:.0f}") + " %"
-    return (f"With {fixed} held fixed ({len(parts)} values), selective presentation's spread over the "
-            f"schedule alone is worst ÷ best {ratios}, with {within} of settings within 10 % of the best. ")
+    return (
+        f"With {fixed} held fixed ({len(parts)} values), selective presentation's spread over the "
+        f"schedule alone is worst ÷ best {ratios}, with {within} of settings within 10 % of the best. "
+    )
 
 
 def _reading(sel: dict, rivals: list[dict]) -> str:
@@ -280,13 +380,11 @@ def _reading(sel: dict, rivals: list[dict]) -> str:
     if ratio_ok and within_ok:
         return "holds: selective presentation is at least as insensitive by both measures"
     if not ratio_ok and not within_ok:
-        return ("does not hold: by each measure of spread some rival is less sensitive than selective "
-                "presentation")
+        return "does not hold: by each measure of spread some rival is less sensitive than selective presentation"
     better, worse = ("worst ÷ best", "the share within 10 %")
     if not ratio_ok:
         better, worse = worse, better
-    return (f"holds only in part: selective presentation is at least as insensitive by {better}, not by "
-            f"{worse}")
+    return f"holds only in part: selective presentation is at least as insensitive by {better}, not by {worse}"
 
 
 def _good(r: dict) -> bool:
@@ -306,56 +404,79 @@ def _answer(sel: dict, primary: dict, at: str, rivals: list[dict]) -> str:
     """The paper's sentence answered in plain words: selective presentation's spread against that of the
     rivals that reach the best level at their cost; the others' spread set aside, with why."""
     good, bad = [r for r in rivals if _good(r)], [r for r in rivals if not _good(r)]
-    mine = (f"elective presentation{at} varies by worst ÷ best {_ratio(primary['worst_over_best'])}, with "
-            f"{_within(primary)} of its settings within 10 % of its best")
+    mine = (
+        f"elective presentation{at} varies by worst ÷ best {_ratio(primary['worst_over_best'])}, with "
+        f"{_within(primary)} of its settings within 10 % of its best"
+    )
     if not rivals:
-        return (f"S{mine}; no rival family (one-stage training, an optimizer swept over its parameters) has "
-                "more than one setting, so the comparison the sentence makes cannot be made here.")
+        return (
+            f"S{mine}; no rival family (one-stage training, an optimizer swept over its parameters) has "
+            "more than one setting, so the comparison the sentence makes cannot be made here."
+        )
     if good:
         n = len(good)
         theirs = "; ".join(f"{r['family']} {_ratio(r['worst_over_best'])} with {_within(r)}" for r in good)
         who = _plural(n, "rival that reaches", "rivals that reach")
-        text = (f"Over these ranges, compared with the {who} the best level at {_plural(n, 'its', 'their')} "
-                f"cost, the sentence {_reading(primary, good)}. S{mine}, against {theirs}.")
+        text = (
+            f"Over these ranges, compared with the {who} the best level at {_plural(n, 'its', 'their')} "
+            f"cost, the sentence {_reading(primary, good)}. S{mine}, against {theirs}."
+        )
     else:
-        text = ("No rival family comes within 1.1 × of the best at its cost anywhere in its range, so none "
-                f"is a working alternative whose sensitivity could be compared; s{mine}.")
+        text = (
+            "No rival family comes within 1.1 × of the best at its cost anywhere in its range, so none "
+            f"is a working alternative whose sensitivity could be compared; s{mine}."
+        )
     if bad:
         n = len(bad)
         levels = _span([_inf(r["level"]) for r in bad], _level)
         spreads = _span([_inf(r["worst_over_best"]) for r in bad], _ratio)
         who = _plural(n, "rival family never gets", "rival families never get")
         its = _plural(n, "its", "their")
-        text += (f" {'The other' if good else 'The'} {n} {who} within 1.1 × of the best at {its} cost (best "
-                 f"{levels} × it): bad over the whole range, so {its} spread ({spreads}) is not "
-                 "insensitivity.")
+        text += (
+            f" {'The other' if good else 'The'} {n} {who} within 1.1 × of the best at {its} cost (best "
+            f"{levels} × it): bad over the whole range, so {its} spread ({spreads}) is not "
+            "insensitivity."
+        )
     if not _good(sel):
-        text += (f" Selective presentation's own best is {_level(sel['level'])} × the best at its cost "
-                 f"({sel['level_reference_family']}).")
+        text += (
+            f" Selective presentation's own best is {_level(sel['level'])} × the best at its cost "
+            f"({sel['level_reference_family']})."
+        )
     return text
 
 
-def _spread_line(sel: dict | None, total: dict | None, matched: dict | None, rivals: list[dict],
-                 others: list[dict]) -> str:
-    parts = [f"{r['family']}: {_ratio(r['worst_over_best'])}, {_within(r)}"
-             for r in (sel, total, matched, *others) if r is not None]
+def _spread_line(
+    sel: dict | None, total: dict | None, matched: dict | None, rivals: list[dict], others: list[dict]
+) -> str:
+    parts = [
+        f"{r['family']}: {_ratio(r['worst_over_best'])}, {_within(r)}"
+        for r in (sel, total, matched, *others)
+        if r is not None
+    ]
     if rivals:
-        parts.append(f"rivals at a fixed cost: {_span([_inf(r['worst_over_best']) for r in rivals], _ratio)} "
-                     f"({_span([100 * r['within_10pct_fraction'] for r in rivals], lambda x: f'{x:.0f}')} %)")
-    return ("- *Spread* (how much the error depends on where in its range a family is set: worst ÷ best, and "
-            "the settings within 10 % of its own best): " + "; ".join(parts) + ".")
+        parts.append(
+            f"rivals at a fixed cost: {_span([_inf(r['worst_over_best']) for r in rivals], _ratio)} "
+            f"({_span([100 * r['within_10pct_fraction'] for r in rivals], lambda x: f'{x:.0f}')} %)"
+        )
+    return (
+        "- *Spread* (how much the error depends on where in its range a family is set: worst ÷ best, and "
+        "the settings within 10 % of its own best): " + "; ".join(parts) + "."
+    )
 
 
 def _level_line(main: list[dict], rivals: list[dict]) -> str:
-    text = ("- *Level* (how good a family is at its best: its best ÷ the best of any family at that cost, "
-            "1.00 = nothing does better there): "
-            + "; ".join(f"{r['family']}: {_level(r['level'])}" for r in main) + ".")
+    text = (
+        "- *Level* (how good a family is at its best: its best ÷ the best of any family at that cost, "
+        "1.00 = nothing does better there): " + "; ".join(f"{r['family']}: {_level(r['level'])}" for r in main) + "."
+    )
     bad = [r for r in rivals if not _good(r)]
     if bad:
         flattest = min(bad, key=lambda r: _inf(r["worst_over_best"]))
-        text += (f" A small spread far above the best level is not insensitivity: {flattest['family']} has "
-                 f"worst ÷ best {_ratio(flattest['worst_over_best'])}, but even its best is "
-                 f"{_level(flattest['level'])} × the best at its cost.")
+        text += (
+            f" A small spread far above the best level is not insensitivity: {flattest['family']} has "
+            f"worst ÷ best {_ratio(flattest['worst_over_best'])}, but even its best is "
+            f"{_level(flattest['level'])} × the best at its cost."
+        )
     return text
 
 
@@ -364,31 +485,48 @@ def _cost_line(sel: dict, total: dict | None, matched: dict | None, versus: list
     at the same cost."""
     text = ""
     if total is not None:
-        text += (f"Over the total epochs N as well, selective presentation spreads "
-                 f"{_ratio(sel['worst_over_best'])} against {_ratio(total['worst_over_best'])} at the "
-                 "paper's N: N changes the cost, and a longer run is better for any method")
-        text += (f"; conventional SGD stopped at the same budgets ({matched['presentations_min']:,}–"
-                 f"{matched['presentations_max']:,} t) spreads {_ratio(matched['worst_over_best'])}. "
-                 if matched else ". ")
-    pairs = [r for r in versus if r["topology"] == sel["topology"] and r["family"] == sel["family"]
-             and r["over_matched"] is not None]
+        text += (
+            f"Over the total epochs N as well, selective presentation spreads "
+            f"{_ratio(sel['worst_over_best'])} against {_ratio(total['worst_over_best'])} at the "
+            "paper's N: N changes the cost, and a longer run is better for any method"
+        )
+        text += (
+            f"; conventional SGD stopped at the same budgets ({matched['presentations_min']:,}–"
+            f"{matched['presentations_max']:,} t) spreads {_ratio(matched['worst_over_best'])}. "
+            if matched
+            else ". "
+        )
+    pairs = [
+        r
+        for r in versus
+        if r["topology"] == sel["topology"] and r["family"] == sel["family"] and r["over_matched"] is not None
+    ]
     if pairs:
         lower = sum(r["over_matched"] < 1 for r in pairs)
-        text += ("Set against conventional training at the same cost, each of its settings has "
-                 f"{_span([r['over_matched'] for r in pairs], _ratio)} × conventional's error ({lower} of "
-                 f"{len(pairs)} lower on the mean; whether each difference exceeds the seeds' noise is in "
-                 "the selection verdict).")
+        text += (
+            "Set against conventional training at the same cost, each of its settings has "
+            f"{_span([r['over_matched'] for r in pairs], _ratio)} × conventional's error ({lower} of "
+            f"{len(pairs)} lower on the mean; whether each difference exceeds the seeds' noise is in "
+            "the selection verdict)."
+        )
     return f"- *Cost*: {text.strip()}" if text else ""
 
 
 def _noise_line(main: list[dict]) -> str:
     resolved = [r for r in main if _resolved(r)]
     rest = [r for r in main if not _resolved(r)]
-    which = (f" (all but {_names(rest)})" if rest and len(resolved) > len(rest)
-             else f" ({_names(resolved)})" if resolved else "")
-    return (f"- *Noise*: worst − best, paired by seed, has a 95 % interval above 0 for {len(resolved)} of "
-            f"{len(main)} families{which}; where it does not, the family's spread is within the seeds' "
-            "noise.")
+    which = (
+        f" (all but {_names(rest)})"
+        if rest and len(resolved) > len(rest)
+        else f" ({_names(resolved)})"
+        if resolved
+        else ""
+    )
+    return (
+        f"- *Noise*: worst − best, paired by seed, has a 95 % interval above 0 for {len(resolved)} of "
+        f"{len(main)} families{which}; where it does not, the family's spread is within the seeds' "
+        "noise."
+    )
 
 
 def verdict_text(rows: list[dict], topology: str, versus: list[dict] | None = None) -> str:
@@ -400,8 +538,7 @@ def verdict_text(rows: list[dict], topology: str, versus: list[dict] | None = No
     if not main:
         return f"**{topology}.** No family with more than one setting."
     sel = next((r for r in main if r["family"] == SELECTIVE), None)
-    total = next((r for r in here if r["kind"] == PAPER_TOTAL and r["family"].startswith(SELECTIVE + " at ")),
-                 None)
+    total = next((r for r in here if r["kind"] == PAPER_TOTAL and r["family"].startswith(SELECTIVE + " at ")), None)
     matched = next((r for r in main if r["family"].endswith(", " + BUDGET_MATCHED)), None)
     # the one-stage speed-up techniques at a fixed cost, not other orders nor the budget-matched reference
     rivals = [r for r in main if not r["staged"] and r is not matched]
@@ -410,8 +547,9 @@ def verdict_text(rows: list[dict], topology: str, versus: list[dict] | None = No
     if sel is None:
         answer = "No selective presentation family with more than one setting: the sentence is not tested."
     elif not any(k.startswith(SCHEDULE) for k in sel["swept_keys"].split()):
-        answer = ("Selective presentation's swept keys include none of p, N_i, n_i (schedule.*): the "
-                  "sentence is not tested.")
+        answer = (
+            "Selective presentation's swept keys include none of p, N_i, n_i (schedule.*): the sentence is not tested."
+        )
     else:
         at = " at the paper's N = ΣN_i = 150 (over p, n_i and the N_i profile)" if total else ""
         answer = _answer(sel, total or sel, at, rivals) + " " + _schedule_alone(rows, sel)
@@ -422,10 +560,13 @@ def verdict_text(rows: list[dict], topology: str, versus: list[dict] | None = No
 
 def ranges_text(rows: list[dict], topology: str) -> str:
     """The ranges the verdict depends on, one line per family."""
-    lines = [f"- {r['family']}: {r['swept_terms'] or '—'}" for r in rows
-             if r["topology"] == topology and r["kind"] == FAMILY]
-    return (f"The verdict on {topology} depends on these ranges (a wider range can only raise a family's "
-            "worst ÷ best, a narrower one can hide a cliff):\n\n" + "\n".join(lines))
+    lines = [
+        f"- {r['family']}: {r['swept_terms'] or '—'}" for r in rows if r["topology"] == topology and r["kind"] == FAMILY
+    ]
+    return (
+        f"The verdict on {topology} depends on these ranges (a wider range can only raise a family's "
+        "worst ÷ best, a narrower one can hide a cliff):\n\n" + "\n".join(lines)
+    )
 
 
 def section(ctx: Context) -> Section | None:
@@ -435,15 +576,16 @@ def section(ctx: Context) -> Section | None:
     versus = versus_matched_rows(ctx.groups, ctx.topologies)
     here = [t for t in ctx.topologies if any(r["topology"] == t for r in rows)]
     verdicts = "\n\n".join(f"{verdict_text(rows, t, versus)}\n\n{ranges_text(rows, t)}" for t in here)
-    title = ("Sensitivity: is selective presentation \"not very sensitive to p, N_i and n_i\"? "
-             "(final held-out RMS, Nm)")
+    title = 'Sensitivity: is selective presentation "not very sensitive to p, N_i and n_i"? (final held-out RMS, Nm)'
     blocks = [verdicts, sensitivity_markdown(rows), NOTE]
     csv = {"sensitivity.csv": rows}
     if versus:
-        blocks += ["Each setting of selective presentation (and of any other staged family) beside "
-                   "conventional training stopped at the same presentations (its budget-matched partner, "
-                   "the same other settings): the cost is the same, so the ratio shows what the choice of p, "
-                   "n_i and N_i does beyond buying more or fewer presentations.",
-                   versus_matched_markdown(versus)]
+        blocks += [
+            "Each setting of selective presentation (and of any other staged family) beside "
+            "conventional training stopped at the same presentations (its budget-matched partner, "
+            "the same other settings): the cost is the same, so the ratio shows what the choice of p, "
+            "n_i and N_i does beyond buying more or fewer presentations.",
+            versus_matched_markdown(versus),
+        ]
         csv["sensitivity_vs_matched.csv"] = versus
     return Section(title, blocks, csv=csv)

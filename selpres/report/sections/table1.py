@@ -37,36 +37,54 @@ def table1_rows(groups, topologies, methods) -> list[dict]:
                 continue
             s, w = g.sched, g.wall()
             row.update(
-                p=s["p"], sizes=" ".join(map(str, s["sizes"])), epochs=" ".join(map(str, s["epochs"])),
+                p=s["p"],
+                sizes=" ".join(map(str, s["sizes"])),
+                epochs=" ".join(map(str, s["epochs"])),
                 extra_presentations=sum(s.get("extra_presentations") or [0]),
-                presentations=s["presentations"], paper_presentations=PAPER.get(m, {}).get("presentations"),
-                cost_ratio_vs_equal_epochs=s["cost_ratio"], paper_setting=paper_setting(g.schedule, s),
-                replicas=replicas_text(g), n_complete=len(g.complete_seeds), n_diverged=g.n_diverged,
-                **g.engines(), wall_train_per_replica_s=w["per_replica"], wall_train_job_s=w["train"],
-                wall_total_job_s=w["total"], paper_rms=PAPER.get(m, {}).get("rms", {}).get(t),
+                presentations=s["presentations"],
+                paper_presentations=PAPER.get(m, {}).get("presentations"),
+                cost_ratio_vs_equal_epochs=s["cost_ratio"],
+                paper_setting=paper_setting(g.schedule, s),
+                replicas=replicas_text(g),
+                n_complete=len(g.complete_seeds),
+                n_diverged=g.n_diverged,
+                **g.engines(),
+                wall_train_per_replica_s=w["per_replica"],
+                wall_train_job_s=w["train"],
+                wall_total_job_s=w["total"],
+                paper_rms=PAPER.get(m, {}).get("rms", {}).get(t),
             )
             for set_, _ in SETS:
                 for unit, _ in UNITS:
                     st = summarize(g.values(set_, unit).values())
                     k = f"{set_}_{unit}"
-                    row.update({f"{k}_n": st["n"], f"{k}_mean": st["mean"], f"{k}_std": st["std"],
-                                f"{k}_ci_lo": st["ci95"][0], f"{k}_ci_hi": st["ci95"][1]})
+                    row.update(
+                        {
+                            f"{k}_n": st["n"],
+                            f"{k}_mean": st["mean"],
+                            f"{k}_std": st["std"],
+                            f"{k}_ci_lo": st["ci95"][0],
+                            f"{k}_ci_hi": st["ci95"][1],
+                        }
+                    )
             rows.append(row)
     return rows
 
 
 def stat_of(row: dict, k: str) -> dict:
     """The summarize()-shaped statistics of column group ``k`` (e.g. "heldout_nm") of a Table 1 row."""
-    return {"mean": row.get(f"{k}_mean"), "std": row.get(f"{k}_std"),
-            "ci95": [row.get(f"{k}_ci_lo"), row.get(f"{k}_ci_hi")]}
+    return {
+        "mean": row.get(f"{k}_mean"),
+        "std": row.get(f"{k}_std"),
+        "ci95": [row.get(f"{k}_ci_lo"), row.get(f"{k}_ci_hi")],
+    }
 
 
 def _paper_time(r: dict) -> str:
     paper = PAPER.get(r["method"])
     if not paper:
         return "not in paper"
-    return f"{paper['presentations']:,}t" + (f" (printed {paper['printed']})" if r["method"] == "conventional"
-                                             else "")
+    return f"{paper['presentations']:,}t" + (f" (printed {paper['printed']})" if r["method"] == "conventional" else "")
 
 
 def _epochs(r: dict) -> str:
@@ -80,9 +98,12 @@ def _wall(r: dict) -> str:
 
 def _rms_cells() -> list[tuple]:
     """(label, cell) for our RMS rows: each set and unit, mean ± std then the 95 % interval."""
-    return [(f"{sname} RMS {uname}, {what}", lambda r, k=f"{set_}_{unit}", show=show: show(stat_of(r, k)))
-            for set_, sname in SETS for unit, uname in UNITS
-            for what, show in (("mean ± std", mean_std), ("95 % CI", ci))]
+    return [
+        (f"{sname} RMS {uname}, {what}", lambda r, k=f"{set_}_{unit}", show=show: show(stat_of(r, k)))
+        for set_, sname in SETS
+        for unit, uname in UNITS
+        for what, show in (("mean ± std", mean_std), ("95 % CI", ci))
+    ]
 
 
 def _cells() -> list[tuple]:
@@ -103,6 +124,7 @@ def _cells() -> list[tuple]:
 
 def table1_markdown(rows: list[dict]) -> str:
     """The paper's layout: attributes down the side, one column per (method, topology)."""
+
     def cell(r, label, show):
         if r.get("presentations") is None:  # no results for this column
             return r.get("replicas", "") if label == "replicas complete" else "—"
@@ -120,8 +142,10 @@ def section(ctx: Context) -> Section:
     if ctx.table1_like:
         return Section(title, [table1_markdown(rows), FOOTNOTE], csv={"table1.csv": rows})
     tops = f"{len(ctx.topologies)} topolog{'ies' if len(ctx.topologies) > 1 else 'y'}"
-    note = (f"Not laid out: this sweep is a study of parameters, not Table 1's grid of the paper's methods "
-            f"({len(ctx.methods)} methods × {tops}, labelled by the settings they sweep), so Table 1's "
-            "layout would have one column each. `table1.csv` holds every column (schedule, cost, wall time, "
-            "replicas, mean / std / 95 % interval of each metric); the sections above read them.")
+    note = (
+        f"Not laid out: this sweep is a study of parameters, not Table 1's grid of the paper's methods "
+        f"({len(ctx.methods)} methods × {tops}, labelled by the settings they sweep), so Table 1's "
+        "layout would have one column each. `table1.csv` holds every column (schedule, cost, wall time, "
+        "replicas, mean / std / 95 % interval of each metric); the sections above read them."
+    )
     return Section(title, [note], csv={"table1.csv": rows})

@@ -11,10 +11,14 @@ from selpres.report.markdown import diff_text, fmt, pvalues_text, table
 
 def method_note(rows: list[dict], options: Options) -> str:
     """How the readings were reached: the three readings, the margin used, the families and Holm."""
-    sizes = ", ".join(f"{max((r.get(f'{s}_family_size', 0) for r in rows), default=0)} {name}"
-                      for s, name in SETS[::-1])
-    adjusted = ("Holm-adjusted within each family (`--holm`)" if options.holm
-                else "not adjusted for multiplicity (`--holm` applies Holm's step-down correction)")
+    sizes = ", ".join(
+        f"{max((r.get(f'{s}_family_size', 0) for r in rows), default=0)} {name}" for s, name in SETS[::-1]
+    )
+    adjusted = (
+        "Holm-adjusted within each family (`--holm`)"
+        if options.holm
+        else "not adjusted for multiplicity (`--holm` applies Holm's step-down correction)"
+    )
     return (
         f"Three readings, never merged: *better/worse by …* when the paired t-test rejects Δ = 0 "
         f"(p < {ALPHA:g}: the 95 % t-interval excludes 0); *equivalent within ±m* when two one-sided tests "
@@ -36,14 +40,22 @@ NOTE = (
 def verdict_markdown(rows: list[dict], options: Options = Options()) -> str:
     head = ["topology", "comparison", "cost ratio", "pairs"]
     for _, name in SETS[::-1]:  # held-out first: the paper's claim is about generalisation
-        head += [f"{name} Δ Nm, mean [95 % CI]", f"{name} ±m Nm",
-                 f"{name} p: t / TOST" + (" (Holm)" if options.holm else ""), f"{name} reading"]
+        head += [
+            f"{name} Δ Nm, mean [95 % CI]",
+            f"{name} ±m Nm",
+            f"{name} p: t / TOST" + (" (Holm)" if options.holm else ""),
+            f"{name} reading",
+        ]
     body = []
     for r in rows:
         cells = [r["topology"], r["comparison"], fmt(r.get("cost_ratio"), 3), str(r.get("heldout_pairs", 0))]
         for set_, _ in SETS[::-1]:
-            cells += [diff_text(r, set_), fmt(r.get(f"{set_}_margin")), pvalues_text(r, set_, options.holm),
-                      r.get(f"reading_{set_}", "")]
+            cells += [
+                diff_text(r, set_),
+                fmt(r.get(f"{set_}_margin")),
+                pvalues_text(r, set_, options.holm),
+                r.get(f"reading_{set_}", ""),
+            ]
         body.append(cells)
     return table(head, body)
 
@@ -55,12 +67,17 @@ def section(ctx: Context) -> Section:
     title = f"Verdict: {REFERENCE} − other, paired by seed (final RMS, Nm)"
     if not ctx.table1_like:
         n = len(comparisons(ctx.methods)) * len(ctx.topologies)
-        return Section(title, [
-            f"Not computed: this sweep is a study of parameters, where {REFERENCE} against every other "
-            f"method would be {n:,} comparisons across different settings and costs. The comparisons a study "
-            "is about are each staged setting against conventional training at the same cost (the selection "
-            "verdict, shown when the sweep has more than one budget) and each family's spread and level (the "
-            "sensitivity section, shown when a family has more than one setting)."])
+        return Section(
+            title,
+            [
+                f"Not computed: this sweep is a study of parameters, where {REFERENCE} against every other "
+                f"method would be {n:,} comparisons across different settings and costs. The comparisons a study "
+                "is about are each staged setting against conventional training at the same cost (the selection "
+                "verdict, shown when the sweep has more than one budget) and each family's spread and level (the "
+                "sensitivity section, shown when a family has more than one setting)."
+            ],
+        )
     rows = verdict_rows(ctx.groups, ctx.topologies, ctx.methods, ctx.options)
-    return Section(title, [verdict_markdown(rows, ctx.options), method_note(rows, ctx.options), NOTE],
-                   csv={"verdict.csv": rows})
+    return Section(
+        title, [verdict_markdown(rows, ctx.options), method_note(rows, ctx.options), NOTE], csv={"verdict.csv": rows}
+    )
