@@ -316,11 +316,6 @@ class Scaler:
         return self._inv(Ys, self.y_min, self.y_max)
 
 
-def rms_overall_nm(pred_scaled: torch.Tensor, Y_true_Nm: torch.Tensor, scaler: Scaler) -> torch.Tensor:
-    """The overall Nm entry of ``rms_errors`` alone (what a learning-curve point needs), shape ``[...]``."""
-    return (scaler.inverse_y(pred_scaled) - Y_true_Nm.to(pred_scaled)).square().mean((-2, -1)).sqrt()
-
-
 def metric_names(n_outputs: int) -> tuple[str, ...]:
     """``overall, tau1..tauK``: the per-output keys of ``rms_errors`` (output k is "tau<k>" whatever its
     column is called, so results.json reads alike for every arm and data file)."""

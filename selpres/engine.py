@@ -333,17 +333,6 @@ class NativeEngine:
         self.buf = self._pack(state["momentum"])
 
 
-def native_available(sizes=(6, 13, 2)) -> bool:
-    """Whether the native kernel can be built and loaded here (for topology ``sizes``)."""
-    from selpres import _kernels
-
-    try:
-        _kernels.load(sizes)
-        return True
-    except _kernels.KernelUnavailable:
-        return False
-
-
 def make_engine(
     name: str, sizes, params, lr: float, momentum: float, batch_size: int, threads: int | None = None
 ) -> Engine:

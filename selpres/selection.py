@@ -195,19 +195,7 @@ class StageSelection:
         return selection_charge(self.schedule.n - kept, self.cost_fraction)
 
 
-def stage_selection(
-    kind: str,
-    schedule: Schedule,
-    seeds: list[int],
-    X_raw: torch.Tensor,
-    bins: int,
-    X: torch.Tensor,
-    Y: torch.Tensor,
-    cost_fraction: float,
-    samplers: list[SelectivePresentationSampler],
-) -> StageSelection | None:
-    """The job's stage-wise selection, or None for an order fixed before training (nothing to choose or
-    charge)."""
-    if kind not in STAGEWISE:
-        return None
-    return StageSelection(kind, schedule, seeds, X_raw, bins, X, Y, cost_fraction, samplers)
+def stage_selection(kind: str, *args) -> StageSelection | None:
+    """The job's stage-wise selection (``StageSelection(kind, *args)``), or None for an order fixed before
+    training (nothing to choose or charge)."""
+    return StageSelection(kind, *args) if kind in STAGEWISE else None
