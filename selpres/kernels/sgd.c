@@ -38,6 +38,8 @@
 
 static const int64_t S[NL + 1] = {SIZES};
 
+#define PF 8  /* prefetch distance in presentations (see train_groups) */
+
 #define LD(p) _mm256_loadu_pd(p)
 #define ST(p, v) _mm256_storeu_pd((p), (v))
 
@@ -129,6 +131,18 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *
         if (B > 1) memset(Gb, 0, (size_t)ni * P_TOTAL * 32);
         for (int64_t k = 0; k < bs; k++) {
             const int64_t j = s + k;
+            /* prefetch the rows presented PF steps ahead: on sets larger than the caches every row is a
+               random fetch from memory, which would otherwise stall each step (issue 11, item 9) */
+            if (j + PF < m) {
+#pragma GCC unroll 4
+                EACH for (int q = 0; q < 4; q++) {
+                    const int64_t r = ord[u][q][j + PF];
+                    __builtin_prefetch(X + r * nin);
+                    __builtin_prefetch(X + r * nin + nin - 1);
+                    __builtin_prefetch(Y + r * nout);
+                    __builtin_prefetch(Y + r * nout + nout - 1);
+                }
+            }
             /* forward: inputs of the 4 lanes' patterns, then each layer's sigmoid units */
 #pragma GCC unroll 4
             EACH {
