@@ -50,6 +50,7 @@ LANES = 4
 INTERLEAVE = 2  # groups of 4 replicas advanced together in one instruction stream (see the C comment)
 
 SOURCE = Path(__file__).resolve().parent / "kernels" / "sgd.c"  # compiled in place: errors name its lines
+SHUFFLE_SOURCE = SOURCE.with_name("shuffle.c")  # the per-epoch shuffles (selpres.sampler), any topology
 
 CFLAGS = ["-O3", "-march=native", "-fPIC", "-shared", "-std=c11"]
 LIBS = ["-lm"]
@@ -63,6 +64,7 @@ LIBS = ["-lm"]
 # of 1002 patterns at R = 5: 366 vs 478 us. On a busy machine the pool did not pay below 4e6.
 MIN_THREAD_WORK = 1 << 20
 TRAIN_WORK_PER_PARAMETER = 3
+SHUFFLE_WORK_PER_ELEMENT = 8  # a hash, a bucket, an insertion, a gather: ~8 multiply-adds' time (measured)
 SCORE_BLOCK = 1024  # patterns per partial sum of squared_errors (fixed: results never depend on threads)
 COMPILE_TIMEOUT = 300  # seconds; a time-out (a busy machine) is reported and retried by a later load()
 REQUIRED_CPU_FEATURES = ("avx2", "fma")  # what the kernel's intrinsics need (sgd.c stops without them)
@@ -130,53 +132,15 @@ def check_cpu(flags: frozenset[str]) -> None:
         raise KernelUnavailable(f"no AVX2/FMA: this CPU lacks {', '.join(missing)}{seen}")
 
 
-class Kernel:
-    """One topology's compiled library: :meth:`train` (an epoch), :meth:`forward` (evaluation),
-    :meth:`squared_errors` (scoring) and :meth:`finite` (the divergence check)."""
+class _Library:
+    """A compiled library whose calls are split into chunks run on a thread pool (ctypes releases the
+    GIL, so they run in parallel)."""
 
     def __init__(self, path: Path):
         self.path = path
         self.lib = ctypes.CDLL(str(path))
-        i64, dp, lp, c_int = ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int
-        self._train = self.lib.selpres_train
-        self._train.argtypes = [
-            c_int,
-            lp,
-            i64,
-            i64,
-            i64,
-            dp,
-            dp,
-            dp,
-            dp,
-            lp,
-            i64,
-            i64,
-            ctypes.c_double,
-            ctypes.c_double,
-            dp,
-        ]
-        self._train.restype = c_int
-        self._forward = self.lib.selpres_forward
-        self._forward.argtypes = [c_int, lp, i64, i64, i64, i64, i64, dp, dp, i64, dp]
-        self._forward.restype = c_int
-        self._sqerr = self.lib.selpres_sqerr
-        self._sqerr.argtypes = [c_int, lp, i64, i64, i64, i64, i64, i64, dp, dp, dp, i64, i64, dp]
-        self._sqerr.restype = c_int
-        self._finite = self.lib.selpres_finite
-        self._finite.argtypes = [i64, i64, dp, lp]
-        self._finite.restype = c_int
         self._pool: ThreadPoolExecutor | None = None
         self._pool_size = 0
-        self._sizes: dict[tuple[int, ...], torch.Tensor] = {}
-
-    def _sizes_arg(self, sizes) -> tuple[int, int]:
-        """``(nl, pointer to sizes as int64)`` for the C entry points; the tensor is kept, not rebuilt
-        per call (a call at R = 1 costs tens of microseconds, so every torch op shows)."""
-        key = tuple(sizes)
-        if key not in self._sizes:
-            self._sizes[key] = torch.tensor(key, dtype=torch.int64)
-        return len(key) - 1, self._sizes[key].data_ptr()
 
     def _executor(self, n: int) -> ThreadPoolExecutor:
         if self._pool is None or self._pool_size < n:
@@ -212,6 +176,52 @@ class Kernel:
     def _bounds(n: int, threads: int) -> list[tuple[int, int]]:
         T = max(1, min(int(threads), n))
         return [(n * k // T, n * (k + 1) // T) for k in range(T)]
+
+
+class Kernel(_Library):
+    """One topology's compiled library: :meth:`train` (an epoch), :meth:`forward` (evaluation),
+    :meth:`squared_errors` (scoring) and :meth:`finite` (the divergence check)."""
+
+    def __init__(self, path: Path):
+        super().__init__(path)
+        i64, dp, lp, c_int = ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int
+        self._train = self.lib.selpres_train
+        self._train.argtypes = [
+            c_int,
+            lp,
+            i64,
+            i64,
+            i64,
+            dp,
+            dp,
+            dp,
+            dp,
+            lp,
+            i64,
+            i64,
+            ctypes.c_double,
+            ctypes.c_double,
+            dp,
+        ]
+        self._train.restype = c_int
+        self._forward = self.lib.selpres_forward
+        self._forward.argtypes = [c_int, lp, i64, i64, i64, i64, i64, dp, dp, i64, dp]
+        self._forward.restype = c_int
+        self._sqerr = self.lib.selpres_sqerr
+        self._sqerr.argtypes = [c_int, lp, i64, i64, i64, i64, i64, i64, dp, dp, dp, i64, i64, dp]
+        self._sqerr.restype = c_int
+        self._finite = self.lib.selpres_finite
+        self._finite.argtypes = [i64, i64, dp, lp]
+        self._finite.restype = c_int
+        self._sizes: dict[tuple[int, ...], torch.Tensor] = {}
+
+    def _sizes_arg(self, sizes) -> tuple[int, int]:
+        """``(nl, pointer to sizes as int64)`` for the C entry points; the tensor is kept, not rebuilt
+        per call (a call at R = 1 costs tens of microseconds, so every torch op shows)."""
+        key = tuple(sizes)
+        if key not in self._sizes:
+            self._sizes[key] = torch.tensor(key, dtype=torch.int64)
+        return len(key) - 1, self._sizes[key].data_ptr()
 
     def train(
         self,
@@ -306,6 +316,30 @@ class Kernel:
         return out.bool()
 
 
+class Shuffler(_Library):
+    """The per-epoch shuffles of ``kernels/shuffle.c``: the permutations ``selpres.sampler`` defines."""
+
+    def __init__(self, path: Path):
+        super().__init__(path)
+        i64, vp = ctypes.c_int64, ctypes.c_void_p
+        self._shuffle = self.lib.selpres_shuffle
+        self._shuffle.argtypes = [i64, i64, vp, vp, i64, i64, vp]
+        self._shuffle.restype = ctypes.c_int
+
+    def shuffle(self, base, orders: list[torch.Tensor], size: int, count: int, out: torch.Tensor, threads: int):
+        """``out[r] = orders[r][argsort(hashes of base[r])[:count]]`` for every replica r (``base``: uint64
+        numpy array [R]; ``orders``: contiguous int64 tensors; ``out``: int64 [R, count]). Threads take
+        contiguous chunks of replicas."""
+        R = len(orders)
+        assert base.dtype.name == "uint64" and base.shape == (R,) and base.flags.c_contiguous
+        assert out.dtype == torch.int64 and out.shape == (R, count) and out.is_contiguous()
+        assert all(o.dtype == torch.int64 and o.is_contiguous() and o.numel() >= size for o in orders)
+        ptrs = (ctypes.c_void_p * R)(*(o.data_ptr() for o in orders))
+        threads = self.threads_for(SHUFFLE_WORK_PER_ELEMENT * R * size, threads)
+        rest = (base.ctypes.data, ctypes.addressof(ptrs), size, count, out.data_ptr())
+        self._run(self._shuffle, [(r0, r1, *rest) for r0, r1 in self._bounds(R, threads)])
+
+
 def macros(sizes) -> list[str]:
     """The ``-D`` flags that specialise ``kernels/sgd.c`` for topology ``sizes`` (see the file's header)."""
     sizes = tuple(int(s) for s in sizes)
@@ -343,30 +377,38 @@ def _intact(library: Path) -> bool:
 
 def library_path(sizes, cc: list[str] | None = None) -> Path:
     """Where the cache keeps the library for ``sizes``: keyed by source, macros, flags, compiler and CPU."""
+    return _library_path(f"selpres_{'-'.join(map(str, sizes))}", SOURCE, macros(sizes), cc)
+
+
+def _library_path(stem: str, source: Path, flags: list[str], cc: list[str] | None = None) -> Path:
     cc = cc or _compiler()
     key_text = "\0".join(
         [
-            SOURCE.read_text(),
-            shlex.join([*cc, *macros(sizes), *CFLAGS, *LIBS]),
+            source.read_text(),
+            shlex.join([*cc, *flags, *CFLAGS, *LIBS]),
             _compiler_version(cc),
             " ".join(sorted(cpu_flags())),
             _cpu_model(),
         ]
     )
     key = hashlib.sha256(key_text.encode()).hexdigest()[:16]
-    return cache_dir() / f"selpres_{'-'.join(map(str, sizes))}_{key}.so"
+    return cache_dir() / f"{stem}_{key}.so"
 
 
 def build(sizes) -> Path:
     """The cached library for ``sizes``, compiled first if it is missing or fails its checksum."""
     sizes = tuple(int(s) for s in sizes)
+    return _build(f"selpres_{'-'.join(map(str, sizes))}", SOURCE, macros(sizes))
+
+
+def _build(stem: str, source: Path, flags: list[str]) -> Path:
     cc = _compiler()
-    target = library_path(sizes, cc)
+    target = _library_path(stem, source, flags, cc)
     if target.exists():
         if _intact(target):
             return target
         log.warning("the cached native kernel %s fails its checksum; rebuilding it", target)
-    cmd = [*cc, *CFLAGS, *macros(sizes), "-o", "<out>", str(SOURCE), *LIBS]
+    cmd = [*cc, *CFLAGS, *flags, "-o", "<out>", str(source), *LIBS]
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
@@ -410,3 +452,23 @@ def load(sizes) -> Kernel:
         except OSError as exc:
             raise KernelUnavailable(f"cannot load {path}: {exc}") from exc
         return _kernels[sizes]
+
+
+_shuffler: list[Shuffler] = []  # the loaded shuffle library, once it loaded
+
+
+def load_shuffle() -> Shuffler:
+    """The native shuffles (``kernels/shuffle.c``), built on first use, under the same conditions as
+    :func:`load` (``SELPRES_NO_NATIVE``, AVX2/FMA: it is compiled with the same flags); raises
+    :class:`KernelUnavailable` with the reason."""
+    if os.environ.get("SELPRES_NO_NATIVE", "") not in ("", "0"):
+        raise KernelUnavailable("disabled by SELPRES_NO_NATIVE")
+    with _lock:
+        if not _shuffler:
+            check_cpu(cpu_flags())
+            path = _build("selpres_shuffle", SHUFFLE_SOURCE, [])
+            try:
+                _shuffler.append(Shuffler(path))
+            except OSError as exc:
+                raise KernelUnavailable(f"cannot load {path}: {exc}") from exc
+        return _shuffler[0]

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-import torch
 from omegaconf import DictConfig
 
 from selpres.batch_engine import check_batch_options
@@ -19,7 +18,7 @@ from selpres.config import to_container
 from selpres.data import grid_points, heldout_count
 from selpres.errors import ConfigError
 from selpres.model import TopologyError, parse_topology
-from selpres.optim import HPARAM_KEYS, make_optimizer
+from selpres.optim import HPARAM_KEYS, checked_hparams
 from selpres.sampling import MAX_N
 from selpres.task import DATA_KEYS, Shape, task_shape
 
@@ -45,7 +44,7 @@ def batch_mode(o: DictConfig) -> bool:
 
 
 def optim_hparams(o: DictConfig) -> dict:
-    """The optimizer keys of ``cfg.optim`` (None = not set), as ``make_optimizer`` takes them."""
+    """The optimizer keys of ``cfg.optim`` (None = not set), as ``checked_hparams`` takes them."""
     return {k: o[k] for k in HPARAM_KEYS}
 
 
@@ -55,7 +54,7 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
     o = cfg.optim
-    make_optimizer(o.name.value, [torch.zeros(1)], optim_hparams(o))  # ConfigError naming optim.<key>
+    checked_hparams(o.name.value, optim_hparams(o))  # ConfigError naming optim.<key>
     check_batch_options(o.sigmoid_prime_offset, o.reduction.value)
     if o.batch_size < 0 or (o.name.value != "sgd" and o.batch_size != 0):
         allowed = (

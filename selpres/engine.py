@@ -89,7 +89,11 @@ def _check_inputs(sizes, X: torch.Tensor, Y: torch.Tensor, order: torch.Tensor, 
     if order.dim() != 2 or order.shape[0] != R:
         raise ValueError(f"order must be [R={R}, m], got {tuple(order.shape)}")
     o = order.detach().cpu().numpy()  # numpy: see NativeEngine.train_epoch
-    if o.size and (int(o.min()) < 0 or int(o.max()) >= X.shape[0]):
+    if o.dtype == np.int64:  # one pass: viewed as unsigned, a negative index is larger than any valid one
+        bad = o.size and int(o.view(np.uint64).max()) >= X.shape[0]
+    else:
+        bad = o.size and (int(o.min()) < 0 or int(o.max()) >= X.shape[0])
+    if bad:
         raise IndexError(f"order has indices outside [0, {X.shape[0]})")
 
 
@@ -283,11 +287,13 @@ class NativeEngine:
         return padded.reshape(self.G, self.LANES, self.P).transpose(1, 2).contiguous()
 
     def _unpack(self, packed):
-        flat = packed.transpose(1, 2).reshape(self.G * self.LANES, self.P)[: self.R]
-        out, k = [], 0
+        """Per-layer copies in numpy: a torch copy here wakes torch's OpenMP pool, ~1 ms a call between
+        epochs of the kernel (see train_epoch); checkpoints unpack both weights and momenta."""
+        a, out, k = packed.numpy(), [], 0
         for s in self.shapes:
             n = int(torch.Size(s).numel())
-            out.append(flat[:, k : k + n].reshape(self.R, *s).clone())
+            layer = np.ascontiguousarray(a[:, k : k + n, :].transpose(0, 2, 1)).reshape(self.G * self.LANES, n)
+            out.append(torch.from_numpy(layer[: self.R].reshape(self.R, *s)))
             k += n
         return out
 
@@ -298,9 +304,12 @@ class NativeEngine:
         Y = Y.detach().to(torch.float64).contiguous()
         # numpy, not torch, for the padding: a large torch op would wake torch's OpenMP pool, whose
         # spinning threads then compete with the kernel's threads for the cores
-        padded = np.zeros((self.G * self.LANES, m), dtype=np.int64)
-        padded[: self.R] = order.detach().cpu().numpy()
-        padded_order = torch.from_numpy(padded)
+        if self.R == self.G * self.LANES and order.dtype == torch.int64 and order.is_contiguous():
+            padded_order = order  # no padding lanes: the kernel reads the orders as they are
+        else:
+            padded = np.zeros((self.G * self.LANES, m), dtype=np.int64)
+            padded[: self.R] = order.detach().cpu().numpy()
+            padded_order = torch.from_numpy(padded)
         loss = torch.zeros(self.G * self.LANES, dtype=torch.float64)
         self._k.train(
             self.sizes, self.w, self.buf, X, Y, padded_order, self.batch_size, self.lr, self.mom, loss, self.threads

@@ -56,7 +56,7 @@ def priority_orders(X: torch.Tensor, kind: str, gens: list[torch.Generator], bin
         if bins < 1:
             raise ConfigError("schedule.strata_bins", bins, "a whole number >= 1")
         sid = strata(X, bins)  # the same for every replica: computed once
-        return [_stratified(sid, g) for g in gens]
+        return list(_stratified(sid, gens))
     if kind == "coverage":
         return coverage_orders(X, gens)
     raise ConfigError("schedule.order", kind, f"one of {list(ORDERS)}")
@@ -67,21 +67,24 @@ def stratified_order(X: torch.Tensor, gen: torch.Generator, bins: int) -> torch.
     return priority_orders(X, "stratified", [gen], bins)[0]
 
 
-def _stratified(sid: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
-    """The stratified order from the strata ids: random rank within each stratum, then sorted by
-    (rank + U(0,1)) / stratum size."""
+def _stratified(sid: torch.Tensor, gens: list[torch.Generator]) -> torch.Tensor:
+    """The stratified orders from the strata ids, one row per generator: random rank within each stratum,
+    then sorted by (rank + U(0,1)) / stratum size. Each generator draws its permutation and then its
+    jitter, exactly as for one replica alone; the rest is batched over the rows (stable sorts and
+    element-wise arithmetic: every row is what it would be alone)."""
     n = sid.shape[0]
-    shuffled = torch.randperm(n, generator=gen)  # random rank within each stratum
-    sid_s = sid[shuffled]
-    _, inverse, counts = torch.unique(sid_s, return_inverse=True, return_counts=True)
+    draws = [(torch.randperm(n, generator=g), torch.rand(n, generator=g, dtype=torch.float64)) for g in gens]
+    shuffled = torch.stack([d[0] for d in draws])  # [R, n] random rank within each stratum
+    jitter = torch.stack([d[1] for d in draws])
+    _, stratum, counts = torch.unique(sid, return_inverse=True, return_counts=True)  # counts: any order's
+    inverse = stratum[shuffled]
     # rank of each shuffled pattern within its stratum: position minus the stratum's first position
-    by_stratum = torch.argsort(inverse, stable=True)
+    by_stratum = torch.argsort(inverse, dim=1, stable=True)
     first = torch.cumsum(counts, 0) - counts
-    rank = torch.empty(n, dtype=torch.long)
-    rank[by_stratum] = torch.arange(n) - first[inverse[by_stratum]]
-    jitter = torch.rand(n, generator=gen, dtype=torch.float64)
+    rank = torch.empty_like(shuffled)
+    rank.scatter_(1, by_stratum, torch.arange(n) - first[inverse.gather(1, by_stratum)])
     key = (rank.double() + jitter) / counts[inverse].double()
-    return shuffled[torch.argsort(key, stable=True)]
+    return shuffled.gather(1, torch.argsort(key, dim=1, stable=True))
 
 
 def coverage_orders(

@@ -123,12 +123,32 @@ def _settle_ties(h: np.ndarray, pos: np.ndarray, tie: np.ndarray) -> None:
         pos[row] = np.argsort(h[row])
 
 
+@functools.lru_cache(maxsize=1)
+def native_shuffles():
+    """``(shuffler, None)`` when the native shuffles (``kernels/shuffle.c``) load here, else ``(None, why)``;
+    decided once per process, so a missing compiler is not retried every epoch."""
+    from selpres._kernels import KernelUnavailable, load_shuffle
+
+    try:
+        return load_shuffle(), None
+    except KernelUnavailable as exc:
+        return None, str(exc)
+
+
+def shuffle_implementation() -> str:
+    """What computes the shuffles in this process, for the job's record: ``native``, or ``numpy (why)``.
+    Both give the same permutations (tested); only the speed differs."""
+    shuffler, why = native_shuffles()
+    return "native" if shuffler is not None else f"numpy ({why})"
+
+
 def epoch_orders(samplers: list[SelectivePresentationSampler]) -> torch.Tensor:
     """Every sampler's current epoch order, stacked [R, m]: one vectorised shuffle for all replicas.
 
     Replica r's shuffle is argsort of hash(key_r, epoch, i) over the current set's positions i, a
     counter-based permutation, so it is the same whether computed alone or with other replicas, and
-    costs no generator set-up. Replicas are hashed and sorted in blocks that stay in cache, by
+    costs no generator set-up. The native shuffles compute it with a bucket sort, on every thread torch
+    may use; without them, numpy: replicas hashed and sorted in blocks that stay in cache, by
     ``_argsort_distinct_rows`` (exact: the hash is bijective, so a row's keys are distinct).
     """
     plans = [s._plan[s.epoch] for s in samplers]
@@ -139,11 +159,17 @@ def epoch_orders(samplers: list[SelectivePresentationSampler]) -> torch.Tensor:
     keys = np.array([s._key for s in samplers], dtype=np.uint64)
     epochs = np.array([s.epoch for s in samplers], dtype=np.uint64)
     out = torch.empty((R, count), dtype=samplers[0].order.dtype)
+    with np.errstate(over="ignore"):
+        base = _shuffle_bases(keys, epochs)
+    shuffler, _ = native_shuffles()
+    if shuffler is not None and out.dtype == torch.int64:
+        orders = [s.order.contiguous() for s in samplers]  # kept alive: the C code reads them
+        shuffler.shuffle(base, orders, size, count, out, torch.get_num_threads())
+        return out
     block = max(1, min(R, _BLOCK_HASHES // size))
     h = np.empty((block, size), dtype=np.uint64)
     tmp = np.empty_like(h)
     with np.errstate(over="ignore"):
-        base = _shuffle_bases(keys, epochs)
         for r0 in range(0, R, block):
             r1 = min(R, r0 + block)
             hb = _row_hashes(base[r0:r1], h[: r1 - r0], tmp[: r1 - r0])

@@ -8,6 +8,7 @@ honest.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Sequence
 
@@ -35,6 +36,7 @@ def t_cdf(t: float, df: int) -> float:
     return 0.5 + 0.5 * a
 
 
+@functools.lru_cache(maxsize=1024)  # a pure function, asked for the same (p, df) for every metric of a job
 def t_quantile(p: float, df: int) -> float:
     if not 0 < p < 1 or df < 1:
         raise ValueError(f"t_quantile needs 0 < p < 1 and df >= 1, got p={p}, df={df}")

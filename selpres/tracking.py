@@ -24,7 +24,10 @@ class Tracker:
         self.logdir = Path(logdir)
         self.writer = None
         if enabled:
+            from tensorboard.compat.proto.summary_pb2 import Summary
             from torch.utils.tensorboard import SummaryWriter
+
+            self._summary = Summary
 
             if self.logdir.exists():  # rebuilt from history on resume
                 shutil.rmtree(self.logdir)
@@ -33,7 +36,7 @@ class Tracker:
     def log_epoch(self, rec: dict) -> None:
         if self.writer is None:
             return
-        w = self.writer
+        by_epoch, by_pres = [], []  # (tag, value) at step epoch + 1, and at step presentations
         for metric in METRICS:
             vals = rec.get(metric)
             if vals is None:
@@ -42,16 +45,30 @@ class Tracker:
             if not finite:
                 continue
             stats = {"mean": sum(finite) / len(finite), "min": min(finite), "max": max(finite)}
-            for axis, step in (("epoch", rec["epoch"] + 1), ("presentations", rec["presentations"])):
-                for name, v in stats.items():
-                    w.add_scalar(f"{metric}/{name}/by_{axis}", v, step)
+            for name, v in stats.items():
+                by_epoch.append((f"{metric}/{name}/by_epoch", v))
+                by_pres.append((f"{metric}/{name}/by_presentations", v))
             if self.per_replica and len(vals) > 1 and metric == "heldout_rms_nm":  # against cost only
-                for r, v in enumerate(vals):
-                    if v is not None and math.isfinite(v):
-                        w.add_scalar(f"replicas/{metric}/r{r:03d}/by_presentations", v, rec["presentations"])
-        w.add_scalar("schedule/stage/by_epoch", rec["stage"] + 1, rec["epoch"] + 1)
-        w.add_scalar("schedule/stage/by_presentations", rec["stage"] + 1, rec["presentations"])
-        w.add_scalar("schedule/training_set_size/by_epoch", rec["size"], rec["epoch"] + 1)
+                by_pres += [
+                    (f"replicas/{metric}/r{r:03d}/by_presentations", v)
+                    for r, v in enumerate(vals)
+                    if v is not None and math.isfinite(v)
+                ]
+        by_epoch += [
+            ("schedule/stage/by_epoch", rec["stage"] + 1),
+            ("schedule/training_set_size/by_epoch", rec["size"]),
+        ]
+        by_pres.append(("schedule/stage/by_presentations", rec["stage"] + 1))
+        self._write(by_epoch, rec["epoch"] + 1)
+        self._write(by_pres, rec["presentations"])
+
+    def _write(self, scalars: list[tuple[str, float]], step: int) -> None:
+        """One event holding every scalar of a step: what ``add_scalar`` writes (a simple_value per tag),
+        without an event, a proto and a queue put per scalar (~20 us each: 0.7 s of a 1000-replica job).
+        The writer has no public call for several scalars at once, hence its file writer."""
+        S = self._summary
+        summary = S(value=[S.Value(tag=tag, simple_value=float(v)) for tag, v in scalars])
+        self.writer._get_file_writer().add_summary(summary, step)
 
     def replay(self, history: list[dict]) -> None:
         for rec in history:

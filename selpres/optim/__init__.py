@@ -40,7 +40,15 @@ from selpres.optim.delta_bar_delta import DeltaBarDelta
 from selpres.optim.offset import offset_sigmoid
 from selpres.optim.quickprop import QuickProp
 
-__all__ = ["DeltaBarDelta", "QuickProp", "offset_sigmoid", "make_optimizer", "OPTIMIZER_KEYS", "HPARAM_KEYS"]
+__all__ = [
+    "DeltaBarDelta",
+    "QuickProp",
+    "offset_sigmoid",
+    "checked_hparams",
+    "make_optimizer",
+    "OPTIMIZER_KEYS",
+    "HPARAM_KEYS",
+]
 
 OPTIMIZER_KEYS = {
     "sgd": ("lr", "momentum"),
@@ -52,44 +60,66 @@ OPTIMIZER_KEYS = {
 HPARAM_KEYS = tuple(sorted(set().union(*OPTIMIZER_KEYS.values())))  # pass them all: unused ones must be None
 
 
-def _sgd(params, lr=0.15, momentum=0.0):
-    lr = require("lr", lr, "a learning rate > 0", lambda v: v > 0)
-    momentum = require("momentum", momentum, "a momentum in [0, 1)", lambda v: 0 <= v < 1)
-    return torch.optim.SGD(params, lr=lr, momentum=momentum)
-
-
-def _rprop(params, lr=0.1, eta_minus=0.5, eta_plus=1.2, step_min=1e-6, step_max=50.0):
-    lr = require("lr", lr, "an initial update value > 0 (Riedmiller & Braun: 0.1)", lambda v: v > 0)
-    eta_minus = require("eta_minus", eta_minus, "a decrease factor in (0, 1) (0.5)", lambda v: 0 < v < 1)
-    eta_plus = require("eta_plus", eta_plus, "an increase factor > 1 (1.2)", lambda v: v > 1)
-    step_min = require("step_min", step_min, "a smallest update value >= 0 (1e-6)", lambda v: v >= 0)
-    step_max = require(
-        "step_max", step_max, f"a largest update value >= step_min = {step_min:g} (50)", lambda v: v >= step_min
+def _sgd(lr=0.15, momentum=0.0) -> dict:
+    return dict(
+        lr=require("lr", lr, "a learning rate > 0", lambda v: v > 0),
+        momentum=require("momentum", momentum, "a momentum in [0, 1)", lambda v: 0 <= v < 1),
     )
-    return torch.optim.Rprop(params, lr=lr, etas=(eta_minus, eta_plus), step_sizes=(step_min, step_max))
 
 
-def _adam(params, lr=1e-3, beta1=0.9, beta2=0.999, eps=1e-8, weight_decay=0.0):
-    lr = require("lr", lr, "a step size > 0 (Kingma & Ba: 0.001)", lambda v: v > 0)
-    beta1 = require("beta1", beta1, "a decay rate in [0, 1) (0.9)", lambda v: 0 <= v < 1)
-    beta2 = require("beta2", beta2, "a decay rate in [0, 1) (0.999)", lambda v: 0 <= v < 1)
-    eps = require("eps", eps, "a denominator offset > 0 (1e-8)", lambda v: v > 0)
-    weight_decay = require("weight_decay", weight_decay, "a weight decay >= 0", lambda v: v >= 0)
-    return torch.optim.Adam(params, lr=lr, betas=(beta1, beta2), eps=eps, weight_decay=weight_decay)
+def _rprop(lr=0.1, eta_minus=0.5, eta_plus=1.2, step_min=1e-6, step_max=50.0) -> dict:
+    step_min = require("step_min", step_min, "a smallest update value >= 0 (1e-6)", lambda v: v >= 0)
+    return dict(
+        lr=require("lr", lr, "an initial update value > 0 (Riedmiller & Braun: 0.1)", lambda v: v > 0),
+        eta_minus=require("eta_minus", eta_minus, "a decrease factor in (0, 1) (0.5)", lambda v: 0 < v < 1),
+        eta_plus=require("eta_plus", eta_plus, "an increase factor > 1 (1.2)", lambda v: v > 1),
+        step_min=step_min,
+        step_max=require(
+            "step_max", step_max, f"a largest update value >= step_min = {step_min:g} (50)", lambda v: v >= step_min
+        ),
+    )
 
 
-_FACTORIES = {"sgd": _sgd, "quickprop": QuickProp, "delta_bar_delta": DeltaBarDelta, "rprop": _rprop, "adam": _adam}
+def _adam(lr=1e-3, beta1=0.9, beta2=0.999, eps=1e-8, weight_decay=0.0) -> dict:
+    return dict(
+        lr=require("lr", lr, "a step size > 0 (Kingma & Ba: 0.001)", lambda v: v > 0),
+        beta1=require("beta1", beta1, "a decay rate in [0, 1) (0.9)", lambda v: 0 <= v < 1),
+        beta2=require("beta2", beta2, "a decay rate in [0, 1) (0.999)", lambda v: 0 <= v < 1),
+        eps=require("eps", eps, "a denominator offset > 0 (1e-8)", lambda v: v > 0),
+        weight_decay=require("weight_decay", weight_decay, "a weight decay >= 0", lambda v: v >= 0),
+    )
 
 
-def make_optimizer(name: str, params, hparams: dict | None = None, prefix: str = "optim") -> torch.optim.Optimizer:
-    """The optimizer ``name`` (a key of :data:`OPTIMIZER_KEYS`) over ``params``, from flat config keys.
+# name -> (its hyperparameters checked, with defaults; the optimizer built from them). The checks are
+# separate so that validating a config builds no optimizer: the first torch.optim.Optimizer of a process
+# imports torch._dynamo, about 1.3 s, which a job on the native engine never needs.
+_OPTIMIZERS = {
+    "sgd": (_sgd, lambda params, lr, momentum: torch.optim.SGD(params, lr=lr, momentum=momentum)),
+    "quickprop": (QuickProp.hparams, QuickProp),
+    "delta_bar_delta": (DeltaBarDelta.hparams, DeltaBarDelta),
+    "rprop": (
+        _rprop,
+        lambda params, lr, eta_minus, eta_plus, step_min, step_max: torch.optim.Rprop(
+            params, lr=lr, etas=(eta_minus, eta_plus), step_sizes=(step_min, step_max)
+        ),
+    ),
+    "adam": (
+        _adam,
+        lambda params, lr, beta1, beta2, eps, weight_decay: torch.optim.Adam(
+            params, lr=lr, betas=(beta1, beta2), eps=eps, weight_decay=weight_decay
+        ),
+    ),
+}
+
+
+def checked_hparams(name: str, hparams: dict | None = None, prefix: str = "optim") -> dict:
+    """The hyperparameters of optimizer ``name`` from flat config keys (``None`` = its default), checked.
 
     Every error is a :class:`~selpres.errors.ConfigError` naming ``<prefix>.<key>``, the value and what
-    is allowed: an unknown name, a key the optimizer does not use, or a value out of range. Call it on a
-    dummy tensor to validate a config before anything is trained or written.
+    is allowed: an unknown name, a key the optimizer does not use, or a value out of range.
     """
-    if name not in _FACTORIES:
-        raise ConfigError(f"{prefix}.name", name, f"one of {', '.join(_FACTORIES)}")
+    if name not in _OPTIMIZERS:
+        raise ConfigError(f"{prefix}.name", name, f"one of {', '.join(_OPTIMIZERS)}")
     given = {k: v for k, v in (hparams or {}).items() if v is not None}
     for key in given:
         if key not in OPTIMIZER_KEYS[name]:
@@ -99,6 +129,13 @@ def make_optimizer(name: str, params, hparams: dict | None = None, prefix: str =
                 f"no value: {name} does not use it (its keys: {', '.join(OPTIMIZER_KEYS[name])})",
             )
     try:
-        return _FACTORIES[name](params, **given)
+        return _OPTIMIZERS[name][0](**given)
     except ConfigError as e:
         raise ConfigError(f"{prefix}.{e.key}", e.value, e.allowed) from None
+
+
+def make_optimizer(name: str, params, hparams: dict | None = None, prefix: str = "optim") -> torch.optim.Optimizer:
+    """The optimizer ``name`` (a key of :data:`OPTIMIZER_KEYS`) over ``params``, from flat config keys,
+    checked as :func:`checked_hparams` checks them."""
+    checked = checked_hparams(name, hparams, prefix)
+    return _OPTIMIZERS[name][1](params, **checked)

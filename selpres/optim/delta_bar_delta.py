@@ -40,15 +40,22 @@ class DeltaBarDelta(PerWeightOptimizer):
     values for this project's problem.
     """
 
-    def __init__(
-        self, params, lr: float = 0.1, kappa: float = 0.25, phi: float = 0.5, theta: float = 0.7, momentum: float = 0.0
-    ):
-        lr = require("lr", lr, "an initial learning rate > 0", lambda v: v > 0)
-        kappa = require("kappa", kappa, "an additive rate increase kappa >= 0", lambda v: v >= 0)
-        phi = require("phi", phi, "a multiplicative rate decrease phi in [0, 1)", lambda v: 0 <= v < 1)
-        theta = require("theta", theta, "an averaging factor theta in [0, 1)", lambda v: 0 <= v < 1)
-        momentum = require("momentum", momentum, "a momentum in [0, 1)", lambda v: 0 <= v < 1)
-        super().__init__(params, dict(lr=lr, kappa=kappa, phi=phi, theta=theta, momentum=momentum))
+    def __init__(self, params, **hparams):
+        super().__init__(params, self.hparams(**hparams))
+
+    @staticmethod
+    def hparams(
+        lr: float = 0.1, kappa: float = 0.25, phi: float = 0.5, theta: float = 0.7, momentum: float = 0.0
+    ) -> dict:
+        """The hyperparameters with their defaults, each checked (ConfigError naming it); config validation
+        calls this alone, without building an optimizer."""
+        return dict(
+            lr=require("lr", lr, "an initial learning rate > 0", lambda v: v > 0),
+            kappa=require("kappa", kappa, "an additive rate increase kappa >= 0", lambda v: v >= 0),
+            phi=require("phi", phi, "a multiplicative rate decrease phi in [0, 1)", lambda v: 0 <= v < 1),
+            theta=require("theta", theta, "an averaging factor theta in [0, 1)", lambda v: 0 <= v < 1),
+            momentum=require("momentum", momentum, "a momentum in [0, 1)", lambda v: 0 <= v < 1),
+        )
 
     def update(self, p, grad, state, group):
         if not state:

@@ -50,11 +50,18 @@ class QuickProp(PerWeightOptimizer):
     folded into the slope. State per weight: ``prev_step`` (dw(t-1)) and ``prev_slope`` (S(t-1)).
     """
 
-    def __init__(self, params, lr: float = 0.55, mu: float = 1.75, weight_decay: float = 1e-4):
-        lr = require("lr", lr, "a gradient-descent rate epsilon > 0 (Fahlman's program: 0.55)", lambda v: v > 0)
-        mu = require("mu", mu, "a maximum growth factor mu > 0 (Fahlman: 1.75)", lambda v: v > 0)
-        weight_decay = require("weight_decay", weight_decay, "a weight decay >= 0 (Fahlman: 1e-4)", lambda v: v >= 0)
-        super().__init__(params, dict(lr=lr, mu=mu, weight_decay=weight_decay))
+    def __init__(self, params, **hparams):
+        super().__init__(params, self.hparams(**hparams))
+
+    @staticmethod
+    def hparams(lr: float = 0.55, mu: float = 1.75, weight_decay: float = 1e-4) -> dict:
+        """The hyperparameters with their defaults, each checked (ConfigError naming it); config validation
+        calls this alone, without building an optimizer."""
+        return dict(
+            lr=require("lr", lr, "a gradient-descent rate epsilon > 0 (Fahlman's program: 0.55)", lambda v: v > 0),
+            mu=require("mu", mu, "a maximum growth factor mu > 0 (Fahlman: 1.75)", lambda v: v > 0),
+            weight_decay=require("weight_decay", weight_decay, "a weight decay >= 0 (Fahlman: 1e-4)", lambda v: v >= 0),
+        )
 
     def update(self, p, grad, state, group):
         if not state:

@@ -1,0 +1,77 @@
+/* selpres native shuffles: the per-epoch presentation orders of many replicas (selpres_shuffle), the same
+ * permutations as selpres.sampler.epoch_orders computes in numpy, without a comparison sort.
+ *
+ * Built and loaded by selpres/_kernels.py (load_shuffle) with the kernel's flags, no macros.
+ *
+ * Replica r's shuffle of its current set (the first `size` entries of its priority order) is the argsort
+ * of h_i = mix(base_r + i * golden), i < size, where mix is splitmix64's finaliser: a bijection, so the
+ * h_i are distinct and the argsort is one permutation, whatever algorithm finds it. Here: a counting sort
+ * into 2^b buckets by the top b bits of h (2^b >= 2 size, so at most about one hash a bucket), which leaves every
+ * hash at most a bucket away from its place, then an insertion sort by the full 64 bits that moves each
+ * hash only past the few others of its bucket. Expected O(size) per replica instead of O(size log size).
+ */
+#include <stdint.h>
+#include <stdlib.h>
+
+#define GOLDEN 0x9E3779B97F4A7C15ULL
+
+static inline uint64_t mix64(uint64_t z)
+{
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+/* Replicas r0 .. r1-1: out[r * count + k] = orders[r][perm_r[k]] for k < count, perm_r the argsort of
+   replica r's hashes (base[r]) over positions 0 .. size-1. Returns 0, or -1 (out of memory). */
+int selpres_shuffle(int64_t r0, int64_t r1, const uint64_t *base, const int64_t *const *orders, int64_t size,
+                    int64_t count, int64_t *out)
+{
+    int bits = 1;
+    while (bits < 62 && ((int64_t)1 << bits) < 2 * size) bits++; /* 2^b >= 2 size: fewer shared buckets */
+    const int64_t nb = (int64_t)1 << bits;
+    uint64_t *h = (uint64_t *)malloc((size_t)size * sizeof *h), *hs = (uint64_t *)malloc((size_t)size * sizeof *hs);
+    int32_t *perm = (int32_t *)malloc((size_t)size * sizeof *perm);
+    int32_t *start = (int32_t *)malloc((size_t)(nb + 1) * sizeof *start);
+    if (!h || !hs || !perm || !start || size > INT32_MAX) {
+        free(h);
+        free(hs);
+        free(perm);
+        free(start);
+        return -1;
+    }
+    for (int64_t r = r0; r < r1; r++) {
+        for (int64_t b = 0; b <= nb; b++) start[b] = 0;
+        uint64_t z = base[r];
+        for (int64_t i = 0; i < size; i++, z += GOLDEN) {
+            h[i] = mix64(z);
+            start[(h[i] >> (64 - bits)) + 1]++;
+        }
+        for (int64_t b = 0; b < nb; b++) start[b + 1] += start[b];
+        for (int64_t i = 0; i < size; i++) { /* placed with their hashes: the insertion reads no h[perm[.]] */
+            const int32_t at = start[h[i] >> (64 - bits)]++;
+            perm[at] = (int32_t)i;
+            hs[at] = h[i];
+        }
+        for (int64_t k = 1; k < size; k++) { /* buckets are in order: only neighbours within one move */
+            const int32_t p = perm[k];
+            const uint64_t hp = hs[k];
+            int64_t j = k;
+            while (j > 0 && hs[j - 1] > hp) {
+                perm[j] = perm[j - 1];
+                hs[j] = hs[j - 1];
+                j--;
+            }
+            perm[j] = p;
+            hs[j] = hp;
+        }
+        const int64_t *ord = orders[r];
+        int64_t *o = out + r * count;
+        for (int64_t k = 0; k < count; k++) o[k] = ord[perm[k]];
+    }
+    free(h);
+    free(hs);
+    free(perm);
+    free(start);
+    return 0;
+}
