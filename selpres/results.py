@@ -15,6 +15,7 @@ from omegaconf import DictConfig
 
 from selpres.config import to_container
 from selpres.datafile import file_digest
+from selpres.sampler import shuffle_implementation
 from selpres.stats import summarize
 from selpres.storage import stable_hash
 
@@ -82,6 +83,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "engine": engine.name,  # what ran
         "engine_requested": cfg.engine.value,
         "engine_fallback": engine.fallback_reason,  # why "fast" did not run natively (None if it did)
+        "shuffle": shuffle_implementation(),  # native, or numpy (why): the same permutations either way
         "replicas": R,
         "seeds": prob.seeds,
         "presentations_done": progress.presentations,  # the cost: training + selection presentations

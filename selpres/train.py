@@ -34,7 +34,7 @@ from selpres.errors import ConfigError
 from selpres.model import init_replica_params
 from selpres.orders import priority_orders
 from selpres.proportions import fit_schedule, with_fraction_form
-from selpres.sampler import SelectivePresentationSampler, epoch_orders
+from selpres.sampler import SelectivePresentationSampler, epoch_orders, shuffle_implementation
 from selpres.schedule import EpochPlan, Schedule, build_schedule
 from selpres.seeding import derive_seed, generator, seed_everything
 from selpres.selection import StageSelection, initial_kind, stage_selection
@@ -258,6 +258,8 @@ def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
         torch.set_num_threads(cfg.threads)
     prob = prepare(cfg)
     engine = job_engine(cfg, prob)
+    if shuffle_implementation() != "native":
+        log.warning("the per-epoch shuffles run in numpy (slower, the same permutations): %s", shuffle_implementation())
     out = Path(out_dir) if out_dir is not None else None
     chash = results_json.job_hash(cfg)
     ckpts = Checkpoints(out, chash) if out is not None and cfg.checkpoint.enabled else None

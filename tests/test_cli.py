@@ -268,7 +268,9 @@ def test_a_fallback_from_the_native_engine_is_said_and_recorded(tmp_path):
     res = json.loads((folder / "results.json").read_text())
     assert (res["engine"], res["engine_requested"]) == ("torch", "fast")
     assert "SELPRES_NO_NATIVE" in res["engine_fallback"]
+    assert res["shuffle"] == "numpy (disabled by SELPRES_NO_NATIVE)"  # the shuffles fell back too, and say so
     log = (folder / "train.log").read_text()
+    assert "shuffles run in numpy" in log
     assert sum("SELPRES_NO_NATIVE" in line for line in (proc.stdout + proc.stderr).splitlines()) >= 1
     assert "SELPRES_NO_NATIVE" in log and "stage 5/5" in log  # Python logging reaches train.log
     assert "torch (requested fast" in proc.stdout  # the summary names the engine that ran

@@ -313,3 +313,25 @@ def test_errors_survive_pickling():
     assert (e.key, e.value, e.allowed) == ("optim.lr", -1.0, "a learning rate > 0") and "optim.lr=-1.0" in str(e)
     t = pickle.loads(pickle.dumps(TopologyError("6-x-2", "layer widths joined by '-'")))
     assert t.allowed == "layer widths joined by '-'" and "6-x-2" in str(t)
+
+
+def test_validation_checks_the_optimizer_without_building_one():
+    """The first torch.optim.Optimizer of a process imports torch._dynamo (about 1.3 s of every job's set-up);
+    validating a config must not pay it, and building an optimizer does (so this check can fail)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from selpres.bench import compose_train\n"
+        "from selpres.config import CONFIG_DIR\n"
+        "from selpres.train import prepare\n"
+        "prepare(compose_train(CONFIG_DIR, ['replicas=2']))\n"
+        "print('torch._dynamo' in sys.modules)\n"
+        "import torch\n"
+        "from selpres.optim import make_optimizer\n"
+        "make_optimizer('sgd', [torch.zeros(1)], {'lr': 0.1})\n"
+        "print('torch._dynamo' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert out.stdout.split() == ["False", "True"], out.stdout + out.stderr

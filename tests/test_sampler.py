@@ -15,6 +15,8 @@ from selpres.sampler import SelectivePresentationSampler, epoch_orders, priority
 from selpres.schedule import Schedule, Stage, build_schedule
 from selpres.seeding import derive_seed, generator
 
+from conftest import requires_native
+
 PAPER_SIZES, PAPER_EPOCHS = [50, 100, 400, 800, 1002], [30] * 5
 KINDS = ("stratified", "random", "coverage")
 
@@ -331,6 +333,17 @@ def _plain_epoch_order(order: list[int], seed: int, epoch: int, size: int, count
     return [order[i] for i in sorted(range(size), key=h.__getitem__)[:count]]
 
 
+@pytest.fixture(params=["native", "numpy"])
+def shuffles(request, monkeypatch):
+    """Each test runs with the native shuffles (kernels/shuffle.c) and with the numpy ones."""
+    if request.param == "native":
+        if S.native_shuffles()[0] is None:
+            pytest.skip(f"native shuffles unavailable: {S.native_shuffles()[1]}")
+    else:
+        monkeypatch.setattr(S, "native_shuffles", lambda: (None, "forced by the test"))
+    return request.param
+
+
 @pytest.mark.parametrize(
     "n, sizes, epochs, budget, R",
     [
@@ -341,9 +354,10 @@ def _plain_epoch_order(order: list[int], seed: int, epoch: int, size: int, count
         (5000, [2049, 5000], [1, 1], None, 2),  # ... and the smallest on 64-bit keys
         (1002, [1.0], None, 3 * 1002 + 420, 5),  # a partial last epoch
         (300, [1.0], None, 299, 4),  # a single, partial epoch
+        (70_000, [1.0], [1], None, 2),  # a large set: 2^17 buckets in the native bucket sort
     ],
 )
-def test_epoch_orders_equal_the_plain_definition(n, sizes, epochs, budget, R):
+def test_epoch_orders_equal_the_plain_definition(n, sizes, epochs, budget, R, shuffles):
     """Bit-identical to the definition for every replica, epoch, set size and partial count; each replica's
     row equals its solo run (the sampler of seed s + r alone): resume and 'replica r = seed s + r' rely on
     both."""
@@ -362,7 +376,7 @@ def test_epoch_orders_equal_the_plain_definition(n, sizes, epochs, budget, R):
         assert torch.equal(epoch_orders(samplers[1:2])[0], got[1])
 
 
-def test_natural_ties_of_the_truncated_keys_occur_and_are_settled():
+def test_natural_ties_of_the_truncated_keys_occur_and_are_settled(shuffles):
     """At n = 1002 the 32-bit sort keys keep 22 hash bits, so some rows hold two hashes that agree on all
     of them (about one row in eight); the full order must still follow the full 64-bit hashes."""
     n, R = 1002, 64
@@ -412,3 +426,10 @@ def test_forced_ties_in_the_truncated_keys_are_settled_exactly(n, shared_bits, m
     monkeypatch.setattr(S, "_settle_ties", lambda h, pos, tie: None)
     unsettled = S._argsort_distinct_rows(h)
     assert not np.array_equal(unsettled[:3], want[:3])  # the crafted ties were real, and settling fixed them
+
+
+@requires_native
+def test_the_job_records_which_shuffles_ran(monkeypatch):
+    assert S.shuffle_implementation() == "native"
+    monkeypatch.setattr(S, "native_shuffles", lambda: (None, "no compiler"))
+    assert S.shuffle_implementation() == "numpy (no compiler)"
