@@ -269,6 +269,8 @@ def bench_jobs(table: EngineTable, quick: bool, configs: Path) -> bool:
             )
             if updates:
                 line += f"   whole job / updates x{total / updates:.2f}"
+                if "loop" in ws:  # what the loop spends besides the updates: shuffles, eval, log, checkpoints
+                    line += f"   loop bookkeeping / updates x{(ws['loop'] - updates) / updates:.2f}"
             print(line, flush=True)
             parts = "  ".join(f"{k} {ws[k]:.3f} s ({ws[k] / total:.0%})" for k in JOB_PARTS if k in ws)
             missing = [k for k in JOB_PARTS if k not in ws]
@@ -300,27 +302,48 @@ def _epoch_orders_by_argsort(samplers) -> torch.Tensor:
 
 
 def bench_shuffles(quick: bool) -> None:
-    """Per-epoch shuffles of R replicas at n = 1002, old (argsort) and new (epoch_orders) alternating."""
-    from selpres.sampler import SelectivePresentationSampler, epoch_orders
+    """Per-epoch shuffles of R replicas at n = 1002: the argsort of the hashes (how ``epoch_orders`` first
+    worked), numpy's packed-key sort (the fallback) and the native bucket sort (``kernels/shuffle.c``),
+    called in turn in one run after checking that all give the same orders."""
+    from selpres import sampler as S
     from selpres.schedule import build_schedule
 
-    print("\nshuffles: one epoch's orders of all replicas, n = 1002 (argsort of the hashes vs epoch_orders)")
+    native = S.native_shuffles()[0] is not None
+    print(
+        "\nshuffles: one epoch's orders of all replicas, n = 1002 (argsort of the hashes; epoch_orders in numpy;"
+        + (" epoch_orders native)" if native else f" native unavailable: {S.native_shuffles()[1]})")
+    )
+    numpy_only = lambda: (None, "numpy row")  # noqa: E731
     sch = build_schedule([1.0], [EPOCHS], N)
     for R in (1, 30, 1000):
         g = torch.Generator().manual_seed(R)
-        samplers = [SelectivePresentationSampler(torch.randperm(N, generator=g), sch, s) for s in range(R)]
+        samplers = [S.SelectivePresentationSampler(torch.randperm(N, generator=g), sch, s) for s in range(R)]
         for s in samplers:
             s.set_epoch(7)
-        if not torch.equal(_epoch_orders_by_argsort(samplers), epoch_orders(samplers)):
-            raise AssertionError("epoch_orders differs from the argsort of its hashes")
-        old, new = [], []
+
+        def in_numpy():
+            real, S.native_shuffles = S.native_shuffles, numpy_only
+            try:
+                return S.epoch_orders(samplers)
+            finally:
+                S.native_shuffles = real
+
+        ways = {"argsort": lambda: _epoch_orders_by_argsort(samplers), "numpy": in_numpy}
+        if native:
+            ways["native"] = lambda: S.epoch_orders(samplers)
+        want = ways["argsort"]()
+        if not all(torch.equal(want, f()) for f in ways.values()):
+            raise AssertionError("the shuffles differ from the argsort of their hashes")
+        times = {k: [] for k in ways}
         for _ in range(max(3, (20 if quick else 60) // max(1, R // 100))):
-            old.append(median_seconds(lambda: _epoch_orders_by_argsort(samplers), 1))
-            new.append(median_seconds(lambda: epoch_orders(samplers), 1))
-        o, w = statistics.median(old), statistics.median(new)
+            for k, f in ways.items():
+                times[k].append(median_seconds(f, 1))
+        med = {k: statistics.median(v) for k, v in times.items()}
+        best = med["native" if native else "numpy"]
+        cols = "  ".join(f"{k} {v * 1e3:8.3f}" for k, v in med.items())
         print(
-            f"shuffle     R={R:<5} argsort {o * 1e3:8.3f} ms/epoch  epoch_orders {w * 1e3:8.3f} ms/epoch "
-            f"({w * EPOCHS / R * 1e3:.3f} ms per replica-run)  x{o / w:.2f}",
+            f"shuffle     R={R:<5} ms/epoch: {cols}   ({best * EPOCHS / R * 1e3:.3f} ms per replica-run)  "
+            + "  ".join(f"x{med['argsort'] / v:.2f} {k}" for k, v in med.items() if k != "argsort"),
             flush=True,
         )
 
