@@ -245,6 +245,11 @@ class Job:
     ckpts: Checkpoints | None
     tracker: Tracker
 
+    @functools.cached_property
+    def orders_buffer(self) -> torch.Tensor:
+        """Where every epoch's presentation orders are written ([R * the largest epoch], reused)."""
+        return torch.empty(len(self.prob.seeds) * max(p.presentations for p in self.prob.plan), dtype=torch.int64)
+
     def checkpoint_due(self, ep: EpochPlan) -> bool:
         every = self.cfg.checkpoint.every and (ep.index + 1) % self.cfg.checkpoint.every == 0
         last = ep.index == len(self.prob.plan) - 1
@@ -292,7 +297,7 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
     with clock("shuffle"):
         for s in prob.samplers:
             s.set_epoch(ep.index)
-        order = epoch_orders(prob.samplers)
+        order = epoch_orders(prob.samplers, job.orders_buffer)
     with clock("train"):
         loss = job.engine.train_epoch(prob.X, prob.Y, order)
     progress.epoch, progress.presentations = ep.index + 1, progress.presentations + ep.presentations
