@@ -433,3 +433,19 @@ def test_the_job_records_which_shuffles_ran(monkeypatch):
     assert S.shuffle_implementation() == "native"
     monkeypatch.setattr(S, "native_shuffles", lambda: (None, "no compiler"))
     assert S.shuffle_implementation() == "numpy (no compiler)"
+
+
+def test_orders_written_into_a_reused_buffer_equal_fresh_ones(X, shuffles):
+    """A job reuses one buffer every epoch: each epoch's orders are still exactly that epoch's, in the
+    buffer's memory (a smaller current set uses its front)."""
+    sch = build_schedule([100, 1002], [2, 2], 1002)
+    samplers = [
+        SelectivePresentationSampler(priority_order(X, "stratified", generator(s, "subset")), sch, s) for s in range(5)
+    ]
+    buffer = torch.full((5 * 1002,), -1, dtype=torch.int64)
+    for p in sch.plan():
+        for s in samplers:
+            s.set_epoch(p.index)
+        got = epoch_orders(samplers, buffer)
+        assert got.data_ptr() == buffer.data_ptr() and got.shape == (5, p.presentations)
+        assert torch.equal(got, epoch_orders(samplers))
