@@ -14,7 +14,7 @@ from typing import Any, BinaryIO
 RESULTS = "results.json"
 WEIGHTS = "weights.pt"
 CHECKPOINT = "checkpoint.pt"
-HISTORY = "history.jsonl"  # the checkpoint's append-only record log
+HISTORY = "history.pkl"  # the checkpoint's append-only record log (pickled records)
 
 
 def atomic_write(path: Path, write: Callable[[BinaryIO], Any]) -> None:
