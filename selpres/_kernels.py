@@ -32,6 +32,7 @@ every replica sees the same operations in the same order however groups, pattern
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import logging
 import os
@@ -93,6 +94,11 @@ def _compiler() -> list[str]:
 
 def _compiler_version(cc: list[str]) -> str:
     """``cc --version``: part of the cache key, so a changed compiler never reuses an old library."""
+    return _version_of(tuple(cc))
+
+
+@functools.lru_cache(maxsize=8)  # once per process and compiler: the kernel and the shuffles both ask
+def _version_of(cc: tuple[str, ...]) -> str:
     try:
         proc = subprocess.run([*cc, "--version"], capture_output=True, text=True, timeout=30)
     except (OSError, subprocess.SubprocessError) as exc:
