@@ -162,7 +162,8 @@ def test_arms_the_topology_tells_apart_are_not_spelled_out_in_labels():
 
 
 def test_arms_on_one_topology_are_labelled_by_their_names():
-    got = labels([job("selective", "6-13-2", "two_link", 1_000), job("selective", "6-13-2", "puma560", 1_000)])
+    both = [job("selective", "6-13-2", "two_link", 1_000), job("selective", "6-13-2", "puma560", 1_000)]
+    got = labels(both)
     assert got == ["selective robot=two_link", "selective robot=puma560"]
 
 
