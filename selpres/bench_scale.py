@@ -13,6 +13,10 @@ Rows:
   (random indices into the set, as a shuffled epoch presents them). Large sets leave the caches, so the
   ratio to n = 10^3 is the figure of merit. Target: within 25 %. The sizes are interleaved over the
   repeats (ABCABC...) and the median taken, so a load change on a shared machine hits every size alike.
+* padded lanes: the kernel trains replicas in groups of 4 lanes, so R = 10 and R = 12 both run 3 groups
+  and should take the same time. Measured after a warm-up epoch (the padded lanes' momentum buffers reach
+  their steady state), interleaved, 6-13-2 on n = 10^4: the ratio R = 10 / R = 12 is the figure of merit
+  (ideal 1.0; why configs/experiment/large.yaml runs 12 replicas).
 
 The load average before and after is printed: on a busy machine every row is slower, the ratios less so.
 """
@@ -34,6 +38,7 @@ from selpres.config import CONFIG_DIR
 GENERATION_N = 1_000_000
 ENGINE_SIZES = (1_000, 100_000, 1_000_000)
 TOPOLOGY, REPLICAS = (18, 40, 6), 4
+PADDING_TOPOLOGY, PADDING_N, PADDING_REPLICAS = (6, 13, 2), 10_000, (12, 10)  # 3 groups of 4 lanes each
 
 
 def _load() -> str:
@@ -111,6 +116,41 @@ def engine_rows(repeats: int, presentations: int) -> list[dict]:
     ]
 
 
+def padding_rows(repeats: int, presentations: int) -> list[dict]:
+    """Seconds per epoch of ``presentations`` per replica for R = 12 (no padded lane) and R = 10 (two),
+    after a warm-up epoch of as many presentations, interleaved over the repeats."""
+    from selpres.engine import make_engine
+    from selpres.model import init_replica_params
+
+    gen = torch.Generator().manual_seed(0)
+    X = torch.rand(PADDING_N, PADDING_TOPOLOGY[0], dtype=torch.float64, generator=gen)
+    Y = 0.1 + 0.8 * torch.rand(PADDING_N, PADDING_TOPOLOGY[-1], dtype=torch.float64, generator=gen)
+    engines, orders = {}, {}
+    for R in PADDING_REPLICAS:
+        params = init_replica_params(PADDING_TOPOLOGY, list(range(R)))
+        engines[R] = make_engine("fast", PADDING_TOPOLOGY, params, 0.15, 0.9, 1)  # the paper's lr, momentum
+        orders[R] = torch.randint(PADDING_N, (R, presentations), generator=gen)
+        engines[R].train_epoch(X, Y, orders[R])  # warm-up: not timed
+    times: dict[int, list[float]] = {R: [] for R in PADDING_REPLICAS}
+    for _ in range(repeats):
+        for R in PADDING_REPLICAS:  # interleaved
+            t0 = time.perf_counter()
+            engines[R].train_epoch(X, Y, orders[R])
+            times[R].append(time.perf_counter() - t0)
+    base = statistics.median(times[PADDING_REPLICAS[0]])
+    return [
+        {
+            "replicas": R,
+            "engine": engines[R].name,
+            "topology": "-".join(map(str, PADDING_TOPOLOGY)),
+            "presentations_per_replica": presentations,
+            "seconds": statistics.median(t),
+            "time_ratio_to_R_12": statistics.median(t) / base,
+        }
+        for R, t in times.items()
+    ]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m selpres.bench_scale",
@@ -138,9 +178,18 @@ def main(argv: list[str] | None = None) -> int:
             f"  n = {r['n']:>9,}  {r['presentations_per_s']:12,.0f} presentations/s  "
             f"time x{r['time_ratio_to_n_1e3']:.2f} of n = 1e3"
         )
+    pad = padding_rows(repeats, presentations)
+    print(
+        f"\npadded lanes, topology {pad[0]['topology']}, engine {pad[0]['engine']}, n = {PADDING_N:,}, "
+        f"{presentations:,} presentations per replica (3 groups of 4 lanes either way; ideal x1.00):"
+    )
+    for r in pad:
+        ratio = r["time_ratio_to_R_12"]
+        print(f"  R = {r['replicas']:>2}  {r['seconds']:7.3f} s  time x{ratio:.2f} of R = 12")
     print(f"\nload average after: {_load()}")
     if args.json is not None:
-        args.json.write_text(json.dumps({"generation": gen, "engine": eng, "load": _load()}, indent=1))
+        rows = {"generation": gen, "engine": eng, "padding": pad, "load": _load()}
+        args.json.write_text(json.dumps(rows, indent=1))
     return 0
 
 

@@ -169,17 +169,58 @@ def setting_text(f: dict[str, str], keys: list[str]) -> str:
     return " ".join(f"{k}={f[k]}".replace('"', "") for k in keys if f.get(k, "null") != "null")
 
 
+ROBOT = "robot."  # an arm's settings: its name, kind, links, masses, ... (configs/robot/)
+
+
+def arm_name(f: dict[str, str]) -> str:
+    """What an arm is called in a label: ``robot.name`` (puma560, planar3), else its URDF file, else its kind
+    (two_link, whose file sets no name)."""
+    for key in ("robot.name", "robot.path", "robot.kind"):
+        if (v := json.loads(f.get(key, "null"))) is not None:
+            return str(v)
+    return "?"
+
+
+def arm_label(members: list[tuple[Job, dict[str, str]]], keys: list[str]) -> dict[int, str]:
+    """id(job) -> the robot part of its label, when the arm differs between jobs of one schedule name:
+    ``robot=<name>`` instead of the arm spelled out (its links run to thousands of characters), plus any
+    robot key that differs between arms of one name (a mass overridden), so labels stay distinct. Nothing
+    where each topology has one arm (experiment=large: 6-13-2 the two-link arm, 18-40-6 the PUMA): groups
+    are keyed by topology already, and a label naming the arm would make a grid of (topology, method) whose
+    other-arm cells do not exist."""
+    robot_keys = [k for k in keys if k.startswith(ROBOT)]
+    if not robot_keys:
+        return {}
+    per_topology: dict[str | None, set] = {}
+    for j, f in members:
+        per_topology.setdefault(j.topology, set()).add(tuple(f.get(k) for k in robot_keys))
+    if all(len(arms) == 1 for arms in per_topology.values()):
+        return {}
+    by_arm: dict[str, list[dict[str, str]]] = {}
+    for _, f in members:
+        by_arm.setdefault(arm_name(f), []).append(f)
+    labels = {}
+    for j, f in members:
+        name = arm_name(f)
+        same_name = [k for k in varying(by_arm[name]) if k.startswith(ROBOT)]
+        labels[id(j)] = " ".join(filter(None, [f"robot={name}", setting_text(f, same_name)]))
+    return labels
+
+
 def label_methods(jobs: list[Job]) -> None:
     """A job's method is its schedule's name; when jobs of one name differ in other settings (a sweep over
-    stage sizes, epochs, lr, ...), the settings that differ are added to the name, so they are not pooled."""
+    stage sizes, epochs, lr, ...), the settings that differ are added to the name, so they are not pooled
+    (an arm by its name: :func:`arm_label`)."""
     by_name: dict[str, list[tuple[Job, dict]]] = {}
     for j in jobs:
         if j.results and "config" in j.results:
             by_name.setdefault(j.schedule, []).append((j, settings(j)))
     for name, members in by_name.items():
         keys = varying([f for _, f in members])
+        arms = arm_label(members, keys)
+        others = [k for k in keys if not k.startswith(ROBOT)]
         for j, f in members:
-            if text := setting_text(f, keys):
+            if text := " ".join(filter(None, [setting_text(f, others), arms.get(id(j), "")])):
                 j.schedule = name + " " + text
 
 
