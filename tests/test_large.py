@@ -9,7 +9,6 @@ import json
 from pathlib import Path
 
 import pytest
-import torch
 from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.hydra_config import HydraConfig
 from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -20,7 +19,7 @@ from selpres.config import to_container
 from selpres.report.groups import label_methods
 from selpres.report.jobs import Job
 
-from conftest import compose, load_group, requires_native
+from conftest import compose, load_group
 
 COMMAND = ["experiment=large"]  # python train.py experiment=large
 # by hand: each arm with its network (3N inputs, N outputs), every n, every schedule
@@ -107,38 +106,6 @@ def test_each_folder_is_named_by_its_overrides_inside_one_folder_per_n(jobs):
         names.append(want)
     assert "n=100000/data.n=100000,design_arm=puma560,experiment=large,schedule=matched" in names
     assert len(set(names)) == len(names) == 18
-
-
-def test_replicas_fill_the_native_kernels_lanes():
-    """The kernel trains replicas in groups of 4 lanes; padded lanes slow their group (next test)."""
-    from selpres._kernels import LANES
-
-    assert compose(*COMMAND).replicas % LANES == 0
-
-
-@requires_native
-@pytest.mark.xfail(
-    strict=True,
-    reason="NativeEngine pads a group with zero weights presented pattern 0 only; their momentum buffers "
-    "settle on a subnormal value and subnormal arithmetic slows the whole group ~15x (selpres/engine.py, "
-    "NativeEngine._pack / train_epoch). When this passes, the padding is fixed: drop this mark, and "
-    "configs/experiment/large.yaml may use any number of replicas",
-)
-def test_padded_lanes_stay_out_of_subnormal_numbers():
-    from selpres.engine import make_engine
-    from selpres.model import init_replica_params
-
-    sizes, R, n = (6, 13, 2), 10, 200  # 10 replicas: 3 groups of 4, the last with 2 padded lanes
-    gen = torch.Generator().manual_seed(0)
-    X = torch.rand(n, 6, dtype=torch.float64, generator=gen)
-    Y = 0.1 + 0.8 * torch.rand(n, 2, dtype=torch.float64, generator=gen)
-    eng = make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
-    for _ in range(50):  # 10,000 presentations: a padded lane's buffer decays by 0.9 a step once it fits
-        eng.train_epoch(X, Y, torch.stack([torch.randperm(n, generator=gen) for _ in range(R)]))
-    tiny = torch.finfo(torch.float64).tiny
-    packed = torch.cat([eng.w.flatten(), eng.buf.flatten()])
-    subnormal = (packed != 0) & (packed.abs() < tiny)
-    assert not subnormal.any(), f"{int(subnormal.sum())} subnormal weights or momentum buffers"
 
 
 # ------------------------------------------------------------------ the report's label of an arm
