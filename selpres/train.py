@@ -80,6 +80,11 @@ class Problem:
         """Nm per scaled unit of each output (the scaler is affine): scaled errors times this are errors in Nm."""
         return (self.scaler.y_max - self.scaler.y_min) / (self.scaler.hi - self.scaler.lo)
 
+    @functools.cached_property
+    def nm2_per_scaled2(self) -> torch.Tensor:
+        """Its square: what sums of squared scaled errors are multiplied by to be in Nm^2."""
+        return self.nm_per_scaled.square()
+
 
 def prepare(cfg: DictConfig) -> Problem:
     """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
@@ -189,7 +194,7 @@ def _as_list(t: torch.Tensor) -> list:
 
 def _rms_nm(sums: torch.Tensor, n: int, prob: Problem) -> torch.Tensor:
     """Overall RMS in Nm of every replica from its per-output sums of squared scaled errors [R, out]."""
-    return (sums * prob.nm_per_scaled.square()).sum(1).div(n * sums.shape[1]).sqrt()
+    return (sums * prob.nm2_per_scaled2).sum(1).div(n * sums.shape[1]).sqrt()
 
 
 @dataclass(frozen=True)
@@ -211,7 +216,6 @@ def curve_point(engine, prob: Problem, cad: Cadence, ep: EpochPlan | None, loss,
     epoch = -1 if ep is None else ep.index
     every = cad.heldout_every
     heldout_due = ep is None or epoch in prob.stage_ends or (every and (epoch + 1) % every == 0)
-    heldout_X, heldout_Y = (t[: cad.heldout_curve] for t in prob.scored["heldout"])
     rms = lambda X, Y: _as_list(_rms_nm(engine.squared_errors(X, Y), X.shape[0], prob))
     return {
         "epoch": epoch,
@@ -220,7 +224,7 @@ def curve_point(engine, prob: Problem, cad: Cadence, ep: EpochPlan | None, loss,
         "presentations": progress.presentations,
         "train_mse": [None] * len(prob.seeds) if loss is None else _as_list(loss),
         "test10_rms_nm": rms(*prob.scored["test10"]),
-        "heldout_rms_nm": rms(heldout_X, heldout_Y) if heldout_due else None,
+        "heldout_rms_nm": rms(*(t[: cad.heldout_curve] for t in prob.scored["heldout"])) if heldout_due else None,
     }
 
 
@@ -240,7 +244,7 @@ def final_scores(engine, prob: Problem) -> dict:
     for name, (X, Y) in prob.scored.items():
         sums, n = engine.squared_errors(X, Y), X.shape[0]  # [R, out] in scaled units
         scores = {}
-        for unit, weight in (("nm", prob.nm_per_scaled.square()), ("scaled", torch.ones_like(prob.nm_per_scaled))):
+        for unit, weight in (("nm", prob.nm2_per_scaled2), ("scaled", torch.ones_like(prob.nm_per_scaled))):
             per_joint = (sums * weight).div(n).sqrt()
             scores[unit] = {
                 "overall": (sums * weight).sum(1).div(n * sums.shape[1]).sqrt(),
@@ -356,6 +360,7 @@ def train(
                 with clock("checkpoint"):
                     job.progress.seconds = clock.snapshot()
                     job.ckpts.save(job.engine, job.progress)
+                    job.tracker.flush()
     with clock("eval"):
         final = final_scores(job.engine, job.prob)
     return finish(job, final, clock.snapshot())
