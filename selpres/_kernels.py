@@ -45,6 +45,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
 import torch
 
 LANES = 4
@@ -339,10 +340,10 @@ class Shuffler(_Library):
         R = len(orders)
         assert base.dtype.name == "uint64" and base.shape == (R,) and base.flags.c_contiguous
         assert out.dtype == torch.int64 and out.shape == (R, count) and out.is_contiguous()
-        assert all(o.dtype == torch.int64 and o.is_contiguous() and o.numel() >= size for o in orders)
-        ptrs = (ctypes.c_void_p * R)(*(o.data_ptr() for o in orders))
+        # each order: int64, contiguous, at least ``size`` long (the sampler's contract: checked there, once)
+        ptrs = np.fromiter((o.data_ptr() for o in orders), dtype=np.uint64, count=R)
         threads = self.threads_for(SHUFFLE_WORK_PER_ELEMENT * R * size, threads)
-        rest = (base.ctypes.data, ctypes.addressof(ptrs), size, count, out.data_ptr())
+        rest = (base.ctypes.data, ptrs.ctypes.data, size, count, out.data_ptr())
         self._run(self._shuffle, [(r0, r1, *rest) for r0, r1 in self._bounds(R, threads)])
 
 

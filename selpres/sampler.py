@@ -171,7 +171,7 @@ def epoch_orders(samplers: list[SelectivePresentationSampler], buffer: torch.Ten
         base = _shuffle_bases(keys, epochs)
     shuffler, _ = native_shuffles()
     if shuffler is not None and out.dtype == torch.int64:
-        orders = [s.order.contiguous() for s in samplers]  # kept alive: the C code reads them
+        orders = [s.order for s in samplers]  # contiguous int64 of length n (the sampler's setter); kept alive
         shuffler.shuffle(base, orders, size, count, out, torch.get_num_threads())
         return out
     block = max(1, min(R, _BLOCK_HASHES // size))
@@ -191,14 +191,26 @@ class SelectivePresentationSampler(Sampler[int]):
     """Yields the indices presented in one epoch: the current stage's subset of U, freshly shuffled."""
 
     def __init__(self, order: torch.Tensor, schedule: Schedule, seed: int):
-        if order.numel() != schedule.n:
-            raise ValueError(f"priority order has {order.numel()} indices but the schedule ends at n = {schedule.n}")
-        self.order = order
         self.schedule = schedule
+        self.order = order  # checked and stored contiguous (the setter below)
         self.seed = int(seed)
         self._key = derive_seed(self.seed, "shuffle")
         self._plan = schedule.plan()
         self.epoch = 0
+
+    @property
+    def order(self) -> torch.Tensor:
+        """The priority order of U (A_i is its first n_i): a contiguous int64 tensor of the schedule's n,
+        which the native shuffles read directly (selection replaces it at stage starts)."""
+        return self._order
+
+    @order.setter
+    def order(self, order: torch.Tensor) -> None:
+        if order.numel() != self.schedule.n:
+            raise ValueError(
+                f"priority order has {order.numel()} indices but the schedule ends at n = {self.schedule.n}"
+            )
+        self._order = order.to(torch.int64).contiguous().view(-1)
 
     def set_epoch(self, epoch: int) -> None:
         if not 0 <= epoch < len(self._plan):
