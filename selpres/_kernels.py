@@ -330,20 +330,20 @@ class Shuffler(_Library):
         super().__init__(path)
         i64, vp = ctypes.c_int64, ctypes.c_void_p
         self._shuffle = self.lib.selpres_shuffle
-        self._shuffle.argtypes = [i64, i64, vp, vp, i64, i64, vp]
+        self._shuffle.argtypes = [i64, i64, vp, vp, vp, i64, i64, vp]
         self._shuffle.restype = ctypes.c_int
 
-    def shuffle(self, base, orders: list[torch.Tensor], size: int, count: int, out: torch.Tensor, threads: int):
-        """``out[r] = orders[r][argsort(hashes of base[r])[:count]]`` for every replica r (``base``: uint64
-        numpy array [R]; ``orders``: contiguous int64 tensors; ``out``: int64 [R, count]). Threads take
-        contiguous chunks of replicas."""
+    def shuffle(self, keys, epochs, orders: list[torch.Tensor], size: int, count: int, out: torch.Tensor, threads: int):
+        """``out[r] = orders[r][argsort(hashes of replica r at its epoch)[:count]]`` for every replica r
+        (``keys``, ``epochs``: uint64 numpy arrays [R]; ``orders``: contiguous int64 tensors of at least
+        ``size``; ``out``: int64 [R, count]). Threads take contiguous chunks of replicas."""
         R = len(orders)
-        assert base.dtype.name == "uint64" and base.shape == (R,) and base.flags.c_contiguous
+        for a in (keys, epochs):
+            assert a.dtype.name == "uint64" and a.shape == (R,) and a.flags.c_contiguous
         assert out.dtype == torch.int64 and out.shape == (R, count) and out.is_contiguous()
-        # each order: int64, contiguous, at least ``size`` long (the sampler's contract: checked there, once)
         ptrs = np.fromiter((o.data_ptr() for o in orders), dtype=np.uint64, count=R)
         threads = self.threads_for(SHUFFLE_WORK_PER_ELEMENT * R * size, threads)
-        rest = (base.ctypes.data, ptrs.ctypes.data, size, count, out.data_ptr())
+        rest = (keys.ctypes.data, epochs.ctypes.data, ptrs.ctypes.data, size, count, out.data_ptr())
         self._run(self._shuffle, [(r0, r1, *rest) for r0, r1 in self._bounds(R, threads)])
 
 

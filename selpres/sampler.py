@@ -167,13 +167,13 @@ def epoch_orders(samplers: list[SelectivePresentationSampler], buffer: torch.Ten
         out = buffer.view(-1)[: R * count].view(R, count)
     else:
         out = torch.empty((R, count), dtype=dtype)
+    shuffler, _ = native_shuffles()
+    if shuffler is not None:  # it hashes keys and epochs itself (kernels/shuffle.c)
+        orders = [s.order for s in samplers]  # contiguous int64 of length n (the sampler's setter); kept alive
+        shuffler.shuffle(keys, epochs, orders, size, count, out, torch.get_num_threads())
+        return out
     with np.errstate(over="ignore"):
         base = _shuffle_bases(keys, epochs)
-    shuffler, _ = native_shuffles()
-    if shuffler is not None and out.dtype == torch.int64:
-        orders = [s.order for s in samplers]  # contiguous int64 of length n (the sampler's setter); kept alive
-        shuffler.shuffle(base, orders, size, count, out, torch.get_num_threads())
-        return out
     block = max(1, min(R, _BLOCK_HASHES // size))
     h = np.empty((block, size), dtype=np.uint64)
     tmp = np.empty_like(h)

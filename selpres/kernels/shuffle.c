@@ -4,7 +4,7 @@
  * Built and loaded by selpres/_kernels.py (load_shuffle) with the kernel's flags, no macros.
  *
  * Replica r's shuffle of its current set (the first `size` entries of its priority order) is the argsort
- * of h_i = mix(base_r + i * golden), i < size, where mix is splitmix64's finaliser: a bijection, so the
+ * of h_i = mix(base_r + i * golden), i < size, base_r = mix(key_r ^ mix(epoch + golden)), where mix is splitmix64's finaliser: a bijection, so the
  * h_i are distinct and the argsort is one permutation, whatever algorithm finds it. Here: a counting sort
  * into 2^b buckets by the top b bits of h (2^b >= 2 size, so at most about one hash a bucket), which leaves every
  * hash at most a bucket away from its place, then an insertion sort by the full 64 bits that moves each
@@ -24,9 +24,10 @@ static inline uint64_t mix64(uint64_t z)
 }
 
 /* Replicas r0 .. r1-1: out[r * count + k] = orders[r][perm_r[k]] for k < count, perm_r the argsort of
-   replica r's hashes (base[r]) over positions 0 .. size-1. Returns 0, or -1 (out of memory). */
-int selpres_shuffle(int64_t r0, int64_t r1, const uint64_t *base, const int64_t *const *orders, int64_t size,
-                    int64_t count, int64_t *out)
+   replica r's hashes over positions 0 .. size-1, whose base is mix(key[r] ^ mix(epoch[r] + golden)) (as
+   selpres.sampler._shuffle_bases). Returns 0, or -1 (out of memory). */
+int selpres_shuffle(int64_t r0, int64_t r1, const uint64_t *key, const uint64_t *epoch, const int64_t *const *orders,
+                    int64_t size, int64_t count, int64_t *out)
 {
     int bits = 1;
     while (bits < 62 && ((int64_t)1 << bits) < 2 * size) bits++; /* 2^b >= 2 size: fewer shared buckets */
@@ -43,7 +44,7 @@ int selpres_shuffle(int64_t r0, int64_t r1, const uint64_t *base, const int64_t 
     }
     for (int64_t r = r0; r < r1; r++) {
         for (int64_t b = 0; b <= nb; b++) start[b] = 0;
-        uint64_t z = base[r];
+        uint64_t z = mix64(key[r] ^ mix64(epoch[r] + GOLDEN));
         for (int64_t i = 0; i < size; i++, z += GOLDEN) {
             h[i] = mix64(z);
             start[(h[i] >> (64 - bits)) + 1]++;
