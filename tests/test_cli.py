@@ -223,7 +223,7 @@ def test_ctrl_c_during_set_up_keeps_the_users_folder(tmp_path):
     folder = tmp_path / "mine"
     before = _user_folder(folder)
     p = subprocess.Popen(
-        _cmd(folder, *TINY, "data.heldout=1000000"),
+        _cmd(folder, *TINY, "data.heldout=5000000"),  # seconds of set-up (1,000,000 took under 0.5 s)
         cwd=REPO,
         env=_env(),
         stdout=subprocess.PIPE,

@@ -76,8 +76,8 @@ def test_stratified_prefixes_estimate_averages_better_than_random(cube):
     def mean_ratio(order_of):
         return sum(_variance_ratio(f, order_of, k) for f in fs for k in (64, 256, 1024)) / (3 * len(fs))
 
-    kmeans = mean_ratio(lambda s: _stratified(sid_kmeans, torch.Generator().manual_seed(s)))
-    grid = mean_ratio(lambda s: _stratified(sid_grid, torch.Generator().manual_seed(s)))
+    kmeans = mean_ratio(lambda s: _stratified(sid_kmeans, [torch.Generator().manual_seed(s)])[0])
+    grid = mean_ratio(lambda s: _stratified(sid_grid, [torch.Generator().manual_seed(s)])[0])
     random = mean_ratio(lambda s: torch.randperm(N, generator=torch.Generator().manual_seed(s)))
     assert 0.75 < random < 1.3, random
     assert 0.75 < grid < 1.3, grid
