@@ -229,6 +229,9 @@ def test_ctrl_c_during_set_up_keeps_the_users_folder(tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        # a background job (`cmd &` in a script) starts with SIGINT ignored, and Python then keeps ignoring
+        # it: the job must see Ctrl-C as a terminal would deliver it, whoever runs the tests
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     deadline = time.monotonic() + TIMEOUT
     while not (folder / ".hydra" / "overrides.yaml").exists() and time.monotonic() < deadline:
