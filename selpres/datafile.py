@@ -25,21 +25,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from selpres.errors import ConfigError
+from selpres.errors import ConfigError, FileError
 
 NPZ_TABLE, NPZ_COLUMNS = "table", "columns"
 
 
-class DataFileError(ConfigError):
+class DataFileError(FileError):
     """A data file selpres cannot train on: one line naming the file, where (column, row) and the problem."""
-
-    def __init__(self, path: str | Path, where: str, problem: str):
-        self.path, self.where, self.problem = str(path), where, problem
-        self.key, self.value, self.allowed = f"{path}: {where}", None, problem
-        ValueError.__init__(self, f"{path}: {where}: {problem}")
-
-    def __reduce__(self):
-        return type(self), (self.path, self.where, self.problem)
 
 
 def _path(path: str | Path | None) -> Path:

@@ -13,3 +13,15 @@ class ConfigError(ValueError):
     def __reduce__(self):
         """Picklable with its three fields: launchers (joblib, submitit) send a failed job's error home."""
         return type(self), (self.key, self.value, self.allowed)
+
+
+class FileError(ConfigError):
+    """A file selpres cannot use: one line naming the file, where in it (column, row, element) and the problem."""
+
+    def __init__(self, path, where: str, problem: str):
+        self.path, self.where, self.problem = str(path), where, problem
+        self.key, self.value, self.allowed = f"{path}: {where}", None, problem
+        ValueError.__init__(self, f"{path}: {where}: {problem}")
+
+    def __reduce__(self):
+        return type(self), (self.path, self.where, self.problem)

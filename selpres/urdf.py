@@ -23,7 +23,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from selpres.errors import ConfigError
+from selpres.errors import ConfigError, FileError
 from selpres.serial import (
     IDENTITY,
     ZERO3,
@@ -45,16 +45,8 @@ MOVING = ("revolute", "continuous")
 REFUSED = {"prismatic": "a sliding joint", "floating": "a free-floating base", "planar": "a planar joint"}
 
 
-class UrdfError(ConfigError):
+class UrdfError(FileError):
     """A URDF that selpres cannot simulate: one line naming the file, the element and the problem."""
-
-    def __init__(self, path: str | Path, element: str, problem: str):
-        self.path, self.element, self.problem = str(path), element, problem
-        self.key, self.value, self.allowed = f"{path}: {element}", None, problem
-        ValueError.__init__(self, f"{path}: {element}: {problem}")
-
-    def __reduce__(self):
-        return type(self), (self.path, self.element, self.problem)
 
 
 @dataclass(frozen=True)
