@@ -269,3 +269,29 @@ def test_heat_map_grid_of_three_parameters_by_hand(tmp_path):
     for (kappa, phi, theta), v in done.items():
         assert gr.panels[f"optim.theta={theta}"][(str(kappa), str(phi))] == pytest.approx(v)
     assert ("0.003", "0.7") not in gr.panels["optim.theta=0.7"]  # not run: a blank cell
+
+
+def test_a_loss_based_familys_level_is_taken_at_its_cost_with_the_choosing_charged(tmp_path):
+    """loss_high pays forward passes to choose its patterns (selection_presentations); its level must compare it
+    with what else ran at that whole cost. Two loss_high settings trained 31,560 / 63,120 t and charged 900 each
+    (32,460 / 64,020 in all); conventional runs stopped at exactly those costs (32 epochs + 396, 63 + 894) reach
+    0.1 Nm where loss_high reaches 0.4 at best: level 0.4 / 0.1 = 4 (at training presentations alone, nothing else
+    ran there and the level read 1)."""
+    import json
+
+    s = tmp_path / "sw"
+
+    def charged(folder, charge):
+        p = folder / "results.json"
+        r = json.loads(p.read_text())
+        r["selection_presentations"] = charge
+        p.write_text(json.dumps(r))
+
+    charged(write_setting(s, "lh1", "lossy", T, [0.5] * 5, [50, 1002], [30, 30], order="loss_high"), 900)
+    charged(write_setting(s, "lh2", "lossy", T, [0.4] * 5, [50, 1002], [60, 60], order="loss_high"), 900)
+    write_setting(s, "m1", "matched", T, [0.1] * 5, [1002], [32], extra=396)
+    write_setting(s, "m2", "matched", T, [0.1] * 5, [1002], [63], extra=894)
+    groups, tops, _ = aggregate(load_jobs(s))
+    (lossy,) = [r for r in sensitivity_rows(groups, tops) if "loss_high" in r["family"]]
+    assert lossy["level_presentations"] == 64_020 and lossy["level"] == pytest.approx(4.0)
+    assert "budget-matched" in lossy["level_reference_family"]

@@ -67,7 +67,7 @@ def selection_rows(
         partner = matched_partner(groups, g)
         if partner is None:
             row["reading_heldout"] = (
-                f"no compute-matched one-stage run at {g.sched['presentations']:,} t "
+                f"no compute-matched one-stage run at {g.cost:,} t "
                 "(±1 %) with the same other settings"
             )
             continue

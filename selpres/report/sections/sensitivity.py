@@ -75,14 +75,14 @@ def setting_summary(g: Group, target: float | None, base_cost: float | None) -> 
 
 
 def cost_points(fams: list[Family]) -> list[tuple[int, float, str, str]]:
-    """Every setting of the given families as (presentations, mean final held-out RMS, family, setting):
-    what a family's level is measured against. A setting with no complete seed is left out."""
+    """Every setting of the given families as (cost: presentations with selection's charge, mean final held-out
+    RMS, family, setting): what a family's level is measured against. A setting with no complete seed is left out."""
     out = []
     for fam in fams:
         for g in fam.members:
             st = summarize(g.values("heldout").values())
             if st["n"]:
-                out.append((g.sched["presentations"], st["mean"], fam.name, fam.label(g)))
+                out.append((g.cost, st["mean"], fam.name, fam.label(g)))
     return out
 
 
@@ -140,7 +140,7 @@ def family_row(
         "worst_over_best": worst["mean"] / best["mean"] if math.isfinite(best["mean"]) else None,
         "within_10pct": within,
         "within_10pct_fraction": within / len(per),
-        **level(best["mean"], best_g.sched["presentations"], points or []),
+        **level(best["mean"], best_g.cost, points or []),
         "ci95_half_width_pct": None if rel is None else 100 * rel,
         "worst_minus_best_pairs": spread["n"],
         "worst_minus_best_nm": spread["mean"],
@@ -206,7 +206,7 @@ def versus_matched_rows(groups, topologies) -> list[dict]:
                 "total_epochs": terms["N = ΣN_i"],
                 "sizes": " ".join(map(str, g.sched["sizes"])),
                 "epochs": " ".join(map(str, g.sched["epochs"])),
-                "presentations": g.sched["presentations"],
+                "presentations": g.cost,
                 "n": st["n"],
                 "heldout_nm_mean": st["mean"],
                 "heldout_nm_ci_lo": st["ci95"][0],
@@ -215,7 +215,7 @@ def versus_matched_rows(groups, topologies) -> list[dict]:
                 if best is None or st["mean"] is None
                 else st["mean"] <= (1 + TOLERANCE) * best,
                 "matched": partner.schedule if partner else None,
-                "matched_presentations": partner.sched["presentations"] if partner else None,
+                "matched_presentations": partner.cost if partner else None,
                 "matched_n": pst["n"],
                 "matched_heldout_nm_mean": pst["mean"],
                 "over_matched": st["mean"] / pst["mean"] if st["mean"] and pst["mean"] else None,
