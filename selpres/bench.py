@@ -36,10 +36,11 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
+from selpres.config import CONFIG_DIR, compose_train
+
 SIZES = (6, 13, 2)
 N, EPOCHS, LR, MOM = 1002, 150, 0.15, 0.9
 PACKAGE_PARENT = Path(__file__).resolve().parents[1]  # on PYTHONPATH of the child processes
-DEFAULT_CONFIGS = PACKAGE_PARENT / "configs"  # the repository's Hydra configs (a source checkout)
 JOB_PARTS = ("train", "eval", "shuffle", "log", "checkpoint", "prepare", "loop")  # results.json wall_seconds
 
 
@@ -153,21 +154,6 @@ def bench_engines(table: EngineTable, quick: bool, native: bool) -> None:
 
 
 BATCH_OPTIMIZERS = ("quickprop", "delta_bar_delta", "rprop", "adam")  # configs/optim/<name>.yaml
-
-
-def compose_train(configs: str | Path, overrides: list[str]):
-    """The ``train`` config composed from ``configs`` as ``python train.py <overrides>`` composes it."""
-    from hydra import compose, initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
-
-    import selpres.config  # noqa: F401  registers the typed schema and resolvers
-
-    GlobalHydra.instance().clear()
-    try:
-        with initialize_config_dir(config_dir=str(configs), version_base="1.3"):
-            return compose("train", overrides=overrides)
-    finally:
-        GlobalHydra.instance().clear()
 
 
 def bench_batch_engines(table: EngineTable, quick: bool, configs: Path) -> None:
@@ -536,8 +522,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--configs",
         type=Path,
-        default=DEFAULT_CONFIGS,
-        help=f"the Hydra config directory the job rows compose (default: {DEFAULT_CONFIGS})",
+        default=CONFIG_DIR,
+        help=f"the Hydra config directory the job rows compose (default: {CONFIG_DIR})",
     )
     args = ap.parse_args(argv)
     if not (args.configs / "train.yaml").is_file():

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import torch
 
-from selpres.config import CONFIG_DIR
+from selpres.config import CONFIG_DIR, compose_train
 
 GENERATION_N = 1_000_000
 ENGINE_SIZES = (1_000, 100_000, 1_000_000)
@@ -51,7 +51,6 @@ def _load() -> str:
 def generation_rows(repeats: int) -> list[dict]:
     """Seconds to draw 10^6 patterns (median of ``repeats``), per arm and kind of points."""
     from selpres import sampling as S
-    from selpres.bench import compose_train
     from selpres.robot import make_arm
 
     rows = []

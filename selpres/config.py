@@ -237,3 +237,17 @@ register()
 def to_container(cfg: DictConfig) -> dict:
     """Plain, resolved values (enums as strings): what hashes, results.json and the data module take."""
     return OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+
+
+def compose_train(configs: str | Path, overrides: list[str]):
+    """The ``train`` config composed from ``configs`` as ``python train.py <overrides>`` composes it (Hydra's
+    compose API; the global Hydra state is cleared before and after)."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(configs), version_base="1.3"):
+            return compose("train", overrides=overrides)
+    finally:
+        GlobalHydra.instance().clear()

@@ -26,7 +26,7 @@ from omegaconf import OmegaConf
 
 from selpres import data as D
 from selpres.checks import check_task
-from selpres.config import CONFIG_DIR, to_container
+from selpres.config import CONFIG_DIR, compose_train, to_container
 from selpres.errors import ConfigError
 from selpres.robot import TwoLinkArm, make_arm
 from selpres.task import load_task
@@ -35,10 +35,7 @@ from selpres.urdf import to_urdf
 
 def compose_data_config(overrides: list[str]):
     """(robot, data) of train.py's config with ``robot``/``data`` overrides, checked (not the topology)."""
-    from hydra import compose, initialize_config_dir
-
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = compose("train", overrides=overrides)
+    cfg = compose_train(CONFIG_DIR, overrides)
     check_task(cfg)
     return OmegaConf.create(to_container(cfg.robot)), OmegaConf.create(to_container(cfg.data))
 
@@ -49,8 +46,8 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
     task = load_task(robot_cfg, data_cfg)
     t1 = time.perf_counter()
     ex, tests = task.exemplar, task.tests
-    if task.arm is not None:
-        arm = make_arm(robot_cfg)
+    arm = make_arm(robot_cfg) if task.arm is not None else None
+    if arm is not None:
         G = arm.gravity(torch.zeros(arm.dof, dtype=torch.float64))
         print(f"robot {arm.name} ({arm.dof} joints)  G(q=0) = ({', '.join(f'{g:.3f}' for g in G)}) Nm")
     info = task.info
@@ -72,9 +69,8 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
         print(f"  scaling.mode={mode:9s} scaled exemplar targets: {rng}")
     paths = {}
     if urdf is not None:  # first: a refusal here leaves nothing written
-        if task.arm is None:
+        if arm is None:
             raise ConfigError("--urdf", str(urdf), "an arm to write: data=file has none")
-        arm = make_arm(robot_cfg)
         try:
             paths["urdf"] = to_urdf(arm.as_serial() if isinstance(arm, TwoLinkArm) else arm, urdf)
         except ValueError as e:
@@ -137,9 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         robot_cfg, data_cfg = compose_data_config(args.overrides)
-    except ConfigError as e:
-        ap.exit(2, f"error: {e}\n")
-    except Exception as e:  # noqa: BLE001  Hydra's own message (unknown key, wrong type), without a traceback
+    except Exception as e:  # a ConfigError, or Hydra's own message (unknown key, wrong type): no traceback
         ap.exit(2, f"error: {e}\n")
     try:
         export_data(args.out, robot_cfg, data_cfg, args.urdf)

@@ -323,8 +323,7 @@ def test_validation_checks_the_optimizer_without_building_one():
 
     code = (
         "import sys\n"
-        "from selpres.bench import compose_train\n"
-        "from selpres.config import CONFIG_DIR\n"
+        "from selpres.config import CONFIG_DIR, compose_train\n"
         "from selpres.train import prepare\n"
         "prepare(compose_train(CONFIG_DIR, ['replicas=2']))\n"
         "print('torch._dynamo' in sys.modules)\n"

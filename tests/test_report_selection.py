@@ -12,7 +12,8 @@ from test_report import PAPER_SGD, write_setting
 from selpres.report import aggregate, load_jobs
 from selpres.report.build import Report
 from selpres.report.compare import Margin, Options
-from selpres.report.sections.selection import headline, matched_partner, selection_rows, shown
+from selpres.report.families import matched_partner
+from selpres.report.sections.selection import headline, selection_rows, shown
 from selpres.stats import t_test
 
 T = "6-4-2"

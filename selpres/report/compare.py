@@ -68,23 +68,33 @@ class Options:
     holm: bool = False
 
 
+def outcome(v: dict) -> str:
+    """The reading in one word: better / worse (t-test), equivalent (TOST), no detectable difference, or too
+    few pairs. ``reading`` puts the same rule in words."""
+    if v["n"] < 2 or v.get("p") is None:
+        return "too few pairs"
+    if v["p"] < ALPHA:
+        return "better" if v["mean"] < 0 else "worse"
+    return "equivalent" if v.get("p_tost") is not None and v["p_tost"] < ALPHA else "no detectable difference"
+
+
 def reading(v: dict, name: str = REFERENCE, unit: str = "Nm") -> str:
     """Plain words for a paired difference name − other (negative = ``name`` has the lower error).
 
     ``v``: n, mean, ci95 and other_mean of the differences; margin, p (paired t) and p_tost, already
     Holm-adjusted when ``holm``; ci90 (the TOST interval)."""
-    if v["n"] < 2 or v.get("p") is None:
+    said = outcome(v)
+    if said == "too few pairs":
         return f"too few pairs ({v['n']}) for an interval"
     d, m, holm_ = v["mean"], v.get("margin"), v.get("holm", False)
-    equivalent = v.get("p_tost") is not None and v["p_tost"] < ALPHA
+    equivalent = v.get("p_tost") is not None and v["p_tost"] < ALPHA  # also when the t-test already decided
     iv95 = signed_interval(*v["ci95"])
     adj = f"; Holm p = {v['p']:.2g}" if holm_ else ""
-    if v["p"] < ALPHA:
+    if said in ("better", "worse"):
         pct = f"{abs(d) / v['other_mean'] * 100:.1f} %; " if v.get("other_mean") else ""
         within = f"; yet within the margin: equivalent within ±{m:.4f} {unit}" if equivalent else ""
-        direction = "better" if d < 0 else "worse"
-        return f"{name} {direction} by {abs(d):.4f} {unit} ({pct}95 % interval {iv95}{adj}){within}"
-    if equivalent:
+        return f"{name} {said} by {abs(d):.4f} {unit} ({pct}95 % interval {iv95}{adj}){within}"
+    if said == "equivalent":
         tost_adj = f"; Holm TOST p = {v['p_tost']:.2g}" if holm_ else ""
         return f"equivalent within ±{m:.4f} {unit} (90 % interval {signed_interval(*v['ci90'])}{tost_adj})"
     after = " after Holm's correction" if holm_ and not v["ci95"][0] <= 0 <= v["ci95"][1] else ""

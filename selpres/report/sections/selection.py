@@ -13,13 +13,11 @@ than one budget, or an order other than the stratified and random ones.
 
 from __future__ import annotations
 
-from selpres.report.compare import ALPHA, Options, adjust_family, mean_curve, paired, paired_columns, reach, reading
+from selpres.report.compare import Options, adjust_family, mean_curve, outcome, paired, paired_columns, reach, reading
 from selpres.report.context import Context, Section
 from selpres.report.families import PAPER_ORDER, matched_partner, paper_conventional, stages
 from selpres.report.groups import Group
 from selpres.report.markdown import diff_text, fmt, pvalues_text, signed_interval, table
-
-__all__ = ["matched_partner", "section", "selection_rows"]  # matched_partner: see report.families
 
 TABLE1_ORDERS = (PAPER_ORDER, "random")  # what Table 1's verdicts already compare at one budget
 
@@ -30,15 +28,6 @@ def _order(g: Group) -> str:
 
 def order_rank(order: str) -> tuple:
     return (order not in TABLE1_ORDERS, TABLE1_ORDERS.index(order) if order in TABLE1_ORDERS else 0, order)
-
-
-def outcome(v: dict) -> str:
-    """The reading in one word: better / worse (t-test), equivalent (TOST), undetermined, or too few pairs."""
-    if v["p"] is None:
-        return "too few pairs"
-    if v["p"] < ALPHA:
-        return "better" if v["mean"] < 0 else "worse"
-    return "equivalent" if v["p_tost"] is not None and v["p_tost"] < ALPHA else "no detectable difference"
 
 
 def _time_to(g: Group, target_group: Group | None) -> dict:
@@ -67,8 +56,7 @@ def selection_rows(
         partner = matched_partner(groups, g)
         if partner is None:
             row["reading_heldout"] = (
-                f"no compute-matched one-stage run at {g.cost:,} t "
-                "(±1 %) with the same other settings"
+                f"no compute-matched one-stage run at {g.cost:,} t (±1 %) with the same other settings"
             )
             continue
         v = paired(g.values("heldout"), partner.values("heldout"), options.margin)
