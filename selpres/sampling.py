@@ -201,7 +201,8 @@ def sample(arm: Arm, box: Boxes, route: str, points: Points, count: int) -> Draw
     lo = torch.cat((box.q[:, 0], box.dq[:, 0], third[:, 0]))
     width = torch.cat((box.q[:, 1], box.dq[:, 1], third[:, 1])) - lo
     filtered = route == "forward" or box.tau is not None
-    parts: list[tuple[torch.Tensor, ...]] = []
+    empty = torch.empty(0, N, dtype=DTYPE)
+    parts: list[tuple[torch.Tensor, ...]] = [(empty,) * 4]  # count = 0 (every test pattern from U): no rows
     have, drawn, candidates = 0, 0, 0
     while have < count:
         if not filtered:

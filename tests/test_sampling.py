@@ -139,6 +139,13 @@ def test_test_sets_are_drawn_the_same_way():
     assert len(task.tests.heldout) == 300 and qdd.abs().max() <= 2.0
 
 
+def test_every_test_pattern_from_the_exemplar_set_draws_none_outside():
+    """data.test_from_exemplar = data.test_patterns is allowed: the outside draw asks for 0 patterns."""
+    task, _ = task_of("data.n=1000", "data.heldout=100", "data.test_from_exemplar=10")
+    assert task.tests.test10_from_exemplar.tolist() == [True] * 10
+    assert all((task.exemplar.X == row).all(1).any() for row in task.tests.test10.X)
+
+
 def test_heldout_as_a_fraction_of_n():
     task, _ = task_of("data.n=1000", "data.heldout=0.25")
     assert len(task.tests.heldout) == 250
