@@ -380,17 +380,11 @@ def bench_selection(quick: bool, configs: Path) -> bool:
     draw, at R = 1, 30, 1000; then whole selective 6-13-2 jobs at R = 30 and 1000 (R = 30 only with
     --quick) per order: the "select" clock phase against "train", and the charged presentations against
     the trained ones. Returns False if a job failed."""
+    from selpres.engine import make_engine
     from selpres.model import init_replica_params
-    from selpres.orders import priority_orders
+    from selpres.orders import priority_orders, strata
     from selpres.seeding import generator
     from selpres.selection import enlarge_by_loss, errors_of, one_thread, reselected_orders
-
-    class Weights:  # an engine as selection sees it: weights, no predict()
-        def __init__(self, params):
-            self._p = params
-
-        def params(self):
-            return self._p
 
     print(
         "\nstage-wise orders: the cost of choosing, per enlargement (n = 1002, 50 of 952 candidates added; "
@@ -400,14 +394,14 @@ def bench_selection(quick: bool, configs: Path) -> bool:
     for R in (1, 30, 1000):
         params = init_replica_params(SIZES, list(range(R)))
         orders = torch.stack(priority_orders(X, "stratified", [generator(s, "subset") for s in range(R)], 2))
-        eng, seeds = Weights(params), list(range(R))
+        eng, seeds = make_engine("fast", SIZES, params, 0.15, 0.9, 1), list(range(R))  # as a job scores
         batched = functools.partial(lambda o, e: enlarge_by_loss(o, errors_of(e, X, Y), 50, 50, True), orders, eng)
         loop = functools.partial(_per_replica_enlargement, params, X, Y, orders, 50, 50)
         with one_thread():  # as a job chooses
             if not torch.equal(batched()[:, :100].sort(1).values, loop()[:, :100].sort(1).values):
                 raise AssertionError("the batched enlargement chose other patterns than the per-replica loop")
             batched, loop = median_seconds(batched, 3), median_seconds(loop, 3)
-            redraw = median_seconds(functools.partial(reselected_orders, X, seeds, 1, 2), 3)
+            redraw = median_seconds(functools.partial(reselected_orders, strata(X, 2), seeds, 1), 3)
         print(
             f"select      loss_high   R={R:<5} batched {batched * 1e3:9.2f} ms  per-replica loop "
             f"{loop * 1e3:9.2f} ms  x{loop / batched:.1f}   reselect draw {redraw * 1e3:8.2f} ms",

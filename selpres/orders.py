@@ -1,8 +1,9 @@
 """Priority orders: how the nested training sets A1 ⊂ A2 ⊂ … ⊂ U grow (each A_i is a prefix of one order).
 
 * ``stratified`` (the paper): the paper chooses each A_i "by a uniform sampling of the entire training
-  space"; here that is exact for every prefix: the inputs are cut into ``bins`` equal-width bins each,
-  and each stratum (cell) appears in every prefix in proportion to its share of U, within about one
+  space"; here that is exact for every prefix: U is cut into strata (``selpres.partition.strata``: ``bins``
+  equal-width bins per input, or k-means cells where that grid would have more than 4,096 cells), and
+  each stratum appears in every prefix in proportion to its share of U, within about one
   pattern (proportional stratified sampling, realised by sorting on the key
   (rank-within-stratum + U(0,1)) / stratum size).
 * ``random``: plain random growth, the literature's strongest simple baseline (Wu, Dyer & Neyshabur,
@@ -56,18 +57,13 @@ def priority_orders(X: torch.Tensor, kind: str, gens: list[torch.Generator], bin
         if bins < 1:
             raise ConfigError("schedule.strata_bins", bins, "a whole number >= 1")
         sid = strata(X, bins)  # the same for every replica: computed once
-        return list(_stratified(sid, gens))
+        return list(stratified_orders(sid, gens))
     if kind == "coverage":
         return coverage_orders(X, gens)
     raise ConfigError("schedule.order", kind, f"one of {list(ORDERS)}")
 
 
-def stratified_order(X: torch.Tensor, gen: torch.Generator, bins: int) -> torch.Tensor:
-    """Every prefix a proportional stratified sample of U (strata: ``bins`` bins per input)."""
-    return priority_orders(X, "stratified", [gen], bins)[0]
-
-
-def _stratified(sid: torch.Tensor, gens: list[torch.Generator]) -> torch.Tensor:
+def stratified_orders(sid: torch.Tensor, gens: list[torch.Generator]) -> torch.Tensor:
     """The stratified orders from the strata ids, one row per generator: random rank within each stratum,
     then sorted by (rank + U(0,1)) / stratum size. Each generator draws its permutation and then its
     jitter, exactly as for one replica alone; the rest is batched over the rows (stable sorts and

@@ -8,9 +8,8 @@ start of stage k (its first epoch), so each replica's sampler gets a new order t
   which the replica's *current* network errs most (hard first) or least (easy first): per-pattern squared
   error summed over the outputs, in scaled units. Ties go to the earlier pattern of the seed's stratified
   order: the candidates are kept in that order, and the chosen ones join A_k in it too. All replicas are
-  scored together by one forward pass over U (``engine.predict``, or the model's forward over the engine's
-  weights in blocks of ``SCORE_BLOCK`` replicas), and the chosen patterns are found by a partition, not a
-  sort (at R = 1000: ~13 ms against ~60-80 ms for a stable sort).
+  scored together by one forward pass over U (``engine.predict``), and the chosen patterns are found by a
+  partition, not a sort (at R = 1000: ~13 ms against ~60-80 ms for a stable sort).
 * ``reselect``: not nested. Stage k's A_k is a fresh stratified draw of size n_k (stage 1's is the
   ``stratified`` order's A_1; stage k > 1 draws from the seed's stream ``(seed, "subset", k)``), so
   consecutive subsets overlap only by chance, about n_{k-1} n_k / n patterns; the last stage is U.
@@ -33,20 +32,19 @@ phase "select". Stratified draws (A_1, ``reselect``) need no network and are cha
 
 from __future__ import annotations
 
+import functools
 import math
 from contextlib import contextmanager
 
 import numpy as np
 import torch
 
-from selpres.model import forward_replicas
-from selpres.orders import priority_orders
+from selpres.orders import strata, stratified_orders
 from selpres.sampler import SelectivePresentationSampler
 from selpres.schedule import EpochPlan, Schedule
 from selpres.seeding import generator
 
 LOSS_ORDERS = {"loss_high": True, "loss_low": False}  # order -> hard first?
-SCORE_BLOCK = 4  # replicas per forward pass when scoring: their activations stay in cache (R = 1000: 3-6x)
 STAGEWISE = (*LOSS_ORDERS, "reselect")  # the orders whose A_k is chosen at the start of stage k
 
 
@@ -96,10 +94,11 @@ def enlarge_by_loss(orders: torch.Tensor, errors: torch.Tensor, kept: int, added
     return torch.from_numpy(np.concatenate(rows, axis=1))
 
 
-def reselected_orders(X_raw: torch.Tensor, seeds: list[int], stage: int, bins: int) -> torch.Tensor:
-    """Stage ``stage``'s fresh stratified orders [R, n] (stage 0: the ``stratified`` order's own draw)."""
+def reselected_orders(sid: torch.Tensor, seeds: list[int], stage: int) -> torch.Tensor:
+    """Stage ``stage``'s fresh stratified orders [R, n] of U's strata ``sid`` (``orders.strata``, computed
+    once per job; stage 0: the ``stratified`` order's own draw)."""
     gens = [generator(s, "subset") if stage == 0 else generator(s, "subset", stage) for s in seeds]
-    return torch.stack(priority_orders(X_raw, "stratified", gens, bins))
+    return stratified_orders(sid, gens)
 
 
 def selection_charge(candidates: int, fraction: float) -> int:
@@ -120,20 +119,10 @@ def planned_charge(kind: str, sizes: list[int], fraction: float) -> int:
 
 
 def errors_of(engine, X: torch.Tensor, Y: torch.Tensor) -> torch.Tensor:
-    """Every replica's per-pattern squared error on (X, Y) [n, in], [n, out] -> [R, n]: ``engine.predict``
-    where the engine has it (one call), else the model's forward over its weights, SCORE_BLOCK replicas at
-    a time (every engine will gain predict(); until then this path scores them all)."""
+    """Every replica's per-pattern squared error on (X, Y) [n, in], [n, out] -> [R, n], from one
+    ``engine.predict`` call."""
     with torch.no_grad():
-        predict = getattr(engine, "predict", None)
-        if predict is not None:
-            return pattern_errors(predict(X), Y)
-        params = engine.params()
-        return torch.cat(
-            [
-                pattern_errors(forward_replicas([p[r0 : r0 + SCORE_BLOCK] for p in params], X), Y)
-                for r0 in range(0, len(params[0]), SCORE_BLOCK)
-            ]
-        )
+        return pattern_errors(engine.predict(X), Y)
 
 
 class StageSelection:
@@ -164,6 +153,11 @@ class StageSelection:
         self.stage_starts = {ep.index: ep.stage for ep in plan if ep.stage > 0 and plan[ep.index - 1].stage != ep.stage}
         self._applied = None  # the orders tensor the samplers currently present
 
+    @functools.cached_property
+    def strata(self) -> torch.Tensor:
+        """U's strata, once per job (k-means for many inputs: seconds at n = 1e5), for reselect's draws."""
+        return strata(self.X_raw, self.bins)
+
     def begin_epoch(self, ep: EpochPlan, engine, progress) -> int:
         """Before epoch ``ep``: the samplers present ``progress.orders`` (restored after a resume); at a
         stage start the new A_k is chosen into it. Returns the presentations charged per replica (also
@@ -184,7 +178,7 @@ class StageSelection:
     def _choose(self, stage: int, engine, progress) -> int:
         """Stage ``stage``'s orders into ``progress.orders``; returns the charge per replica."""
         if self.kind == "reselect":
-            progress.orders = reselected_orders(self.X_raw, self.seeds, stage, self.bins)
+            progress.orders = reselected_orders(self.strata, self.seeds, stage)
             return 0  # a stratified draw needs no network
         current = progress.orders
         if current is None:  # the first choice: from the prepared (stratified) orders

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from selpres import partition as P
-from selpres.orders import _stratified
+from selpres.orders import stratified_orders
 from selpres.partition import grid_strata
 
 N, DIM = 8192, 18  # a 6-joint arm's inputs
@@ -76,8 +76,8 @@ def test_stratified_prefixes_estimate_averages_better_than_random(cube):
     def mean_ratio(order_of):
         return sum(_variance_ratio(f, order_of, k) for f in fs for k in (64, 256, 1024)) / (3 * len(fs))
 
-    kmeans = mean_ratio(lambda s: _stratified(sid_kmeans, [torch.Generator().manual_seed(s)])[0])
-    grid = mean_ratio(lambda s: _stratified(sid_grid, [torch.Generator().manual_seed(s)])[0])
+    kmeans = mean_ratio(lambda s: stratified_orders(sid_kmeans, [torch.Generator().manual_seed(s)])[0])
+    grid = mean_ratio(lambda s: stratified_orders(sid_grid, [torch.Generator().manual_seed(s)])[0])
     random = mean_ratio(lambda s: torch.randperm(N, generator=torch.Generator().manual_seed(s)))
     assert 0.75 < random < 1.3, random
     assert 0.75 < grid < 1.3, grid

@@ -12,7 +12,7 @@ import torch
 from selpres.checks import validate
 from selpres.errors import ConfigError
 from selpres.model import BPN, load_into
-from selpres.orders import priority_order
+from selpres.orders import priority_order, strata
 from selpres.seeding import generator
 from selpres.selection import enlarge_by_loss, pattern_errors, reselected_orders, selection_charge
 from selpres.task import load_task
@@ -150,8 +150,8 @@ def test_loss_orders_are_deterministic_per_seed():
 
 
 def _overlaps(X, seeds, k):
-    a = reselected_orders(X, seeds, k - 1, 2)[:, : SIZES[k - 1]]
-    b = reselected_orders(X, seeds, k, 2)[:, : SIZES[k]]
+    a = reselected_orders(strata(X, 2), seeds, k - 1)[:, : SIZES[k - 1]]
+    b = reselected_orders(strata(X, 2), seeds, k)[:, : SIZES[k]]
     return np.array([len(set(x.tolist()) & set(y.tolist())) for x, y in zip(a, b)])
 
 
@@ -177,7 +177,7 @@ def test_reselect_in_the_loop_draws_each_stage_afresh_and_ends_with_U():
     X, seeds = _raw_X(cfg), job.prob.seeds
     for ep in job.prob.plan:
         run_epoch(job, ep, clock)
-        want = reselected_orders(X, seeds, ep.stage, 2)[:, : SIZES[ep.stage]]
+        want = reselected_orders(strata(X, 2), seeds, ep.stage)[:, : SIZES[ep.stage]]
         got = torch.stack([s.subset() for s in job.prob.samplers])
         assert torch.equal(got, want)
         if ep.stage == 0:  # stage 1 is the stratified order's own A_1
@@ -196,7 +196,7 @@ def test_reselected_subsets_are_stratified():
     sid = np.unique(cells, axis=0, return_inverse=True)[1].ravel()
     share = np.bincount(sid) / N
     for k in range(4):
-        for row in reselected_orders(X, [0, 1, 2], k, 2)[:, : SIZES[k]].numpy():
+        for row in reselected_orders(strata(X, 2), [0, 1, 2], k)[:, : SIZES[k]].numpy():
             assert np.abs(np.bincount(sid[row], minlength=len(share)) - SIZES[k] * share).max() <= 2.0
 
 
