@@ -32,7 +32,6 @@ every replica sees the same operations in the same order however groups, pattern
 from __future__ import annotations
 
 import ctypes
-import functools
 import hashlib
 import logging
 import os
@@ -42,6 +41,7 @@ import shutil
 import subprocess
 import tempfile
 import threading
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -93,13 +93,8 @@ def _compiler() -> list[str]:
     return shlex.split(cc)
 
 
-def _compiler_version(cc: list[str]) -> str:
+def _compiler_version(cc: tuple[str, ...]) -> str:
     """``cc --version``: part of the cache key, so a changed compiler never reuses an old library."""
-    return _version_of(tuple(cc))
-
-
-@functools.lru_cache(maxsize=8)  # once per process and compiler: the kernel and the shuffles both ask
-def _version_of(cc: tuple[str, ...]) -> str:
     try:
         proc = subprocess.run([*cc, "--version"], capture_output=True, text=True, timeout=30)
     except (OSError, subprocess.SubprocessError) as exc:
@@ -362,7 +357,7 @@ def macros(sizes) -> list[str]:
 
 
 _lock = threading.Lock()
-_kernels: dict[tuple[int, ...], Kernel] = {}  # loaded libraries; failures are not remembered (see load)
+_loaded: dict = {}  # topology sizes -> Kernel, "shuffle" -> Shuffler; failures are not remembered (see _load)
 
 
 def _digest(path: Path) -> str:
@@ -382,18 +377,14 @@ def _intact(library: Path) -> bool:
         return False
 
 
-def library_path(sizes, cc: list[str] | None = None) -> Path:
-    """Where the cache keeps the library for ``sizes``: keyed by source, macros, flags, compiler and CPU."""
-    return _library_path(f"selpres_{'-'.join(map(str, sizes))}", SOURCE, macros(sizes), cc)
-
-
 def _library_path(stem: str, source: Path, flags: list[str], cc: list[str] | None = None) -> Path:
+    """Where the cache keeps a library: keyed by source, macros, flags, compiler and CPU."""
     cc = cc or _compiler()
     key_text = "\0".join(
         [
             source.read_text(),
             shlex.join([*cc, *flags, *CFLAGS, *LIBS]),
-            _compiler_version(cc),
+            _compiler_version(tuple(cc)),
             " ".join(sorted(cpu_flags())),
             _cpu_model(),
         ]
@@ -441,41 +432,32 @@ def _build(stem: str, source: Path, flags: list[str]) -> Path:
     return target
 
 
-def load(sizes) -> Kernel:
-    """The kernel for topology ``sizes``, built on first use; raises :class:`KernelUnavailable` if it cannot
-    be had. Only successes are remembered: after a failed or timed-out build a later call tries again."""
-    sizes = tuple(int(s) for s in sizes)
+def _load(key, cls: type, built: Callable[[], Path]):
+    """``cls`` over the library that ``built()`` returns (built on first use); raises
+    :class:`KernelUnavailable` if it cannot be had. Only successes are remembered: after a failed or timed-out
+    build a later call tries again."""
     if os.environ.get("SELPRES_NO_NATIVE", "") not in ("", "0"):
         raise KernelUnavailable("disabled by SELPRES_NO_NATIVE")
+    with _lock:
+        if key not in _loaded:
+            check_cpu(cpu_flags())  # before any cached library is opened
+            path = built()
+            try:
+                _loaded[key] = cls(path)
+            except OSError as exc:
+                raise KernelUnavailable(f"cannot load {path}: {exc}") from exc
+        return _loaded[key]
+
+
+def load(sizes) -> Kernel:
+    """The kernel for topology ``sizes`` (see :func:`_load`)."""
+    sizes = tuple(int(s) for s in sizes)
     if len(sizes) - 1 > 32:
         raise KernelUnavailable("more than 32 layers")
-    with _lock:
-        if sizes in _kernels:
-            return _kernels[sizes]
-        check_cpu(cpu_flags())  # before any cached library is opened
-        path = build(sizes)
-        try:
-            _kernels[sizes] = Kernel(path)
-        except OSError as exc:
-            raise KernelUnavailable(f"cannot load {path}: {exc}") from exc
-        return _kernels[sizes]
-
-
-_shuffler: list[Shuffler] = []  # the loaded shuffle library, once it loaded
+    return _load(sizes, Kernel, lambda: build(sizes))
 
 
 def load_shuffle() -> Shuffler:
-    """The native shuffles (``kernels/shuffle.c``), built on first use, under the same conditions as
-    :func:`load` (``SELPRES_NO_NATIVE``, AVX2/FMA: it is compiled with the same flags); raises
-    :class:`KernelUnavailable` with the reason."""
-    if os.environ.get("SELPRES_NO_NATIVE", "") not in ("", "0"):
-        raise KernelUnavailable("disabled by SELPRES_NO_NATIVE")
-    with _lock:
-        if not _shuffler:
-            check_cpu(cpu_flags())
-            path = _build("selpres_shuffle", SHUFFLE_SOURCE, [])
-            try:
-                _shuffler.append(Shuffler(path))
-            except OSError as exc:
-                raise KernelUnavailable(f"cannot load {path}: {exc}") from exc
-        return _shuffler[0]
+    """The native shuffles (``kernels/shuffle.c``), under the same conditions as :func:`load` (it is compiled
+    with the same flags, so it needs AVX2/FMA too)."""
+    return _load("shuffle", Shuffler, lambda: _build("selpres_shuffle", SHUFFLE_SOURCE, []))

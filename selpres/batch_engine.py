@@ -39,12 +39,12 @@ REDUCTIONS = ("mean", "sum")
 CHUNK = 1 << 16  # replica-presentations per forward/backward chunk (bounds memory; results agree to rounding)
 
 
-def check_batch_options(sigmoid_prime_offset, reduction, prefix: str = "optim") -> tuple[float, str]:
-    """The batch-mode options, checked (ConfigError naming ``<prefix>.<key>``): (offset, reduction)."""
+def check_batch_options(sigmoid_prime_offset, reduction) -> tuple[float, str]:
+    """The batch-mode options, checked (ConfigError naming ``optim.<key>``): (offset, reduction)."""
     if reduction not in REDUCTIONS:
-        raise ConfigError(f"{prefix}.reduction", reduction, f"one of {', '.join(REDUCTIONS)}")
+        raise ConfigError("optim.reduction", reduction, f"one of {', '.join(REDUCTIONS)}")
     offset = require(
-        f"{prefix}.sigmoid_prime_offset",
+        "optim.sigmoid_prime_offset",
         sigmoid_prime_offset,
         "an offset >= 0 added to sigma' (Fahlman: 0.1; 0 = exact gradient)",
         lambda v: v >= 0,

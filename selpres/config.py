@@ -239,15 +239,15 @@ def to_container(cfg: DictConfig) -> dict:
     return OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
 
 
-def compose_train(configs: str | Path, overrides: list[str]):
+def compose_train(configs: str | Path, overrides: list[str], hydra: bool = False):
     """The ``train`` config composed from ``configs`` as ``python train.py <overrides>`` composes it (Hydra's
-    compose API; the global Hydra state is cleared before and after)."""
+    compose API; the global Hydra state is cleared before and after; ``hydra``: with the ``hydra`` node)."""
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
 
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(configs), version_base="1.3"):
-            return compose("train", overrides=overrides)
+            return compose("train", overrides=list(overrides), return_hydra_config=hydra)
     finally:
         GlobalHydra.instance().clear()

@@ -30,8 +30,8 @@ class TopologyError(ValueError):
         return type(self), (self.topology, self.allowed)
 
 
-def parse_topology(topology: str, n_inputs: int | None = None, n_outputs: int | None = None) -> tuple[int, ...]:
-    """``"6-13-2"`` -> ``(6, 13, 2)``; checks widths against the data when they are given."""
+def parse_topology(topology: str) -> tuple[int, ...]:
+    """``"6-13-2"`` -> ``(6, 13, 2)`` (whether it fits a task: ``selpres.checks.check_topology``)."""
     text = str(topology).strip()
     if not _TOPOLOGY_RE.match(text):
         raise TopologyError(topology, "layer widths joined by '-', e.g. '6-13-2' or '6-8-8-2'")
@@ -40,10 +40,6 @@ def parse_topology(topology: str, n_inputs: int | None = None, n_outputs: int | 
         raise TopologyError(topology, "at least an input and an output layer")
     if any(s <= 0 for s in sizes):
         raise TopologyError(topology, "positive layer widths (no layer of width 0)")
-    if n_inputs is not None and sizes[0] != n_inputs:
-        raise TopologyError(topology, f"{n_inputs} inputs (θ1, θ̇1, θ̈1, θ2, θ̇2, θ̈2), not {sizes[0]}")
-    if n_outputs is not None and sizes[-1] != n_outputs:
-        raise TopologyError(topology, f"{n_outputs} outputs (τ1, τ2), not {sizes[-1]}")
     return sizes
 
 

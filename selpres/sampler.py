@@ -21,7 +21,6 @@ import numpy as np
 import torch
 from torch.utils.data import Sampler
 
-from selpres.orders import ORDERS, priority_order, strata  # noqa: F401  (re-exported: the sampler's API)
 from selpres.schedule import Schedule
 from selpres.seeding import derive_seed
 

@@ -655,11 +655,6 @@ def _sym(entry) -> tuple:
     return tuple(tuple(upper[min(r, c), max(r, c)] for c in range(3)) for r in range(3))
 
 
-def _row(x: Any, like: torch.Tensor) -> torch.Tensor:
-    """A result entry as a [B] tensor (a constant entry, e.g. a torque that is always 0, broadcast)."""
-    return x if isinstance(x, torch.Tensor) else torch.full_like(like, float(x))
-
-
 class _Singular(Exception):
     """H(q) has a non-positive pivot at chunk row ``index`` (joint ``joint``, 1-based)."""
 

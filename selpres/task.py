@@ -41,7 +41,6 @@ from selpres.seeding import derive_seed
 
 log = logging.getLogger("selpres")
 
-COMMON_KEYS = ("kind", "test_patterns", "test_from_exemplar", "heldout", "test_seed", "scaling")
 DATA_KEYS = {  # the keys of selpres.config.DataConfig each kind reads; the others must stay unset
     "grid": ("theta", "dtheta", "tau1", "tau2", "accel_limit"),
     "sampled": ("n", "route", "draw", "seed", "q", "dq", "tau", "wrench", "accel_limit"),
@@ -109,14 +108,10 @@ class Task:
         }
 
 
-def _kind(data_cfg) -> str:
-    return D.data_kind(data_cfg)
-
-
 def task_shape(robot_cfg, data_cfg) -> Shape:
     """The network's inputs and outputs for this task, from the arm (built, not simulated) or the data
     file's header; raises ConfigError (naming robot.*, data.* or the file), makes no data."""
-    kind = _kind(data_cfg)
+    kind = D.data_kind(data_cfg)
     if kind == "file":
         ins, outs = F.check_columns(data_cfg.path, data_cfg.inputs, data_cfg.outputs)
         return Shape(ins, outs, f"data=file ({data_cfg.path})")
@@ -153,7 +148,7 @@ def load_task(robot_cfg: DictConfig, data_cfg: DictConfig) -> Task:
 def _task(robot_json: str, data_json: str, files: str) -> Task:
     """``files``: the (path, mtime, size) of the files read, so an edited file is read again."""
     robot_cfg, data_cfg = OmegaConf.create(json.loads(robot_json)), OmegaConf.create(json.loads(data_json))
-    task = {"grid": _grid, "sampled": _sampled, "file": _file}[_kind(data_cfg)](robot_cfg, data_cfg)
+    task = {"grid": _grid, "sampled": _sampled, "file": _file}[D.data_kind(data_cfg)](robot_cfg, data_cfg)
     task.info["hash"] = D.config_hash(robot_cfg, data_cfg)
     i = task.info
     kept = (

@@ -28,20 +28,11 @@ def exemplar():
 
 
 def compose(*overrides: str, hydra: bool = False):
-    """The ``train`` config composed as ``python train.py`` composes it (Hydra's compose API), GlobalHydra
-    cleared around it. The one place tests compose configs."""
-    from hydra import compose as hydra_compose
-    from hydra import initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
+    """The ``train`` config composed as ``python train.py`` composes it (``selpres.config.compose_train``).
+    The one place tests compose configs."""
+    from selpres.config import compose_train
 
-    import selpres.config  # noqa: F401  registers the typed schema and resolvers
-
-    GlobalHydra.instance().clear()
-    try:
-        with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
-            return hydra_compose("train", overrides=list(overrides), return_hydra_config=hydra)
-    finally:
-        GlobalHydra.instance().clear()
+    return compose_train(CONFIGS, list(overrides), hydra)
 
 
 @pytest.fixture

@@ -222,7 +222,7 @@ def test_fast_engine_reports_the_compilers_message(tmp_path, monkeypatch, caplog
     monkeypatch.setenv("CC", str(cc))
     monkeypatch.delenv("SELPRES_NO_NATIVE", raising=False)
     monkeypatch.setenv("SELPRES_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(_kernels, "_kernels", {})
+    monkeypatch.setattr(_kernels, "_loaded", {})
     monkeypatch.setattr(_kernels, "cpu_flags", lambda: frozenset({"avx2", "fma"}))  # reach the compiler
     sizes = (6, 3, 2)
     with caplog.at_level(logging.WARNING, logger="selpres"):

@@ -7,20 +7,18 @@ a permutation (prefix) of the current nested subset, and ends with finite result
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
-import selpres.config  # noqa: F401
+from selpres.checks import check_topology
 from selpres.errors import ConfigError
-from selpres.model import TopologyError, parse_topology
+from selpres.task import Shape
 from selpres.train import prepare, train
 
-CONFIGS = str(Path(__file__).resolve().parents[1] / "configs")
+from conftest import compose
+
+PAPER_SHAPE = Shape(tuple("abcdef"), ("t1", "t2"), "robot=two_link")  # 6 inputs, 2 outputs
 
 widths = st.one_of(st.integers(0, 12).map(str), st.sampled_from(["x", "", "-1", "1.5", " 6", "08"]))
 junk_topologies = st.lists(widths, min_size=1, max_size=5).map("-".join)
@@ -45,12 +43,6 @@ def valid_schedules(draw):
 schedules = st.one_of(valid_schedules(), junk_schedules)
 
 
-def compose_cfg(overrides):
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONFIGS, version_base="1.3"):
-        return compose("train", overrides=overrides)
-
-
 def _literal(v) -> str:
     return repr(v) if isinstance(v, float) and v == v and abs(v) != float("inf") else str(v)
 
@@ -59,9 +51,9 @@ def _literal(v) -> str:
 @given(junk_topologies)
 def test_topology_strings_parse_or_are_refused(text):
     try:
-        sizes = parse_topology(text, n_inputs=6, n_outputs=2)
-    except TopologyError as e:
-        assert e.allowed and "topology=" in str(e)
+        sizes = check_topology(text, PAPER_SHAPE)
+    except ConfigError as e:
+        assert e.key == "topology.layers" and e.allowed and "topology.layers=" in str(e)
         return
     assert sizes[0] == 6 and sizes[-1] == 2 and all(s > 0 for s in sizes)
     assert sizes == tuple(int(w) for w in text.strip().split("-"))  # "6-08-2" is (6, 8, 2)
@@ -85,7 +77,7 @@ def test_every_config_trains_or_is_refused_cleanly(topology, schedule, batch):
         "logging.progress=false",
     ]
     try:
-        cfg = compose_cfg(overrides)
+        cfg = compose(*overrides)
     except Exception as e:  # noqa: BLE001  Hydra's own parse/type errors are clean too (one message, exit 1)
         assert type(e).__module__.startswith(("hydra", "omegaconf")), repr(e)
         event("refused by Hydra/omegaconf")
@@ -115,5 +107,5 @@ def test_every_config_trains_or_is_refused_cleanly(topology, schedule, batch):
 @pytest.mark.parametrize("bad", ["6-x-2", "6-0-2", "5-8-2", "6-8-3", "6", "6--2", "-6-2"])
 def test_named_bad_topologies_are_config_errors(bad):
     with pytest.raises(ConfigError) as ei:
-        prepare(compose_cfg([f"topology.layers='{bad}'"]))
+        prepare(compose(f"topology.layers='{bad}'"))
     assert ei.value.key == "topology.layers" and bad in str(ei.value)

@@ -24,7 +24,7 @@ SIZES = (5, 3, 2)  # a topology no other test loads: its library is mapped only 
 def fresh_cache(tmp_path, monkeypatch):
     """An empty kernel cache and an empty in-process memo, so each test builds and loads for itself."""
     monkeypatch.setenv("SELPRES_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(_kernels, "_kernels", {})
+    monkeypatch.setattr(_kernels, "_loaded", {})
     return tmp_path / "cache"
 
 

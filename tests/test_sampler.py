@@ -11,7 +11,8 @@ from torch.utils.data import DataLoader, TensorDataset
 
 from selpres import sampler as S
 from selpres.errors import ConfigError
-from selpres.sampler import SelectivePresentationSampler, epoch_orders, priority_order
+from selpres.orders import priority_order
+from selpres.sampler import SelectivePresentationSampler, epoch_orders
 from selpres.schedule import Schedule, Stage, build_schedule
 from selpres.seeding import derive_seed, generator
 

@@ -112,30 +112,30 @@ _OPTIMIZERS = {
 }
 
 
-def checked_hparams(name: str, hparams: dict | None = None, prefix: str = "optim") -> dict:
+def checked_hparams(name: str, hparams: dict | None = None) -> dict:
     """The hyperparameters of optimizer ``name`` from flat config keys (``None`` = its default), checked.
 
-    Every error is a :class:`~selpres.errors.ConfigError` naming ``<prefix>.<key>``, the value and what
+    Every error is a :class:`~selpres.errors.ConfigError` naming ``optim.<key>``, the value and what
     is allowed: an unknown name, a key the optimizer does not use, or a value out of range.
     """
     if name not in _OPTIMIZERS:
-        raise ConfigError(f"{prefix}.name", name, f"one of {', '.join(_OPTIMIZERS)}")
+        raise ConfigError("optim.name", name, f"one of {', '.join(_OPTIMIZERS)}")
     given = {k: v for k, v in (hparams or {}).items() if v is not None}
     for key in given:
         if key not in OPTIMIZER_KEYS[name]:
             raise ConfigError(
-                f"{prefix}.{key}",
+                f"optim.{key}",
                 given[key],
                 f"no value: {name} does not use it (its keys: {', '.join(OPTIMIZER_KEYS[name])})",
             )
     try:
         return _OPTIMIZERS[name][0](**given)
     except ConfigError as e:
-        raise ConfigError(f"{prefix}.{e.key}", e.value, e.allowed) from None
+        raise ConfigError(f"optim.{e.key}", e.value, e.allowed) from None
 
 
-def make_optimizer(name: str, params, hparams: dict | None = None, prefix: str = "optim") -> torch.optim.Optimizer:
+def make_optimizer(name: str, params, hparams: dict | None = None) -> torch.optim.Optimizer:
     """The optimizer ``name`` (a key of :data:`OPTIMIZER_KEYS`) over ``params``, from flat config keys,
     checked as :func:`checked_hparams` checks them."""
-    checked = checked_hparams(name, hparams, prefix)
+    checked = checked_hparams(name, hparams)
     return _OPTIMIZERS[name][1](params, **checked)
