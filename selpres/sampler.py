@@ -26,7 +26,6 @@ from selpres.seeding import derive_seed
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # splitmix64's increment: the counter step of the shuffle hash
 _BLOCK_HASHES = 2**15  # per block of replicas: 256 KB stays in L2, and torch.gather stays on one thread
-_NARROW_MAX_BITS = 11  # sizes up to 2**11 sort 32-bit keys (>= 21 hash bits; ~1 tied pair per row at most)
 
 
 _MIX_STEPS = tuple(
@@ -55,14 +54,6 @@ def _counters(size: int) -> np.ndarray:
     return steps
 
 
-@functools.lru_cache(maxsize=16)
-def _positions(size: int, dtype: type) -> np.ndarray:
-    """0..size-1 in the packed sort keys' integer type, once per size, read-only."""
-    pos = np.arange(size, dtype=dtype)
-    pos.flags.writeable = False
-    return pos
-
-
 def _shuffle_bases(keys: np.ndarray, epochs: np.ndarray) -> np.ndarray:
     """Each replica's hash base for its epoch: mix(key ^ mix(epoch + golden))."""
     return _mix64_(keys ^ _mix64_(epochs + _GOLDEN))
@@ -72,54 +63,6 @@ def _row_hashes(base: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> np.ndarra
     """out[r, i] = mix(base_r + i * golden): the keys replica r's shuffle sorts (buffers reused)."""
     np.add(base[:, None], _counters(out.shape[1])[None, :], out=out)
     return _mix64_(out, tmp)
-
-
-def _argsort_distinct_rows(h: np.ndarray) -> np.ndarray:
-    """The positions of ``np.argsort(h, axis=1)`` for rows of distinct uint64 values, ~2.5x faster.
-
-    Each hash's high bits are packed with its position (the low b bits) into one integer and the packed
-    keys are sorted by value, which numpy 2.x does with SIMD; positions then come out in hash order,
-    except where two hashes share the kept high bits. Such ties are found (neighbours whose packed keys
-    agree above bit b) and settled by the full hashes, so the result is exact. Rows of up to 2**11 use
-    32-bit keys (half the sorting work; about one tied pair in eight rows at n = 1002), longer rows
-    64-bit keys. Returns int64 positions, [rows, n].
-    """
-    n = h.shape[1]
-    b = max(1, (n - 1).bit_length())
-    if b <= _NARROW_MAX_BITS:
-        dtype, packed = np.uint32, (h >> np.uint64(32)).astype(np.uint32)
-    else:
-        dtype, packed = np.uint64, h.copy()
-    low = dtype((1 << b) - 1)
-    packed &= ~low
-    packed |= _positions(n, dtype)
-    packed.sort(axis=1)
-    tie = (packed[:, 1:] ^ packed[:, :-1]) <= low  # neighbours agree on every bit above the position
-    pos = np.empty(h.shape, dtype=np.int64)
-    np.bitwise_and(packed, low, out=pos, casting="unsafe")
-    if tie.any():
-        _settle_ties(h, pos, tie)
-    return pos
-
-
-def _settle_ties(h: np.ndarray, pos: np.ndarray, tie: np.ndarray) -> None:
-    """Order each run of equal truncated keys in ``pos`` (in place) by the full hashes ``h``.
-
-    ``tie[r, j]``: sorted positions j and j + 1 of row r share their truncated key. A lone tie is a pair,
-    swapped if out of order; two ties in a row mean a run of three or more, and that row is argsorted.
-    """
-    r, j = np.divmod(np.flatnonzero(tie), tie.shape[1])  # np.nonzero of a 2-d array is ~5x slower
-    longer = (r[1:] == r[:-1]) & (j[1:] == j[:-1] + 1)
-    whole = np.unique(r[1:][longer]) if longer.any() else ()
-    if len(whole):
-        keep = ~np.isin(r, whole)
-        r, j = r[keep], j[keep]
-    a, c = pos[r, j], pos[r, j + 1]
-    swap = h[r, a] > h[r, c]
-    r, j = r[swap], j[swap]
-    pos[r, j], pos[r, j + 1] = c[swap], a[swap]
-    for row in whole:
-        pos[row] = np.argsort(h[row])
 
 
 @functools.lru_cache(maxsize=1)
@@ -151,8 +94,8 @@ def epoch_orders(samplers: list[SelectivePresentationSampler], buffer: torch.Ten
     Replica r's shuffle is argsort of hash(key_r, epoch, i) over the current set's positions i, a
     counter-based permutation, so it is the same whether computed alone or with other replicas, and
     costs no generator set-up. The native shuffles compute it with a bucket sort, on every thread torch
-    may use; without them, numpy: replicas hashed and sorted in blocks that stay in cache, by
-    ``_argsort_distinct_rows`` (exact: the hash is bijective, so a row's keys are distinct).
+    may use; without them, numpy: replicas hashed and argsorted in blocks that stay in cache (exact: the hash
+    is bijective, so a row's keys are distinct).
     """
     plans = [s._plan[s.epoch] for s in samplers]
     size, count = plans[0].size, plans[0].presentations
@@ -180,7 +123,7 @@ def epoch_orders(samplers: list[SelectivePresentationSampler], buffer: torch.Ten
         for r0 in range(0, R, block):
             r1 = min(R, r0 + block)
             hb = _row_hashes(base[r0:r1], h[: r1 - r0], tmp[: r1 - r0])
-            pos = torch.from_numpy(_argsort_distinct_rows(hb)[:, :count])
+            pos = torch.from_numpy(np.argsort(hb, axis=1)[:, :count])  # exact: a row's hashes are distinct
             orders = torch.stack([s.order for s in samplers[r0:r1]])  # per block: no 8 MB copy to fault in
             torch.gather(orders, 1, pos, out=out[r0:r1])
     return out

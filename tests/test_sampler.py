@@ -377,58 +377,6 @@ def test_epoch_orders_equal_the_plain_definition(n, sizes, epochs, budget, R, sh
         assert torch.equal(epoch_orders(samplers[1:2])[0], got[1])
 
 
-def test_natural_ties_of_the_truncated_keys_occur_and_are_settled(shuffles):
-    """At n = 1002 the 32-bit sort keys keep 22 hash bits, so some rows hold two hashes that agree on all
-    of them (about one row in eight); the full order must still follow the full 64-bit hashes."""
-    n, R = 1002, 64
-    seeds = list(range(R))
-    tied_rows = 0
-    for s in seeds:
-        high = [h >> 42 for h in _plain_hashes(s, 5, n)]
-        tied_rows += len(set(high)) < n
-    assert tied_rows >= 2  # the pair-settling path runs in this very test (worked out: 8 of 64 expected)
-    sch = build_schedule([n], [6], n)
-    samplers = [SelectivePresentationSampler(torch.arange(n), sch, s) for s in seeds]
-    for s in samplers:
-        s.set_epoch(5)
-    got = epoch_orders(samplers)
-    for r, s in enumerate(seeds):
-        assert got[r].tolist() == _plain_epoch_order(list(range(n)), s, 5, n, n)
-
-
-def _crafted_hashes(n: int, shared_bits: int, runs: list[list[int]], seed: int) -> np.ndarray:
-    """One row of n distinct uint64 hashes in which each run of positions agrees on the top ``shared_bits``
-    bits (and differs below them), placed in a random order."""
-    rng = np.random.default_rng(seed)
-    h = rng.integers(0, 2**63, n, dtype=np.uint64) * np.uint64(2) + rng.integers(0, 2, n, dtype=np.uint64)
-    low_bits = 64 - shared_bits
-    for run in runs:
-        top = int(h[run[0]]) >> low_bits
-        lows = rng.choice(2 ** min(low_bits, 62), len(run), replace=False).astype(np.uint64)
-        h[run] = (np.uint64(top) << np.uint64(low_bits)) | lows
-    assert len(np.unique(h)) == n
-    return h
-
-
-@pytest.mark.parametrize("n, shared_bits", [(1002, 22), (1002, 32), (3000, 52)])
-def test_forced_ties_in_the_truncated_keys_are_settled_exactly(n, shared_bits, monkeypatch):
-    """Rows crafted so that pairs, triples and long runs of hashes agree on every bit the packed sort key
-    keeps (32-bit keys keep 22 bits at n = 1002, 64-bit keys 52 at n = 3000): the result is still
-    np.argsort of the full hashes, and without the settling step it would not be."""
-    rows = [
-        _crafted_hashes(n, shared_bits, [[3, 700]], 0),  # one pair, positions far apart
-        _crafted_hashes(n, shared_bits, [[5, 4], [10, 11, 12], [900, 1, 800, 2, 600]], 1),  # pair, 3, 5
-        _crafted_hashes(n, shared_bits, [list(range(0, n, 2))], 2),  # half the row shares its key
-        _crafted_hashes(n, shared_bits, [], 3),  # no forced tie
-    ]
-    h = np.stack(rows)
-    want = np.argsort(h, axis=1, kind="stable")
-    assert np.array_equal(S._argsort_distinct_rows(h), want)
-    monkeypatch.setattr(S, "_settle_ties", lambda h, pos, tie: None)
-    unsettled = S._argsort_distinct_rows(h)
-    assert not np.array_equal(unsettled[:3], want[:3])  # the crafted ties were real, and settling fixed them
-
-
 @requires_native
 def test_the_job_records_which_shuffles_ran(monkeypatch):
     assert S.shuffle_implementation() == "native"
