@@ -9,10 +9,8 @@ Every engine does the same thing, defined by :class:`ReferenceEngine` (plain PyT
 * ``"native"``    -- :class:`NativeEngine`: an AVX2 C kernel (4 float64 replicas per vector, inline
   vector ``exp``, topology compiled in; ``selpres/kernels/sgd.c``), built with the system C compiler at
   first use and cached (see :mod:`selpres._kernels`). Its ``predict`` runs the kernel's forward pass on
-  the packed weights (~3x faster than ``forward_replicas`` at R = 1000 on 2,000 patterns); its
-  ``squared_errors`` sums inside that pass, writing no outputs (2-4x faster than ``predict`` + an RMS in
-  torch at R = 1000 on 2,000 patterns, ~7x at R = 30; measured side by side on a busy 2-core machine),
-  and its ``finite`` reads the packed weights once (5-7x faster than ``params()`` + ``isfinite``).
+  the packed weights; its ``squared_errors`` sums inside that pass, writing no outputs; its ``finite``
+  reads the packed weights once, without unpacking them.
 * ``"fast"``      -- ``native`` if the kernel can be had here, else ``torch``. Not a class: the returned
   engine's ``name`` says which one runs, and its ``fallback_reason`` why it is not native (the
   compiler's message, "no AVX2/FMA ...", "disabled by SELPRES_NO_NATIVE"); one warning line goes to the
@@ -327,8 +325,8 @@ class NativeEngine:
         return out[: self.R]
 
     def squared_errors(self, X, Y):
-        """Summed inside the kernel's forward pass: no [R, N, out] outputs are written. The lead's RMS:
-        scaled = sqrt(sum / N); in Nm, times (y_max - y_min) / (hi - lo) of the output's scaler."""
+        """Summed inside the kernel's forward pass: no [R, N, out] outputs are written (the RMS follows in
+        the train loop: sqrt(sum / N), in Nm times (y_max - y_min) / (hi - lo) of the output's scaler)."""
         X, Y = _check_scoring(self.sizes, X, Y)
         return self._k.squared_errors(self.sizes, self.w, X, Y, self.threads)[: self.R]
 

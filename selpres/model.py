@@ -119,8 +119,8 @@ def forward_replicas(params: list[torch.Tensor], x: torch.Tensor) -> torch.Tenso
     Evaluation of many replicas (R = 1000 on 2,000 patterns) is bound by memory traffic, not arithmetic:
     one pass over all replicas (with a transposing copy) streams ~200 MB of hidden activations through
     memory several times. Blocks of replicas without that copy, sized to the cache where that takes
-    few blocks, make it 3-6x faster, with the same operations per replica: the results equal the
-    former single pass bitwise here, and :class:`BPN` to ~1e-16.
+    few blocks, do the same operations per replica without that traffic: the results equal :class:`BPN`
+    to ~1e-16 (tests/test_model.py).
     """
     R, N = params[0].shape[0], x.shape[0]
     widest = max(w.shape[1] for w in params[0::2])

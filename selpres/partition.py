@@ -15,8 +15,8 @@ inside them, for every smooth f at once.
   its cell's centre, and for an L-Lipschitz f the within-cell variance is at most L² times that
   distance, so the partition bounds the within-strata variance of every smooth f, in any dimension,
   with as many cells as the paper's grid had. Lloyd's algorithm (k-means++ seeding, Arthur & Vassilvitskii
-  2007) runs on at most ``FIT_POINTS`` patterns, then every pattern joins its nearest centre: a few
-  tenths of a second for n = 10^6 and 18 inputs.
+  2007) runs on at most ``FIT_POINTS`` patterns, then every pattern joins its nearest centre (about 1-3 s
+  for n = 10^6 and 18 inputs on the 2-core development machine).
 
 The strata are a deterministic function of U (the seed is fixed): every replica and every job of a
 config gets the same partition, as with the grid.

@@ -90,7 +90,7 @@ def test_compute_matched_schedule_spends_the_budget():
 
 def test_saved_weights_and_scaler_reproduce_the_reported_error(tmp_path):
     """weights.pt is enough to use a trained net: BPN + saved scaler give results.json's held-out RMS."""
-    from selpres.data import Scaler
+    from selpres.data import Scaler, rms_errors
     from selpres.model import BPN, load_into
     from selpres.train import prepare
 
@@ -104,4 +104,12 @@ def test_saved_weights_and_scaler_reproduce_the_reported_error(tmp_path):
         with torch.no_grad():
             tau = scaler.inverse_y(net(X_scaled))  # torques in Nm
         rms = (tau - Y_nm).square().mean().sqrt().item()
-        assert rms == pytest.approx(res["replica_results"][r]["final"]["heldout"]["nm"]["overall"], rel=1e-12)
+        final = res["replica_results"][r]["final"]["heldout"]
+        assert rms == pytest.approx(final["nm"]["overall"], rel=1e-12)
+        # per joint and in scaled units too, from the outputs themselves (data.rms_errors: the paper's
+        # criterion written directly), against the loop's sums of squared scaled errors times the scale
+        with torch.no_grad():
+            direct = rms_errors(net(X_scaled), Y_nm, scaler)
+        for unit, suffix in (("nm", "Nm"), ("scaled", "scaled")):
+            for key, value in final[unit].items():
+                assert value == pytest.approx(direct[f"{key}_{suffix}"].item(), rel=1e-12), (unit, key)
