@@ -315,6 +315,7 @@ def test_errors_survive_pickling():
     assert t.allowed == "layer widths joined by '-'" and "6-x-2" in str(t)
 
 
+@pytest.mark.slow  # a subprocess
 def test_validation_checks_the_optimizer_without_building_one():
     """The first torch.optim.Optimizer of a process imports torch._dynamo (about 1.3 s of every job's set-up);
     validating a config must not pay it, and building an optimizer does (so this check can fail)."""
