@@ -129,7 +129,7 @@ def bench_engine(
     """One online engine's updates alone; returns ms per replica-run."""
     from selpres.engine import make_engine
 
-    make = lambda p: make_engine(name, SIZES, p, LR, MOM, 1, threads=threads)  # noqa: E731
+    make = lambda p: make_engine(name, SIZES, p, LR, MOM, 1, threads=threads)
     eng, sec = time_epochs(make, R, epochs, repeats)
     label = f"{name} engine" if name != "fast" else f"fast engine ({type(eng).__name__})"
     return table.record(label, R, getattr(eng, "threads", 1), epochs, sec, note)
@@ -167,7 +167,7 @@ def bench_batch_engines(table: EngineTable, quick: bool, configs: Path) -> None:
     for name in BATCH_OPTIMIZERS:
         cfg = compose_train(configs, [f"optim={name}"])
         # job_engine reads only the problem's topology and initial weights: the engine a job builds
-        make = lambda p, cfg=cfg: job_engine(cfg, SimpleNamespace(sizes=SIZES, init_params=p))  # noqa: E731
+        make = lambda p, cfg=cfg: job_engine(cfg, SimpleNamespace(sizes=SIZES, init_params=p))
         plan = [(1, 30, 3, 1), (30, 10, 3, 1), (1000, 1 if quick else 3, 1, 1)]
         if default_threads > 1:
             plan.append((1000, 1 if quick else 3, 1, default_threads))
@@ -284,7 +284,7 @@ def bench_shuffles(quick: bool) -> None:
         "\nshuffles: one epoch's orders of all replicas, n = 1002 (epoch_orders in numpy: an argsort of the hashes;"
         + (" epoch_orders native)" if native else f" native unavailable: {S.native_shuffles()[1]})")
     )
-    numpy_only = lambda: (None, "numpy row")  # noqa: E731
+    numpy_only = lambda: (None, "numpy row")
     sch = build_schedule([1.0], [EPOCHS], N)
     for R in (1, 30, 1000):
         g = torch.Generator().manual_seed(R)

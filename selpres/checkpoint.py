@@ -71,7 +71,7 @@ class Checkpoints:
             why = (
                 f"it belongs to another config or an older selpres (hash {ck.get('config_hash')}, this job {self.hash})"
             )
-        except Exception as exc:  # noqa: BLE001 - any unreadable file is set aside, never resumed
+        except Exception as exc:  # any unreadable file is set aside, never resumed
             ok, why = False, f"it cannot be read ({type(exc).__name__}: {exc})"
         if not ok:
             moved = self.move_aside()

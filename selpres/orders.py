@@ -114,7 +114,7 @@ def coverage_orders(
     for lo in range(0, len(firsts), max(1, _BATCH // n)):
         start = firsts[lo : lo + max(1, _BATCH // n)]
         if n <= _MATRIX_MAX:
-            dist = lambda i, out: np.take(table, i, axis=0, out=out)  # noqa: E731
+            dist = lambda i, out: np.take(table, i, axis=0, out=out)
         else:
             dist = _distance_rows(C, len(start))
         picks, _ = _farthest_first(np.full((len(start), n), np.inf), n, dist, start)

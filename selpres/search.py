@@ -74,7 +74,7 @@ def raw_schedule(raw: dict, n: int, order: str, selection_cost: float) -> dict:
 
 def schedule_overrides(raw: dict, n: int, order: str, selection_cost: float) -> list[str]:
     """Hydra overrides of the schedule that the search numbers ``raw`` stand for."""
-    fmt = lambda v: "null" if v is None else str(v).replace(" ", "")  # noqa: E731
+    fmt = lambda v: "null" if v is None else str(v).replace(" ", "")
     return [f"schedule.{k}={fmt(v)}" for k, v in raw_schedule(raw, n, order, selection_cost).items()]
 
 

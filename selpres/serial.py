@@ -197,7 +197,7 @@ def check_link(link: Link, where: str) -> Link:
         and link.limits[0] < link.limits[1]
     ):
         raise ConfigError(f"{where}.joint.limits", link.limits, "[lower, upper] in rad with lower < upper")
-    floats = lambda v: tuple(float(x) for x in v)  # noqa: E731
+    floats = lambda v: tuple(float(x) for x in v)
     return replace(
         link,
         mass=float(link.mass),

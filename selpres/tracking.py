@@ -72,7 +72,7 @@ class Tracker:
             self.logdir.mkdir(parents=True)
             self._event, self._summary = event_pb2.Event, summary_pb2.Summary
             name = f"events.out.tfevents.{int(time.time()):010d}.{socket.gethostname()}.{os.getpid()}.selpres"
-            self.writer = RecordWriter(open(self.logdir / name, "wb"))  # noqa: SIM115 - closed in close()
+            self.writer = RecordWriter(open(self.logdir / name, "wb"))  # closed in close()
             self._append(self._event(wall_time=time.time(), file_version="brain.Event:2"))
 
     def _append(self, event) -> None:

@@ -60,7 +60,7 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
             try:
                 if torch.load(ckpt, weights_only=False)["epoch"] >= 5:
                     break
-            except Exception:  # noqa: BLE001  (never half-written: rename is atomic; but be safe)
+            except Exception:  # never half-written (the rename is atomic), but be safe
                 pass
         time.sleep(0.05)
     p.send_signal(signal.SIGKILL)

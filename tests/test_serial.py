@@ -66,7 +66,7 @@ def _vee(skew: torch.Tensor) -> torch.Tensor:
 
 def energies(arm: SerialArm, q: torch.Tensor, qd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """(kinetic, potential) for one state: ½ m |v_c|² + ½ ω_bᵀ I ω_b per link, and −m gᵀ p_c."""
-    frames = lambda x: reference_frames(arm, x)  # noqa: E731
+    frames = lambda x: reference_frames(arm, x)
     poses, rates = torch.func.jvp(frames, (q,), (qd,))
     gravity = torch.tensor(arm.gravity_vector, dtype=D)
     kinetic = potential = torch.zeros((), dtype=D)
@@ -82,7 +82,7 @@ def energies(arm: SerialArm, q: torch.Tensor, qd: torch.Tensor) -> tuple[torch.T
 
 def reference_torque(arm: SerialArm, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor) -> torch.Tensor:
     """Euler–Lagrange over a batch: τ = d/dt ∂L/∂q̇ − ∂L/∂q = (∂²L/∂q̇²) q̈ + (∂²L/∂q̇∂q) q̇ − ∂L/∂q."""
-    lagrangian = lambda x, v: (lambda t, u: t - u)(*energies(arm, x, v))  # noqa: E731
+    lagrangian = lambda x, v: (lambda t, u: t - u)(*energies(arm, x, v))
     dl_dqd = torch.func.grad(lagrangian, argnums=1)
     mass = torch.func.vmap(torch.func.jacrev(dl_dqd, argnums=1))(q, qd)
     mixed = torch.func.vmap(torch.func.jacrev(dl_dqd, argnums=0))(q, qd)
@@ -92,7 +92,7 @@ def reference_torque(arm: SerialArm, q: torch.Tensor, qd: torch.Tensor, qdd: tor
 
 def reference_mass_matrix(arm: SerialArm, q: torch.Tensor) -> torch.Tensor:
     """H = ∂²T/∂q̇² (T is quadratic in q̇, so any q̇ gives the same Hessian)."""
-    kinetic = lambda x, v: energies(arm, x, v)[0]  # noqa: E731
+    kinetic = lambda x, v: energies(arm, x, v)[0]
     return torch.func.vmap(torch.func.hessian(kinetic, argnums=1))(q, torch.zeros_like(q))
 
 
@@ -115,7 +115,7 @@ def reference_wrench_torque(arm: SerialArm, q: torch.Tensor, k: torch.Tensor) ->
 def random_arm(n: int, seed: int, *, point_masses: bool = False) -> SerialArm:
     """A random chain: any joint origins (xyz, rpy), axes, masses, coms, physically valid inertias."""
     g = torch.Generator().manual_seed(seed)
-    u = lambda *s: torch.rand(*s, dtype=D, generator=g) * 2 - 1  # noqa: E731
+    u = lambda *s: torch.rand(*s, dtype=D, generator=g) * 2 - 1
     links = []
     for i in range(n):
         axis = u(3)
@@ -255,7 +255,7 @@ def test_power_balance(name):
     """d/dt (kinetic + potential) = q̇ᵀτ with k = 0, along (q̇, q̈) for arbitrary q̈."""
     arm = ARMS[name]()
     q, qd, qdd, _ = states(32, arm.dof, seed=8)
-    energy = lambda x, v: sum(energies(arm, x, v))  # noqa: E731
+    energy = lambda x, v: sum(energies(arm, x, v))
     rate = torch.func.vmap(lambda x, v, a: torch.func.jvp(energy, (x, v), (v, a))[1])(q, qd, qdd)
     power = (qd * arm.inverse_dynamics(q, qd, qdd)).sum(-1)
     assert_rel(power, rate, 1e-9)

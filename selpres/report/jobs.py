@@ -53,7 +53,7 @@ def _hydra_identity(folder: Path) -> tuple[str | None, str | None]:
 
             c = yaml.safe_load(cfg.read_text()) or {}
             return (c.get("schedule") or {}).get("name"), (c.get("topology") or {}).get("layers")
-        except Exception:  # noqa: BLE001 - fall back to the folder name
+        except Exception:  # fall back to the folder name
             pass
     m_s = re.search(r"(?:^|,)schedule=([^,]+)", folder.name)
     m_t = re.search(r"(?:^|,)topology=([^,]+)", folder.name)
