@@ -18,6 +18,7 @@ their line number in the file, so an editor finds them.
 from __future__ import annotations
 
 import csv
+import functools
 import hashlib
 import math
 from pathlib import Path
@@ -44,9 +45,17 @@ def _path(path: str | Path | None) -> Path:
 
 
 def file_digest(path: str | Path) -> str:
-    """sha256 of the file's bytes: a data file's identity (its path is not)."""
+    """sha256 of the file's bytes: a data file's identity (its path is not). A job asks three times (the
+    task's record, the data's hash, the job's hash); the file is read once while it is unchanged."""
+    p = _path(path)
+    st = p.stat()
+    return _digest(str(p.resolve()), st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=16)
+def _digest(path: str, mtime_ns: int, size: int) -> str:
     h = hashlib.sha256()
-    with open(_path(path), "rb") as f:
+    with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
