@@ -67,3 +67,19 @@ def _native_reason() -> str | None:
 
 NATIVE_REASON = _native_reason()
 requires_native = pytest.mark.skipif(NATIVE_REASON is not None, reason=f"native kernel unavailable: {NATIVE_REASON}")
+
+
+def run_python(*args: str, timeout: int = 600):
+    """``python <args>`` in the repository as a user runs it (without HYDRA_FULL_ERROR), output captured."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
+    return subprocess.run([sys.executable, *args], cwd=REPO, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def report_of(sweep, out) -> None:
+    """``python -m selpres.report sweep --out out``, which must succeed."""
+    done = run_python("-m", "selpres.report", str(sweep), "--out", str(out))
+    assert done.returncode == 0, done.stderr[-3000:]

@@ -5,10 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 from hypothesis import given, settings
@@ -19,9 +15,7 @@ from selpres.errors import ConfigError
 from selpres.schedule import build_schedule
 from selpres.search import schedule_overrides, shaped_schedule, shaped_sizes
 
-from conftest import compose
-
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import compose, run_python
 
 
 def test_a_schedule_worked_out_by_hand():
@@ -182,7 +176,6 @@ def test_optuna_study_in_sqlite_runs_trials_as_jobs_and_resumes(tmp_path):
     optuna = pytest.importorskip("optuna")
     db = tmp_path / "study.db"
     args = [
-        sys.executable,
         "train.py",
         "experiment=search",
         "replicas=2",
@@ -193,11 +186,8 @@ def test_optuna_study_in_sqlite_runs_trials_as_jobs_and_resumes(tmp_path):
         "data.heldout=300",
         "eval.heldout_curve=300",
     ]
-    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
     for trials in (2, 3):
-        p = subprocess.run(
-            [*args, f"hydra.sweeper.n_trials={trials}"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600
-        )
+        p = run_python(*args, f"hydra.sweeper.n_trials={trials}")
         assert p.returncode == 0, p.stderr[-3000:]
     study = optuna.load_study(study_name="schedule-search", storage=f"sqlite:///{db}")
     assert len(study.trials) == 3 and all(t.state.name == "COMPLETE" for t in study.trials)
@@ -218,9 +208,7 @@ def test_optuna_study_in_sqlite_runs_trials_as_jobs_and_resumes(tmp_path):
         f"hydra.sweep.dir={tmp_path / 'confirm'}",
     ]
     overrides = [o.strip("'") for o in staged.split()[2:]]  # after "python train.py", from "-m" on
-    p = subprocess.run(
-        [sys.executable, "train.py", *overrides, *small], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600
-    )
+    p = run_python("train.py", *overrides, *small)
     assert p.returncode == 0, p.stderr[-3000:]
     (res,) = [json.loads(f.read_text()) for f in (tmp_path / "confirm").glob("*/results.json")]
     assert res["seeds"] == [0, 1] and res["config"]["data"]["test_seed"] == 0

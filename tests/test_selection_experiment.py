@@ -7,10 +7,7 @@ from __future__ import annotations
 
 import functools
 import json
-import os
 import re
-import subprocess
-import sys
 
 import pytest
 from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -21,7 +18,7 @@ from selpres.selection import planned_charge
 from selpres.storage import flatten
 from selpres.train import prepare
 
-from conftest import CONFIGS, REPO, cfg_of, compose
+from conftest import CONFIGS, cfg_of, compose, report_of, run_python
 
 POINTS_DIR = CONFIGS / "design" / "selection"
 EXPERIMENT = CONFIGS / "experiment" / "selection.yaml"
@@ -165,40 +162,23 @@ def tiny(tmp_path_factory):
     topology, 2 seeds, a small held-out set; then the report."""
     out = tmp_path_factory.mktemp("selection")
     picked = ["b25_stratified", "b25_matched", "b25_loss_high", "b25_matched_charged"]
-    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
-    run = subprocess.run(
-        [
-            sys.executable,
-            "train.py",
-            "experiment=selection",
-            "design/selection=" + ",".join(picked),
-            "topology=6-4-2",
-            "replicas=2",
-            "data.heldout=200",
-            "eval.heldout_curve=200",
-            "logging.progress=false",
-            f"hydra.sweep.dir={out / 'sweep'}",
-        ],
-        cwd=REPO,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
+    run = run_python(
+        "train.py",
+        "experiment=selection",
+        "design/selection=" + ",".join(picked),
+        "topology=6-4-2",
+        "replicas=2",
+        "data.heldout=200",
+        "eval.heldout_curve=200",
+        "logging.progress=false",
+        f"hydra.sweep.dir={out / 'sweep'}",
     )
     assert run.returncode == 0, run.stderr[-3000:]
     jobs = {
         re.search(r"design_selection=([^,]+)", p.parent.name).group(1): json.loads(p.read_text())
         for p in (out / "sweep").glob("*/results.json")
     }
-    report = subprocess.run(
-        [sys.executable, "-m", "selpres.report", str(out / "sweep"), "--out", str(out / "report")],
-        cwd=REPO,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert report.returncode == 0, report.stderr[-3000:]
+    report_of(out / "sweep", out / "report")
     return picked, jobs, out / "report"
 
 

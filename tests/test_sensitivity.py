@@ -8,10 +8,7 @@ from __future__ import annotations
 
 import functools
 import json
-import os
 import re
-import subprocess
-import sys
 
 import pytest
 from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -23,7 +20,7 @@ from selpres.config import to_container
 from selpres.results import job_hash
 from selpres.train import prepare
 
-from conftest import CONFIGS, REPO, cfg_of, compose
+from conftest import CONFIGS, cfg_of, compose, report_of, run_python
 
 DESIGN = CONFIGS / "design"
 EXPERIMENT = CONFIGS / "experiment" / "sensitivity.yaml"
@@ -198,24 +195,15 @@ def test_a_tiny_sweep_runs_end_to_end_and_reports(tmp_path):
     """The documented command on four design points (one per kind), 2 seeds, a small held-out set."""
     picked = ["sel_p1", "matched_78900", "qp_c70560_eps0.001_mu1.75", "sgd_c70560_lr0.15_m0.9"]
     sweep = tmp_path / "sweep"
-    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
-    out = subprocess.run(
-        [
-            sys.executable,
-            "train.py",
-            "experiment=sensitivity",
-            f"design=glob([{','.join(picked)}])",
-            "replicas=2",
-            "data.heldout=200",
-            "eval.heldout_curve=200",
-            "logging.progress=false",
-            f"hydra.sweep.dir={sweep}",
-        ],
-        cwd=REPO,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
+    out = run_python(
+        "train.py",
+        "experiment=sensitivity",
+        f"design=glob([{','.join(picked)}])",
+        "replicas=2",
+        "data.heldout=200",
+        "eval.heldout_curve=200",
+        "logging.progress=false",
+        f"hydra.sweep.dir={sweep}",
     )
     assert out.returncode == 0, out.stderr[-3000:]
     # a job's folder is named by its overrides, the design point among them
@@ -229,13 +217,5 @@ def test_a_tiny_sweep_runs_end_to_end_and_reports(tmp_path):
         assert res["status"] == "complete" and res["seeds"] == [0, 1]
         assert res["presentations_done"] == res["schedule"]["presentations"] == stated_cost(name)
         assert res["config"]["optim"]["name"] == point(name)["optim"]["name"]
-    report = subprocess.run(
-        [sys.executable, "-m", "selpres.report", str(sweep), "--out", str(tmp_path / "r")],
-        cwd=REPO,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert report.returncode == 0, report.stderr[-3000:]
+    report_of(sweep, tmp_path / "r")
     assert (tmp_path / "r" / "report.md").is_file()

@@ -3,29 +3,20 @@
 from __future__ import annotations
 
 import json
-import os
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import run_python
+
 pytestmark = pytest.mark.slow  # subprocesses
 TINY = ["schedule.epochs=[1,1,1,1,1]", "data.heldout=200", "eval.heldout_curve=200", "logging.progress=false"]
 
 
 def multirun(sweep_dir: Path, *args: str) -> subprocess.CompletedProcess:
-    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
-    return subprocess.run(
-        [sys.executable, "train.py", "-m", f"hydra.sweep.dir={sweep_dir}", *TINY, *args],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    return run_python("train.py", "-m", f"hydra.sweep.dir={sweep_dir}", *TINY, *args)
 
 
 def results(sweep_dir: Path, key: str) -> dict[str, dict]:
