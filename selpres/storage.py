@@ -38,21 +38,25 @@ def write_json(path: Path, obj: Any) -> None:
     atomic_write(path, lambda f: f.write((to_json(obj) + "\n").encode()))
 
 
+_CONTAINERS = (dict, list, tuple)
+_encode = json.JSONEncoder(default=str).encode  # one encoder: json.dumps(default=) builds one per call
+
+
 def to_json(obj: Any, depth: int = 0) -> str:
     """JSON laid out for reading: a dict one key per line, a list of dicts or lists one item per line,
     and any other value (a list of numbers: one per replica) on one line. The leaves go through
-    ``json.dumps``' C encoder; ``indent=`` would send everything through the pure-Python one, seconds for
+    ``json``'s C encoder; ``indent=`` would send everything through the pure-Python one, seconds for
     the curves of a 1000-replica job."""
     pad, end = " " * (depth + 1), "\n" + " " * depth
     if isinstance(obj, dict) and obj:
         items = (
-            f"{pad}{json.dumps(k if isinstance(k, str) else json.dumps(k))}: {to_json(v, depth + 1)}"
-            for k, v in obj.items()
+            f"{pad}{_encode(k if isinstance(k, str) else _encode(k))}: {to_json(v, depth + 1)}" for k, v in obj.items()
         )
         return "{\n" + ",\n".join(items) + end + "}"
-    if isinstance(obj, (list, tuple)) and any(isinstance(v, (dict, list, tuple)) for v in obj):
+    # the element types in one C-speed pass: a record's lists hold a number per replica (1000s)
+    if isinstance(obj, (list, tuple)) and any(issubclass(t, _CONTAINERS) for t in set(map(type, obj))):
         return "[\n" + ",\n".join(pad + to_json(v, depth + 1) for v in obj) + end + "]"
-    return json.dumps(obj, default=str)
+    return _encode(obj)
 
 
 def flatten(d: dict, sep: str = ".", prefix: str = "") -> dict[str, Any]:
