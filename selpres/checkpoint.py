@@ -10,8 +10,11 @@ a record holds a number per replica for each curve, and JSON's shortest float re
 the append and the checkpoint's atomic rename loses nothing and duplicates nothing. results.json holds the
 same records as JSON, once, at the end.
 
-A checkpoint of another config (or one that cannot be read) is never resumed and never overwritten in
-silence: it is moved aside with a warning, and ``results.json`` names where it went.
+The checkpoint itself is a plain pickle whose tensors travel as numpy arrays (:func:`dumps`): torch.save
+pickles through Python-level hooks for every object, 0.2 ms of a 0.7 ms checkpoint at R = 1, where a
+checkpoint comes every 2.7 ms of updates. A checkpoint of another config (or one that cannot be read,
+such as the torch.save files of an older selpres) is never resumed and never overwritten in silence: it is
+moved aside with a warning, and ``results.json`` names where it went.
 """
 
 from __future__ import annotations
@@ -29,6 +32,30 @@ from selpres.storage import CHECKPOINT, HISTORY, atomic_write
 
 log = logging.getLogger("selpres")
 HISTORY_FORMAT = "pickle"  # of history.pkl; a checkpoint without it (an older selpres) is set aside, not resumed
+
+
+class _Pickler(pickle.Pickler):
+    def reducer_override(self, obj):
+        """A tensor as ``torch.from_numpy(its array)``: exact, and unpickled by plain pickle.load."""
+        if isinstance(obj, torch.Tensor) and not obj.requires_grad and obj.device.type == "cpu":
+            try:
+                return torch.from_numpy, (obj.numpy(),)
+            except TypeError:  # a dtype numpy lacks (bfloat16): torch's own reduction
+                pass
+        return NotImplemented
+
+
+def dumps(state) -> bytes:
+    """``state`` pickled, its CPU tensors as numpy arrays (read back with :func:`read`)."""
+    buf = io.BytesIO()
+    _Pickler(buf, protocol=pickle.HIGHEST_PROTOCOL).dump(state)
+    return buf.getvalue()
+
+
+def read(path: Path):
+    """A checkpoint written by :meth:`Checkpoints.save`."""
+    with open(path, "rb") as f:
+        return pickle.load(f)
 
 
 @dataclass
@@ -66,7 +93,7 @@ class Checkpoints:
         if not self.path.exists():
             return Progress.fresh(replicas)
         try:
-            ck = torch.load(self.path, weights_only=False)
+            ck = read(self.path)
             ok = ck.get("config_hash") == self.hash and ck.get("history_format") == HISTORY_FORMAT
             why = (
                 f"it belongs to another config or an older selpres (hash {ck.get('config_hash')}, this job {self.hash})"
@@ -117,7 +144,8 @@ class Checkpoints:
             "selection_presentations": progress.selection_presentations,
             "orders": progress.orders,
         }
-        atomic_write(self.path, lambda f: torch.save(state, f))
+        data = dumps(state)
+        atomic_write(self.path, lambda f: f.write(data))
 
     def move_aside(self) -> Path:
         """Rename the checkpoint (and its history log) to ``*.stale-<time>``; returns the checkpoint's new path."""

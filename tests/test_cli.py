@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from selpres.checkpoint import dumps
+
 from conftest import REPO
 
 pytestmark = pytest.mark.slow  # subprocesses: each pays for interpreter and torch start-up
@@ -246,11 +248,9 @@ def test_ctrl_c_during_set_up_keeps_the_users_folder(tmp_path):
 
 # ------------------------------------------------------------------ a stale checkpoint is set aside, said and recorded
 def test_a_checkpoint_of_another_config_is_moved_aside_with_a_warning(tmp_path):
-    import torch
-
     folder = tmp_path / "run"
     folder.mkdir()
-    torch.save({"config_hash": "0123456789abcdef", "epoch": 3}, folder / "checkpoint.pt")
+    (folder / "checkpoint.pt").write_bytes(dumps({"config_hash": "0123456789abcdef", "epoch": 3}))
     stale_bytes = (folder / "checkpoint.pt").read_bytes()
     proc = _run(folder, *TINY)
     assert proc.returncode == 0, proc.stdout + proc.stderr

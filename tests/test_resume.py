@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 import torch
 
+from selpres.checkpoint import read as read_checkpoint
+
 from conftest import requires_native
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -58,7 +60,7 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
     while time.time() < deadline:  # wait until a mid-run checkpoint (past stage 3's first epoch) exists
         if ckpt.exists():
             try:
-                if torch.load(ckpt, weights_only=False)["epoch"] >= 5:
+                if read_checkpoint(ckpt)["epoch"] >= 5:
                     break
             except Exception:  # never half-written (the rename is atomic), but be safe
                 pass
@@ -67,7 +69,7 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
     p.wait()
     assert p.returncode == -signal.SIGKILL
     assert not (killed / "results.json").exists(), "the run finished before it could be killed"
-    epoch_at_kill = torch.load(ckpt, weights_only=False)["epoch"]
+    epoch_at_kill = read_checkpoint(ckpt)["epoch"]
     assert 5 <= epoch_at_kill < EPOCHS[engine]
 
     resumed = run(killed, args)
