@@ -12,8 +12,11 @@ import math
 import os
 import shutil
 import socket
+import struct
 import time
 from pathlib import Path
+
+import numpy as np
 
 from selpres.storage import flatten
 
@@ -46,6 +49,45 @@ def fast_event_checksums() -> bool:
     return True
 
 
+def _varint(n: int) -> bytes:
+    """A non-negative int in protobuf's base-128 varint encoding."""
+    out = bytearray()
+    while n > 0x7F:
+        out.append((n & 0x7F) | 0x80)
+        n >>= 7
+    out.append(n)
+    return bytes(out)
+
+
+class ScalarEvents:
+    """Events of ``simple_value`` scalars in protobuf's wire format, built from bytes cached per tag.
+
+    Building them as protobuf objects (an Event, a Summary, a Value per scalar) cost ~20 us an event at R = 1
+    and ~0.4 ms for the 1000-replica held-out curve; here an event is a join of cached bytes. The result is
+    byte-for-byte ``Event(wall_time, step, summary=Summary(value=[Value(tag, simple_value)])).SerializeToString()``
+    (tests/test_tracking.py), so TensorBoard reads it as it reads any event."""
+
+    def __init__(self):
+        self._values: dict[str, bytes] = {}  # tag -> the Value's bytes up to its float
+
+    def _value_head(self, tag: str) -> bytes:
+        head = self._values.get(tag)
+        if head is None:
+            t = tag.encode()
+            value = b"\x0a" + _varint(len(t)) + t + b"\x15"  # Value.tag (1, string); simple_value (2, float32)
+            head = self._values[tag] = b"\x0a" + _varint(len(value) + 4) + value  # Summary.value (1, repeated)
+        return head
+
+    def encode(self, scalars: list[tuple[str, float]], step: int, wall_time: float) -> bytes:
+        with np.errstate(over="ignore"):  # beyond float32's range: inf, as protobuf's float field stores it
+            f32 = np.array([v for _, v in scalars], dtype=np.float32).tobytes()
+        summary = b"".join(self._value_head(tag) + f32[4 * i : 4 * i + 4] for i, (tag, _) in enumerate(scalars))
+        event = b"\x09" + struct.pack("<d", wall_time) if wall_time else b""  # Event.wall_time (1, double)
+        if step:  # proto3 leaves a zero out
+            event += b"\x10" + _varint(step if step > 0 else step + (1 << 64))  # Event.step (2, int64)
+        return event + b"\x2a" + _varint(len(summary)) + summary  # Event.summary (5)
+
+
 class Tracker:
     """TensorBoard event files written in the loop's own thread.
 
@@ -62,7 +104,7 @@ class Tracker:
         self.logdir = Path(logdir)
         self.writer = None  # a RecordWriter over the event file, while open
         if enabled:
-            from tensorboard.compat.proto import event_pb2, summary_pb2
+            from tensorboard.compat.proto import event_pb2
             from tensorboard.summary.writer.record_writer import RecordWriter
 
             if not fast_event_checksums():
@@ -70,7 +112,7 @@ class Tracker:
             if self.logdir.exists():  # rebuilt from history on resume
                 shutil.rmtree(self.logdir)
             self.logdir.mkdir(parents=True)
-            self._event, self._summary = event_pb2.Event, summary_pb2.Summary
+            self._event, self._scalars = event_pb2.Event, ScalarEvents()
             name = f"events.out.tfevents.{int(time.time()):010d}.{socket.gethostname()}.{os.getpid()}.selpres"
             self.writer = RecordWriter(open(self.logdir / name, "wb"))  # closed in close()
             self._append(self._event(wall_time=time.time(), file_version="brain.Event:2"))
@@ -109,9 +151,7 @@ class Tracker:
 
     def _write(self, scalars: list[tuple[str, float]], step: int) -> None:
         """One event holding every scalar of a step, each a simple_value as ``add_scalar`` writes it."""
-        S = self._summary
-        summary = S(value=[S.Value(tag=tag, simple_value=float(v)) for tag, v in scalars])
-        self._append(self._event(wall_time=time.time(), step=int(step), summary=summary))
+        self.writer.write(self._scalars.encode(scalars, int(step), time.time()))
 
     def flush(self) -> None:
         """Hand what is buffered to the file (the loop calls it at checkpoints; ``close`` at the end)."""
