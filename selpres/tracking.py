@@ -7,6 +7,7 @@ rebuilds it from the checkpoint's history instead of appending duplicates.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import os
@@ -14,6 +15,7 @@ import shutil
 import socket
 import struct
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -25,28 +27,97 @@ log = logging.getLogger("selpres")
 METRICS = ("train_mse", "test10_rms_nm", "heldout_rms_nm")
 
 
-def fast_event_checksums() -> bool:
-    """Give TensorBoard's event writer a CRC-32C in C (google-crc32c), if it is installed; True if so.
-
-    Without TensorFlow, TensorBoard checksums every event record in pure Python (its tensorflow stub: 3 ms
-    for the 30 KB event of a 1000-replica curve point, 20 us for a small one) on its writer thread, which
-    holds the GIL meanwhile: the training loop then waits to get it back after every kernel call (an R = 1
-    job's updates took 0.058 s with TensorBoard on, 0.040 s with it off). The same checksum, computed in C,
-    removes that; the event files are byte-for-byte what the stub would write (tests/test_tracking.py)."""
+@functools.lru_cache(maxsize=1)
+def event_checksum() -> tuple[Callable[[bytes], int], bool]:
+    """TFRecord's masked CRC-32C, and whether it runs in C (google-crc32c) rather than TensorBoard's pure
+    Python (its tensorflow stub: 3 ms for the 30 KB event of a 1000-replica curve point, 20 us for a small
+    one, and 0.1 s to import). The two give the same checksums (tests/test_tracking.py)."""
     try:
         import google_crc32c
-        from tensorboard.summary.writer import record_writer
+
+        if getattr(google_crc32c, "implementation", "") == "c":
+            crc = google_crc32c.value
+
+            def masked_crc32c(data: bytes) -> int:  # TensorBoard's masking of the CRC-32C (TFRecord format)
+                x = crc(data)
+                return (((x >> 15) | (x << 17)) + 0xA282EAD8) & 0xFFFFFFFF
+
+            return masked_crc32c, True
     except ImportError:
-        return False
-    if getattr(google_crc32c, "implementation", "") != "c":
-        return False
+        pass
+    from tensorboard.compat.tensorflow_stub.pywrap_tensorflow import masked_crc32c
 
-    def masked_crc32c(data: bytes) -> int:  # TensorBoard's masking of the CRC-32C (TFRecord format)
-        x = google_crc32c.value(data)
-        return (((x >> 15) | (x << 17)) + 0xA282EAD8) & 0xFFFFFFFF
+    return masked_crc32c, False
 
-    record_writer.masked_crc32c = masked_crc32c
-    return True
+
+class EventFile:
+    """An event file in TensorBoard's record format (TFRecord: length, its checksum, data, its checksum), as
+    tensorboard's RecordWriter frames it; written here because importing that writer took 0.1 s of every job."""
+
+    def __init__(self, path: Path):
+        self._file = open(path, "wb")
+        self._crc = event_checksum()[0]
+
+    def write(self, data: bytes) -> None:
+        header = struct.pack("<Q", len(data))
+        self._file.write(header + struct.pack("<I", self._crc(header)) + data + struct.pack("<I", self._crc(data)))
+
+    def flush(self) -> None:
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+_HPARAMS_PLUGIN = "hparams"  # tensorboard.plugins.hparams.metadata's names (importing it took 0.1 s)
+_HPARAMS_TAGS = ("_hparams_/experiment", "_hparams_/session_start_info", "_hparams_/session_end_info")
+
+
+def hparams_summaries(hparams: dict, metrics: dict) -> list:
+    """The three summaries (experiment, session start, session end) that TensorBoard's HParams plugin reads,
+    as ``torch.utils.tensorboard.summary.hparams(hparams, metrics)`` builds them (tested equal), for values
+    that are int, float, str or bool; without importing torch's tensorboard module (0.16 s)."""
+    from tensorboard.compat.proto.summary_pb2 import Summary, SummaryMetadata
+    from tensorboard.plugins.hparams import api_pb2, plugin_data_pb2
+
+    start = plugin_data_pb2.SessionStartInfo()
+    infos = []
+    for k, v in hparams.items():
+        if v is None:
+            continue
+        if isinstance(v, (int, float)):  # bools too, as torch files them: a number
+            start.hparams[k].number_value = v
+            kind = "DATA_TYPE_FLOAT64"
+        elif isinstance(v, str):
+            start.hparams[k].string_value = v
+            kind = "DATA_TYPE_STRING"
+        else:
+            raise ValueError(f"hparam {k}={v!r}: expected int, float, str or bool")
+        infos.append(api_pb2.HParamInfo(name=k, type=api_pb2.DataType.Value(kind)))
+    experiment = api_pb2.Experiment(
+        hparam_infos=infos, metric_infos=[api_pb2.MetricInfo(name=api_pb2.MetricName(tag=k)) for k in metrics]
+    )
+    end = plugin_data_pb2.SessionEndInfo(status=api_pb2.Status.Value("STATUS_SUCCESS"))
+    contents = (
+        plugin_data_pb2.HParamsPluginData(experiment=experiment, version=0),
+        plugin_data_pb2.HParamsPluginData(session_start_info=start, version=0),
+        plugin_data_pb2.HParamsPluginData(session_end_info=end, version=0),
+    )
+    return [
+        Summary(
+            value=[
+                Summary.Value(
+                    tag=tag,
+                    metadata=SummaryMetadata(
+                        plugin_data=SummaryMetadata.PluginData(
+                            plugin_name=_HPARAMS_PLUGIN, content=content.SerializeToString()
+                        )
+                    ),
+                )
+            ]
+        )
+        for tag, content in zip(_HPARAMS_TAGS, contents)
+    ]
 
 
 def _varint(n: int) -> bytes:
@@ -102,19 +173,18 @@ class Tracker:
         self.enabled = enabled
         self.per_replica = per_replica
         self.logdir = Path(logdir)
-        self.writer = None  # a RecordWriter over the event file, while open
+        self.writer = None  # the EventFile, while open
         if enabled:
             from tensorboard.compat.proto import event_pb2
-            from tensorboard.summary.writer.record_writer import RecordWriter
 
-            if not fast_event_checksums():
+            if not event_checksum()[1]:
                 log.warning("TensorBoard checksums its events in pure Python (google-crc32c missing): slower logging")
             if self.logdir.exists():  # rebuilt from history on resume
                 shutil.rmtree(self.logdir)
             self.logdir.mkdir(parents=True)
             self._event, self._scalars = event_pb2.Event, ScalarEvents()
             name = f"events.out.tfevents.{int(time.time()):010d}.{socket.gethostname()}.{os.getpid()}.selpres"
-            self.writer = RecordWriter(open(self.logdir / name, "wb"))  # closed in close()
+            self.writer = EventFile(self.logdir / name)  # closed in close()
             self._append(self._event(wall_time=time.time(), file_version="brain.Event:2"))
 
     def _append(self, event) -> None:
@@ -167,8 +237,6 @@ class Tracker:
         ``add_hparams(..., run_name=".")`` writes, into this same file), then the file is closed."""
         if self.writer is None:
             return
-        from torch.utils.tensorboard.summary import hparams as hparams_summaries
-
         hp = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in flatten(hparams, "/").items()}
         mt = {k: v for k, v in flatten(metrics, "/").items() if isinstance(v, (int, float)) and math.isfinite(v)}
         for summary in hparams_summaries(hp, mt):  # experiment, session start, session end

@@ -43,23 +43,46 @@ def test_curves_by_epoch_and_by_presentations(tmp_path):
     assert "final/heldout_rms_nm_overall" in {m.name.tag for m in experiment.metric_infos}
 
 
-def test_event_checksums_in_c_equal_tensorboards_own(tmp_path):
-    """The C checksum that replaces TensorBoard's pure-Python one gives the same masked CRC-32C on any
-    bytes (worked against the stub's implementation), and event files written with it read back."""
+def test_event_files_are_what_tensorboards_record_writer_writes(tmp_path):
+    """The C checksum gives TensorBoard's own masked CRC-32C on any bytes (its pure-Python stub), an
+    EventFile holds byte-for-byte what TensorBoard's RecordWriter writes, and a job's event file reads back."""
+    import io
     import os
 
     from tensorboard.compat.tensorflow_stub.pywrap_tensorflow import masked_crc32c as stub
-    from tensorboard.summary.writer import record_writer
+    from tensorboard.summary.writer.record_writer import RecordWriter
 
-    from selpres.tracking import fast_event_checksums
+    from selpres.tracking import EventFile, event_checksum
 
-    assert fast_event_checksums() and record_writer.masked_crc32c is not stub
+    crc, in_c = event_checksum()
+    assert in_c and crc is not stub
     for n in (0, 1, 3, 8, 255, 4096, 40_000):
         data = os.urandom(n)
-        assert record_writer.masked_crc32c(data) == stub(data), n
-    assert record_writer.masked_crc32c(b"123456789") == stub(b"123456789")  # the CRC-32C check string
-    train(cfg_of("schedule.epochs=[1,1,1,1,1]", "replicas=2"), tmp_path)
-    assert len(load(tmp_path / "tb").Scalars("heldout_rms_nm/mean/by_presentations")) == 6  # read, CRCs checked
+        assert crc(data) == stub(data), n
+    assert crc(b"123456789") == stub(b"123456789")  # the CRC-32C check string
+
+    records = [os.urandom(n) for n in (0, 5, 300, 70_000)]
+    ours, theirs = EventFile(tmp_path / "ours"), RecordWriter(io.BytesIO())
+    for r in records:
+        ours.write(r)
+        theirs.write(r)
+    ours.close()
+    assert (tmp_path / "ours").read_bytes() == theirs._writer.getvalue()
+
+    train(cfg_of("schedule.epochs=[1,1,1,1,1]", "replicas=2"), tmp_path / "job")
+    assert len(load(tmp_path / "job" / "tb").Scalars("heldout_rms_nm/mean/by_presentations")) == 6  # read back
+
+
+def test_hparams_summaries_are_torchs():
+    """What the job writes for TensorBoard's HParams plugin equals torch's add_hparams summaries."""
+    from torch.utils.tensorboard.summary import hparams
+
+    from selpres.tracking import hparams_summaries
+
+    hp = {"schedule": "selective", "replicas": 30, "lr": 0.15, "overwrite": False, "note": None, "ü": "δ"}
+    metrics = {"final/heldout_rms_nm_overall": 0.21, "final/test10_rms_nm_overall": 0.3}
+    ours = [s.SerializeToString() for s in hparams_summaries(hp, metrics)]
+    assert ours == [s.SerializeToString() for s in hparams(hp, metrics)]
 
 
 def test_hand_encoded_events_are_what_protobuf_serialises():
