@@ -72,6 +72,7 @@ COMPILE_TIMEOUT = 300  # seconds; a time-out (a busy machine) is reported and re
 REQUIRED_CPU_FEATURES = ("avx2", "fma")  # what the kernel's intrinsics need (sgd.c stops without them)
 
 log = logging.getLogger(__name__)
+_UINT64 = np.dtype(np.uint64)
 
 
 class KernelUnavailable(RuntimeError):
@@ -334,7 +335,7 @@ class Shuffler(_Library):
         ``size``; ``out``: int64 [R, count]). Threads take contiguous chunks of replicas."""
         R = len(orders)
         for a in (keys, epochs):
-            assert a.dtype.name == "uint64" and a.shape == (R,) and a.flags.c_contiguous
+            assert a.dtype == _UINT64 and a.shape == (R,) and a.flags.c_contiguous  # dtype.name costs 1.5 us
         assert out.dtype == torch.int64 and out.shape == (R, count) and out.is_contiguous()
         ptrs = np.fromiter((o.data_ptr() for o in orders), dtype=np.uint64, count=R)
         threads = self.threads_for(SHUFFLE_WORK_PER_ELEMENT * R * size, threads)

@@ -87,9 +87,9 @@ def shuffle_implementation() -> str:
 def epoch_orders(samplers: list[SelectivePresentationSampler], buffer: torch.Tensor | None = None) -> torch.Tensor:
     """Every sampler's current epoch order, stacked [R, m]: one vectorised shuffle for all replicas.
 
-    ``buffer`` (int64, at least R * m elements), when given, holds the result (a view of it is returned):
-    a job reuses one buffer every epoch, since fresh memory (8 MB at R = 1000) is mapped in page by page,
-    which cost more than the shuffle itself.
+    ``buffer`` (one-dimensional int64, at least R * m elements), when given, holds the result (a view of it
+    is returned): a job reuses one buffer every epoch, since fresh memory (8 MB at R = 1000) is mapped in
+    page by page, which cost more than the shuffle itself.
 
     Replica r's shuffle is argsort of hash(key_r, epoch, i) over the current set's positions i, a
     counter-based permutation, so it is the same whether computed alone or with other replicas, and
@@ -105,8 +105,14 @@ def epoch_orders(samplers: list[SelectivePresentationSampler], buffer: torch.Ten
     keys = np.array([s._key for s in samplers], dtype=np.uint64)
     epochs = np.array([s.epoch for s in samplers], dtype=np.uint64)
     dtype = samplers[0].order.dtype
-    if buffer is not None and buffer.dtype == dtype and buffer.is_contiguous() and buffer.numel() >= R * count:
-        out = buffer.view(-1)[: R * count].view(R, count)
+    if (
+        buffer is not None
+        and buffer.dtype == dtype
+        and buffer.dim() == 1
+        and buffer.is_contiguous()
+        and buffer.numel() >= R * count
+    ):
+        out = buffer[: R * count].view(R, count)
     else:
         out = torch.empty((R, count), dtype=dtype)
     shuffler, _ = native_shuffles()

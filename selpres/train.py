@@ -235,9 +235,9 @@ def curve_point(engine, prob: Problem, cad: Cadence, ep: EpochPlan | None, loss,
 
 def mark_diverged(progress: Progress, engine, loss: torch.Tensor, epoch: int) -> None:
     """A replica whose loss or weights are no longer finite diverged here (its results are withheld)."""
+    if math.isfinite(float(loss.sum())) and bool(engine.finite().all()):  # the usual case, in few small ops
+        return  # (a sum that overflows while every loss is finite only takes the slow path below)
     finite = torch.isfinite(loss) & engine.finite()
-    if bool(finite.all()):  # the usual case, in two small ops
-        return
     for r in torch.nonzero(~finite).flatten().tolist():
         if progress.diverged_at[r] is None:
             progress.diverged_at[r] = {"epoch": epoch + 1, "presentations": progress.presentations}
