@@ -28,7 +28,7 @@ from pathlib import Path
 
 import torch
 
-from selpres.storage import CHECKPOINT, HISTORY, atomic_write
+from selpres.storage import CHECKPOINT, CHECKPOINT_ALT, HISTORY, atomic_write
 
 log = logging.getLogger("selpres")
 HISTORY_FORMAT = "pickle"  # of history.pkl; a checkpoint without it (an older selpres) is set aside, not resumed
@@ -82,30 +82,56 @@ class Progress:
 
 
 class Checkpoints:
-    """``checkpoint.pt`` + ``history.pkl`` in a job folder, for one job identity (its config hash)."""
+    """``checkpoint.pt`` / ``checkpoint.alt.pt`` + ``history.pkl`` in a job folder, for one job identity (its
+    config hash).
+
+    Saves alternate between the two names, each written to a temporary file and renamed onto a name freed
+    just before, while the other name keeps the newest checkpoint, so a kill at any moment leaves one whole
+    checkpoint (a resume takes the newer). Renaming over an existing file makes ext4 allocate the new file's
+    blocks at once (its replace-via-rename safeguard): 0.1-0.3 ms a checkpoint, where an R = 1 job
+    checkpoints every 2.7 ms; onto a free name the rename costs ~0.01 ms.
+    """
 
     def __init__(self, folder: Path, config_hash: str):
-        self.path, self.history_path, self.hash = folder / CHECKPOINT, folder / HISTORY, config_hash
+        self.paths, self.history_path, self.hash = (
+            (folder / CHECKPOINT, folder / CHECKPOINT_ALT),
+            folder / HISTORY,
+            config_hash,
+        )
         self._saved = 0  # history records already in the file
+        self._next = 0  # the name the next save takes (the other holds the newest checkpoint)
+
+    @staticmethod
+    def present(folder: Path) -> bool:
+        """Whether ``folder`` holds a checkpoint to resume from."""
+        return any((folder / name).exists() for name in (CHECKPOINT, CHECKPOINT_ALT))
 
     def resume(self, engine, replicas: int) -> Progress:
-        """The saved progress (engine state loaded) if a checkpoint of this job is here, else a fresh start."""
-        if not self.path.exists():
-            return Progress.fresh(replicas)
-        try:
-            ck = read(self.path)
-            ok = ck.get("config_hash") == self.hash and ck.get("history_format") == HISTORY_FORMAT
-            why = (
-                f"it belongs to another config or an older selpres (hash {ck.get('config_hash')}, this job {self.hash})"
-            )
-        except Exception as exc:  # any unreadable file is set aside, never resumed
-            ok, why = False, f"it cannot be read ({type(exc).__name__}: {exc})"
-        if not ok:
+        """The saved progress (engine state loaded) from the newer checkpoint of this job here, else a fresh
+        start; if either file is of another config or cannot be read, both are set aside (not resumed)."""
+        found, why = [], None
+        for slot, path in enumerate(self.paths):
+            if not path.exists():
+                continue
+            try:
+                ck = read(path)
+                if ck.get("config_hash") == self.hash and ck.get("history_format") == HISTORY_FORMAT:
+                    found.append((ck["epoch"], slot, ck))
+                else:
+                    why = f"{path.name} belongs to another config or an older selpres (hash {ck.get('config_hash')}, "
+                    why += f"this job {self.hash})"
+            except Exception as exc:  # any unreadable file is set aside, never resumed
+                why = f"{path.name} cannot be read ({type(exc).__name__}: {exc})"
+        if why is not None:
             moved = self.move_aside()
-            log.warning("%s: %s; moved it to %s and started afresh", self.path, why, moved.name)
+            log.warning("%s: %s; moved it to %s and started afresh", self.paths[0].parent, why, moved.name)
             progress = Progress.fresh(replicas)
             progress.stale_checkpoint = str(moved)
             return progress
+        if not found:
+            return Progress.fresh(replicas)
+        _, slot, ck = max(found, key=lambda f: f[:2])
+        self._next = 1 - slot
         engine.load_state_dict(ck["engine"])
         with open(self.history_path, "r+b") as f:
             f.truncate(ck["history_bytes"])  # drop records appended after this checkpoint
@@ -114,7 +140,7 @@ class Checkpoints:
         while log_bytes.tell() < ck["history_bytes"]:
             history.append(pickle.load(log_bytes))
         self._saved = len(history)
-        log.info("resuming from %s at epoch %d", self.path, ck["epoch"])
+        log.info("resuming from %s at epoch %d", self.paths[slot], ck["epoch"])
         return Progress(
             history,
             ck["diverged_at"],
@@ -127,7 +153,8 @@ class Checkpoints:
         )
 
     def save(self, engine, progress: Progress) -> None:
-        """Append the new history records, then write the checkpoint atomically (write, then rename)."""
+        """Append the new history records, then write the checkpoint atomically (write, then rename) in place
+        of the older one."""
         with open(self.history_path, "ab" if self._saved else "wb") as f:
             f.writelines(pickle.dumps(rec, protocol=pickle.HIGHEST_PROTOCOL) for rec in progress.history[self._saved :])
             size = f.tell()
@@ -145,18 +172,24 @@ class Checkpoints:
             "orders": progress.orders,
         }
         data = dumps(state)
-        atomic_write(self.path, lambda f: f.write(data))
+        target = self.paths[self._next]
+        target.unlink(missing_ok=True)  # the older of the two: the other name holds the newest checkpoint
+        atomic_write(target, lambda f: f.write(data))
+        self._next = 1 - self._next
 
     def move_aside(self) -> Path:
-        """Rename the checkpoint (and its history log) to ``*.stale-<time>``; returns the checkpoint's new path."""
+        """Rename the checkpoints (and their history log) to ``*.stale-<time>``; returns where the first went."""
         stamp = time.strftime("%Y%m%d-%H%M%S")
-        target = self.path.with_name(f"{self.path.stem}.stale-{stamp}{self.path.suffix}")
-        self.path.rename(target)
-        if self.history_path.exists():
-            self.history_path.rename(self.history_path.with_name(f"history.stale-{stamp}{self.history_path.suffix}"))
-        return target
+        moved = []
+        for path in (*self.paths, self.history_path):
+            if path.exists():
+                name, dot, suffix = path.name.partition(".")
+                target = path.with_name(f"{name}.stale-{stamp}.{suffix}")
+                path.rename(target)
+                moved.append(target)
+        return moved[0]
 
     def discard(self) -> None:
-        """A finished (or deliberately restarted) job needs neither file."""
-        self.path.unlink(missing_ok=True)
-        self.history_path.unlink(missing_ok=True)
+        """A finished (or deliberately restarted) job needs none of the files."""
+        for path in (*self.paths, self.history_path):
+            path.unlink(missing_ok=True)

@@ -26,9 +26,10 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
+from selpres.checkpoint import Checkpoints
 from selpres.errors import ConfigError
 from selpres.results import job_hash
-from selpres.storage import CHECKPOINT, RESULTS, write_json
+from selpres.storage import RESULTS, write_json
 from selpres.train import Problem, train
 
 log = logging.getLogger("selpres")
@@ -145,10 +146,9 @@ def run_job(cfg: DictConfig) -> float:
     except KeyboardInterrupt:
         if multirun:
             raise
-        print(
-            "interrupted" + ("; run the same command to resume" if (out / CHECKPOINT).exists() else ""), file=sys.stderr
-        )
-        if not (out / CHECKPOINT).exists():  # interrupted before anything worth keeping
+        resumable = Checkpoints.present(out)
+        print("interrupted" + ("; run the same command to resume" if resumable else ""), file=sys.stderr)
+        if not resumable:  # interrupted before anything worth keeping
             _undo(out)
         sys.exit(130)
     except Exception as e:  # a crash: keep the traceback in the job's log, mark the job failed

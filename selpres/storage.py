@@ -14,6 +14,7 @@ from typing import Any, BinaryIO
 RESULTS = "results.json"
 WEIGHTS = "weights.pt"
 CHECKPOINT = "checkpoint.pt"
+CHECKPOINT_ALT = "checkpoint.alt.pt"  # checkpoints alternate between the two names (selpres.checkpoint)
 HISTORY = "history.pkl"  # the checkpoint's append-only record log (pickled records)
 
 

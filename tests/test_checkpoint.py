@@ -43,3 +43,62 @@ def test_the_engine_state_comes_back_exactly(tmp_path):
     other = make_engine("torch", SIZES, init_replica_params(SIZES, [7, 8]), 0.15, 0.9, 1)
     Checkpoints(tmp_path, "h").resume(other, 2)
     assert all(torch.equal(a, b) for a, b in zip(engine.params(), other.params()))
+
+
+def test_saves_alternate_and_never_rename_over_a_file(tmp_path, monkeypatch):
+    """Each save renames onto a name that is free at that moment (ext4 makes a rename over a file allocate
+    its blocks at once), and the two names take turns, so the other always holds the newest checkpoint."""
+    import os
+
+    from selpres import storage
+
+    real = os.replace
+    targets = []
+
+    def replace(src, dst):
+        assert not os.path.exists(dst), f"renamed over {dst}"
+        targets.append(os.path.basename(dst))
+        real(src, dst)
+
+    monkeypatch.setattr(storage.os, "replace", replace)
+    engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
+    ckpts, progress = Checkpoints(tmp_path, "h"), Progress([record(-1)], [None, None])
+    for epoch in range(1, 5):
+        progress.history.append(record(epoch - 1))
+        progress.epoch = epoch
+        ckpts.save(engine, progress)
+    assert targets == ["checkpoint.pt", "checkpoint.alt.pt"] * 2
+    assert Checkpoints(tmp_path, "h").resume(engine, 2).epoch == 4  # the newer of the two (alt)
+
+
+def test_a_kill_while_the_older_checkpoint_is_replaced_resumes_from_the_newer(tmp_path):
+    """Between freeing the older name and the rename onto it only the newer checkpoint exists: a resume
+    takes it, and the history log is cut back to it. The next save goes to the free name, not over the
+    checkpoint resumed from."""
+    engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
+    ckpts = Checkpoints(tmp_path, "h")
+    ckpts.save(engine, Progress([record(-1), record(0)], [None, None], epoch=1))  # -> checkpoint.pt
+    ckpts.save(engine, Progress([record(-1), record(0), record(1)], [None, None], epoch=2))  # -> .alt.pt
+    (tmp_path / "checkpoint.pt").unlink()  # the third save freed the older name, then the job was killed
+    with open(tmp_path / "history.pkl", "ab") as f:  # after appending its records
+        f.write(pickle.dumps(record(2)))
+    resumed = Checkpoints(tmp_path, "h")
+    back = resumed.resume(engine, 2)
+    assert back.epoch == 2 and [r["epoch"] for r in back.history] == [-1, 0, 1]
+    back.history.append(record(2))
+    back.epoch = 3
+    resumed.save(engine, back)
+    assert (tmp_path / "checkpoint.pt").exists() and (tmp_path / "checkpoint.alt.pt").exists()
+    assert Checkpoints(tmp_path, "h").resume(engine, 2).epoch == 3
+
+
+def test_a_checkpoint_of_another_config_beside_ours_sets_both_aside(tmp_path):
+    """If either file is not this job's, neither is resumed and nothing is deleted: all move aside."""
+    engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
+    Checkpoints(tmp_path, "h").save(engine, Progress([record(-1)], [None, None], epoch=1))
+    (tmp_path / "checkpoint.alt.pt").write_bytes(b"junk")
+    back = Checkpoints(tmp_path, "h").resume(engine, 2)
+    assert back.epoch == 0 and back.stale_checkpoint is not None
+    names = sorted(p.name.split("-")[0] + "|" + p.suffix for p in tmp_path.iterdir())
+    assert names == ["checkpoint.stale|.pt", "checkpoint.stale|.pt", "history.stale|.pkl"]
+    assert not Checkpoints.present(tmp_path)

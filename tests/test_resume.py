@@ -48,6 +48,19 @@ def run(out: Path, args: list[str], wait: bool = True) -> subprocess.Popen:
     return p
 
 
+def newest_checkpoint(folder: Path) -> tuple[Path | None, int]:
+    """The checkpoint a resume should take (the later of the two alternating files) and its epoch (-1: none)."""
+    best: tuple[Path | None, int] = (None, -1)
+    for path in (folder / "checkpoint.pt", folder / "checkpoint.alt.pt"):
+        try:
+            epoch = read_checkpoint(path)["epoch"]
+        except Exception:  # absent (never half-written: the rename is atomic)
+            continue
+        if epoch > best[1]:
+            best = (path, epoch)
+    return best
+
+
 @pytest.mark.parametrize(
     "engine", [pytest.param("reference"), pytest.param("native", marks=requires_native), pytest.param("loss_high")]
 )
@@ -55,25 +68,20 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
     args = ENGINES[engine]
     killed = tmp_path / "killed"
     p = run(killed, args, wait=False)
-    ckpt = killed / "checkpoint.pt"
     deadline = time.time() + 240
     while time.time() < deadline:  # wait until a mid-run checkpoint (past stage 3's first epoch) exists
-        if ckpt.exists():
-            try:
-                if read_checkpoint(ckpt)["epoch"] >= 5:
-                    break
-            except Exception:  # never half-written (the rename is atomic), but be safe
-                pass
+        if newest_checkpoint(killed)[1] >= 5:
+            break
         time.sleep(0.05)
     p.send_signal(signal.SIGKILL)
     p.wait()
     assert p.returncode == -signal.SIGKILL
     assert not (killed / "results.json").exists(), "the run finished before it could be killed"
-    epoch_at_kill = read_checkpoint(ckpt)["epoch"]
+    ckpt, epoch_at_kill = newest_checkpoint(killed)
     assert 5 <= epoch_at_kill < EPOCHS[engine]
 
     resumed = run(killed, args)
-    assert f"resuming from {ckpt}" in resumed.stdout.read()
+    assert f"resuming from {ckpt} at epoch {epoch_at_kill}" in resumed.stdout.read()
     straight = tmp_path / "straight"
     run(straight, args)
 
