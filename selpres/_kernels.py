@@ -6,10 +6,15 @@ parameters contiguous as ``[P, 4]`` in the replica list's order (W1 row-major, b
 ``INTERLEAVE`` (2) groups are trained together in one instruction stream. The topology is compiled in
 as macros (``-DNL=2 -DSIZES=6,13,2 ...``, see :func:`macros`): one small shared library per topology.
 The sigmoid's ``exp`` is an inline AVX2 polynomial, so there is no -ffast-math and no vector-math
-library: only a C compiler is needed.
+library: only a C compiler is needed. Evaluation (:meth:`Kernel.forward`, :meth:`Kernel.squared_errors`)
+is written once for a vector width (``kernels/eval.h``) and built at 4 lanes and, where the compiler
+targets AVX-512F, at 8 (two groups per zmm, ~1.7x the FMA work per cycle here); the numbers are bitwise
+the same at either width, and :attr:`Kernel.eval_lanes` says which one the loaded library runs.
 
 Build: ``$CC`` (default ``cc``/``gcc``) ``-O3 -march=native -fPIC -shared`` on the real source path (so
-compiler messages name its lines), once per (source, topology, flags, compiler version, CPU) into
+compiler messages name its lines), once per (source and the headers it includes, topology, flags -- with
+any extra flags a caller asks for, e.g. ``-mno-avx512f`` for the AVX2-only variant the tests compare --,
+compiler version, CPU) into
 ``$SELPRES_CACHE_DIR`` (default ``~/.cache/selpres``), written to a temporary file and renamed, so
 parallel processes may race safely; a ``.sha256`` sidecar written after the library marks it complete.
 Before any library is opened the CPU must list AVX2 and FMA (a cache shared between machines ends in a
@@ -36,6 +41,7 @@ import hashlib
 import logging
 import os
 import platform
+import re
 import shlex
 import shutil
 import subprocess
@@ -216,7 +222,17 @@ class Kernel(_Library):
         self._finite = self.lib.selpres_finite
         self._finite.argtypes = [i64, i64, dp, lp]
         self._finite.restype = c_int
+        self._eval_lanes = self.lib.selpres_eval_lanes
+        self._eval_lanes.argtypes = []
+        self._eval_lanes.restype = c_int
         self._sizes: dict[tuple[int, ...], torch.Tensor] = {}
+
+    @property
+    def eval_lanes(self) -> int:
+        """The vector width :meth:`forward` and :meth:`squared_errors` run at in this library: 8 where it
+        was compiled for AVX-512F (pairs of groups in a zmm), else 4 (AVX2). The numbers do not depend on
+        it, the speed does: a run records it as what ran."""
+        return int(self._eval_lanes())
 
     def _sizes_arg(self, sizes) -> tuple[int, int]:
         """``(nl, pointer to sizes as int64)`` for the C entry points; the tensor is kept, not rebuilt
@@ -378,12 +394,20 @@ def _intact(library: Path) -> bool:
         return False
 
 
+def _source_text(source: Path) -> str:
+    """The source and the headers it includes from its own folder (``#include "eval.h"``): an edited header
+    changes the cache key as an edited source does."""
+    text = source.read_text()
+    headers = sorted(set(re.findall(r'^[ \t]*#[ \t]*include[ \t]*"([^"]+)"', text, re.MULTILINE)))
+    return "\0".join([text, *(source.with_name(h).read_text() for h in headers)])
+
+
 def _library_path(stem: str, source: Path, flags: list[str], cc: list[str] | None = None) -> Path:
-    """Where the cache keeps a library: keyed by source, macros, flags, compiler and CPU."""
+    """Where the cache keeps a library: keyed by source (and its headers), macros, flags, compiler, CPU."""
     cc = cc or _compiler()
     key_text = "\0".join(
         [
-            source.read_text(),
+            _source_text(source),
             shlex.join([*cc, *flags, *CFLAGS, *LIBS]),
             _compiler_version(tuple(cc)),
             " ".join(sorted(cpu_flags())),
@@ -394,10 +418,18 @@ def _library_path(stem: str, source: Path, flags: list[str], cc: list[str] | Non
     return cache_dir() / f"{stem}_{key}.so"
 
 
-def build(sizes) -> Path:
-    """The cached library for ``sizes``, compiled first if it is missing or fails its checksum."""
-    sizes = tuple(int(s) for s in sizes)
-    return _build(f"selpres_{'-'.join(map(str, sizes))}", SOURCE, macros(sizes))
+def _extra_flags(extra_flags) -> tuple[str, ...]:
+    if isinstance(extra_flags, str) or not all(isinstance(f, str) and f.startswith("-") for f in extra_flags):
+        raise ValueError(f"extra_flags: a sequence of options like '-mno-avx512f', not {extra_flags!r}")
+    return tuple(extra_flags)
+
+
+def build(sizes, extra_flags=()) -> Path:
+    """The cached library for ``sizes``, compiled first if it is missing or fails its checksum.
+    ``extra_flags`` go after the usual flags (so ``-mno-avx512f`` undoes what ``-march=native`` enables)
+    and into the cache key: a variant never replaces the usual library."""
+    sizes, extra = tuple(int(s) for s in sizes), _extra_flags(extra_flags)
+    return _build(f"selpres_{'-'.join(map(str, sizes))}", SOURCE, [*macros(sizes), *extra])
 
 
 def _build(stem: str, source: Path, flags: list[str]) -> Path:
@@ -450,12 +482,13 @@ def _load(key, cls: type, built: Callable[[], Path]):
         return _loaded[key]
 
 
-def load(sizes) -> Kernel:
-    """The kernel for topology ``sizes`` (see :func:`_load`)."""
-    sizes = tuple(int(s) for s in sizes)
+def load(sizes, extra_flags=()) -> Kernel:
+    """The kernel for topology ``sizes`` (see :func:`_load`); with ``extra_flags`` (see :func:`build`) a
+    variant, loaded beside the usual one (the tests compare the AVX2-only evaluation with the AVX-512 one)."""
+    sizes, extra = tuple(int(s) for s in sizes), _extra_flags(extra_flags)
     if len(sizes) - 1 > 32:
         raise KernelUnavailable("more than 32 layers")
-    return _load(sizes, Kernel, lambda: build(sizes))
+    return _load((sizes, extra) if extra else sizes, Kernel, lambda: build(sizes, extra))
 
 
 def load_shuffle() -> Shuffler:

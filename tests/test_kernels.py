@@ -12,6 +12,7 @@ import sys
 import textwrap
 
 import pytest
+import torch
 
 from selpres import _kernels
 
@@ -212,3 +213,91 @@ def test_small_calls_never_touch_the_pool_and_large_ones_do(monkeypatch):
         # errors stay whole (one group, one block of patterns: nothing to split)
         assert pooled == ([] if min_work > 1 else [2] * 4), pooled
     assert all(torch.equal(a, b) for a, b in zip(*results))
+
+
+# -------------------------------------------------------- evaluation at 8 lanes (AVX-512) = at 4 lanes (AVX2)
+AVX2_ONLY = ("-mno-avx512f",)  # after -march=native: the same source, evaluated at 4 lanes only
+requires_avx512 = pytest.mark.skipif(
+    "avx512f" not in _kernels.cpu_flags(), reason="this CPU lacks avx512f: evaluation runs at 4 lanes only"
+)
+
+
+def _bits(t):
+    """The float64s' bit patterns: equal means bitwise equal, NaNs (and their payloads) included."""
+    return t.contiguous().view(torch.int64)
+
+
+def _packed_weights(sizes, G, seed):
+    """[G, P, 4] weights of G groups: most lanes N(0, 1); lane 0 of every group x1000, its first and last
+    output biases -1e4 and 1e4, so its sigmoids saturate and exp's clamp at -708/708 is reached; one NaN
+    weight in replica 6 (the upper half of the first pair of groups), or replica 1 when there is one group."""
+    P = sum(o * i + o for i, o in zip(sizes[:-1], sizes[1:]))
+    g = torch.Generator().manual_seed(seed)
+    w = torch.randn(G, P, 4, generator=g, dtype=torch.float64)
+    w[:, :, 0] *= 1000.0
+    w[:, P - sizes[-1], 0], w[:, P - 1, 0] = -1e4, 1e4  # output biases: sigmoid(-708) = 3.3e-308, and 1.0
+    nan_replica = 6 if G > 1 else 1
+    w[nan_replica // 4, P // 2, nan_replica % 4] = float("nan")
+    return w, nan_replica
+
+
+@requires_native
+@requires_avx512
+@pytest.mark.parametrize("sizes", [(6, 13, 2), (6, 5, 5, 2), (18, 40, 6)])
+def test_avx512_evaluation_is_bitwise_the_avx2_one(monkeypatch, sizes):
+    """forward and squared_errors of the AVX-512 build (pairs of groups in a zmm, a leftover odd group at 4
+    lanes) against the AVX2-only build of the same source, bit for bit: odd and even group counts, chunks
+    that start at an odd group, N = 1037 (two score blocks, the second 13 patterns: one batch of NPAT = 8
+    and 5 leftovers), a NaN replica, saturated sigmoids. 1 and 2 threads (MIN_THREAD_WORK = 1, so even
+    these small calls are split: groups, or patterns/blocks when there is one group)."""
+    wide, narrow = _kernels.load(sizes), _kernels.load(sizes, AVX2_ONLY)
+    assert (wide.eval_lanes, narrow.eval_lanes) == (8, 4)
+    monkeypatch.setattr(_kernels, "MIN_THREAD_WORK", 1)
+    g = torch.Generator().manual_seed(len(sizes))
+    N = _kernels.SCORE_BLOCK + 13
+    X = torch.rand(N, sizes[0], generator=g, dtype=torch.float64)
+    Y = 0.1 + 0.8 * torch.rand(N, sizes[-1], generator=g, dtype=torch.float64)
+    for R in (4, 8, 12, 20):
+        w, nan_replica = _packed_weights(sizes, R // 4, seed=R)
+        for threads in (1, 2):
+            for method, args in (("forward", (X,)), ("squared_errors", (X, Y))):
+                got = getattr(wide, method)(sizes, w, *args, threads)
+                want = getattr(narrow, method)(sizes, w, *args, threads)
+                assert torch.equal(_bits(got), _bits(want)), (sizes, R, threads, method)
+                nan_rows = got.isnan().flatten(1).any(1).nonzero().flatten().tolist()
+                assert nan_rows == [nan_replica], (sizes, R, threads, method, nan_rows)
+        outputs = wide.forward(sizes, w, X, 1)  # the data reach exp's clamp (sigmoid(-708) ~ 3.3e-308), 1.0
+        outputs = outputs[~outputs.isnan()]
+        assert outputs.min() < 1e-300 and outputs.max() == 1.0, (sizes, R, outputs.min(), outputs.max())
+
+
+def test_eval_lanes_say_what_the_build_runs():
+    """8 where the compiler targets AVX-512F (-march=native on a CPU that has it), else 4; the AVX2-only
+    variant is a second library beside the usual one, never a replacement."""
+    try:
+        usual, avx2 = _kernels.load(SIZES), _kernels.load(SIZES, AVX2_ONLY)
+    except _kernels.KernelUnavailable as exc:
+        pytest.skip(f"native kernel unavailable: {exc}")
+    assert usual.eval_lanes == (8 if "avx512f" in _kernels.cpu_flags() else 4)
+    assert avx2.eval_lanes == 4 and avx2.path != usual.path and _kernels.load(SIZES) is usual
+
+
+def test_extra_flags_and_included_headers_key_the_cache(tmp_path):
+    """A library is keyed by its extra flags and by the headers its source includes (eval.h): an edited
+    header must never reuse a library built from the old one."""
+    src = tmp_path / "sgd.c"
+    src.write_text(_kernels.SOURCE.read_text())
+    header = tmp_path / "eval.h"
+    header.write_text(_kernels.SOURCE.with_name("eval.h").read_text())
+    assert '#include "eval.h"' in src.read_text()
+    flags = _kernels.macros(SIZES)
+    usual = _kernels._library_path("s", src, flags)
+    assert _kernels._library_path("s", src, [*flags, *AVX2_ONLY]) != usual
+    header.write_text(header.read_text() + "\n/* edited */\n")
+    assert _kernels._library_path("s", src, flags) != usual
+
+
+def test_extra_flags_must_be_compiler_options():
+    for bad in ("-mno-avx512f", ["mno-avx512f"], [3]):
+        with pytest.raises(ValueError, match="extra_flags: a sequence of options like '-mno-avx512f', not "):
+            _kernels.load(SIZES, bad)

@@ -1,7 +1,8 @@
 /* selpres native kernel: SGD with momentum for many replicas of a sigmoid back-propagation network
  * (selpres_train: one epoch), their forward passes (selpres_forward: evaluation), their squared errors
  * summed inside the forward pass (selpres_sqerr: scoring), and whether their weights are finite
- * (selpres_finite: the divergence check).
+ * (selpres_finite: the divergence check). The evaluation code is in eval.h, built here at 4 lanes and,
+ * where the compiler targets AVX-512F, at 8 (selpres_eval_lanes says which).
  *
  * Built and loaded by selpres/_kernels.py, which compiles this file once per topology with
  *   cc -O3 -march=native -fPIC -shared -std=c11 \
@@ -286,65 +287,98 @@ int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t 
 }
 
 /* ------------------------------------------------------------------------------------------------
-   Forward passes only (evaluation): the same layout, 4 replicas per vector, every replica sees the
-   same inputs. Patterns are independent, so NPAT of them are advanced together: one weight load feeds
-   NPAT FMAs and the NPAT sigmoid chains overlap. The loop runs group by group so that a group's
-   weights stay in L1 while all patterns stream past. */
+   Forward passes only (evaluation): the same layout, every replica sees the same inputs. Patterns are
+   independent, so NPAT of them are advanced together: one weight load feeds NPAT FMAs and the NPAT
+   sigmoid chains overlap. The loop runs group by group so that a group's weights stay in L1 while all
+   patterns stream past. The code is in eval.h, written once for VL lanes and instantiated here for 4
+   (ymm: one group) and, where the compiler targets AVX-512F, for 8 (zmm: two groups g, g+1 side by
+   side, their weights interleaved once per call into [P_TOTAL][8], see pack_pair); a chunk's leftover
+   odd group runs at 4 lanes. At 4 lanes evaluation is bound by the FMA ports (~47 cycles a replica's
+   forward pass at 6-13-2), and zmm FMAs do ~1.7x the work per cycle on AVX-512 cores; measured, 8 lanes
+   take 1.3x less time (~37 cycles): the sigmoid's division, whose throughput per lane is the same at
+   either width (16 cycles a zmm, 8 a ymm), then bounds it (~30 cycles of divider a replica-forward at
+   6-13-2; with a multiplication in its place, a throwaway test, 8 lanes took ~29 cycles). Lanes are
+   independent and every lane sees the same operations in the same order at either width (exp8 is exp4
+   operation for operation), so numbers are bitwise the same with or without AVX-512, however groups
+   are paired or split among threads. */
 #define NPAT 8
 
-/* Forward pass of patterns n .. n+np-1 of X through one group's weights w: the activations of pattern
-   n + p end in work + p * TOT_UNITS * 4 ([TOT_UNITS][4], the outputs last). */
-static inline __attribute__((always_inline)) void
-forward_act(const int np, const double *w, double *work, const double *X, int64_t n)
-{
-    const int64_t nin = S[0];
-    int64_t woff[NL], boff[NL], aoff[NL + 1];
-    layer_offsets(woff, boff, aoff);
-    double *act[NPAT];
-#define EACHP for (int p = 0; p < np; p++)
-#pragma GCC unroll 8
-    EACHP {
-        act[p] = work + p * TOT_UNITS * 4;
-#pragma GCC unroll 4
-        for (int64_t i = 0; i < nin; i++) ST(act[p] + i * 4, _mm256_set1_pd(X[(n + p) * nin + i]));
-    }
-#pragma GCC unroll 8
-    for (int l = 0; l < NL; l++) {
-        const int64_t ni_ = S[l], no = S[l + 1];
-        for (int64_t o = 0; o < no; o++) {
-            __m256d z[NPAT];
-            const __m256d bias = LD(w + (boff[l] + o) * 4);
-#pragma GCC unroll 8
-            EACHP z[p] = bias;
-#pragma GCC unroll 4
-            for (int64_t i = 0; i < ni_; i++) {
-                const __m256d wv = LD(w + (woff[l] + o * ni_ + i) * 4);
-#pragma GCC unroll 8
-                EACHP z[p] = _mm256_fmadd_pd(wv, LD(act[p] + (aoff[l] + i) * 4), z[p]);
-            }
-#pragma GCC unroll 8
-            EACHP ST(act[p] + (aoff[l + 1] + o) * 4, sigmoid4(z[p]));
-        }
-    }
+#define VL 4
+#define VEC __m256d
+#define VOP(op) _mm256_##op
+#define VSIGMOID sigmoid4
+#define VF(name) name##_4
+#include "eval.h"
+
+#ifdef __AVX512F__
+#define EVAL_LANES 8
+
+/* exp4 for 8 lanes, operation for operation: the same clamp (operand order keeps NaN), the same rounding
+   (roundscale with scale 0 is round_pd), the same Cody-Waite and Horner fnmadd/fmadd chain and scaling.
+   AVX-512F only (the sign flip in sigmoid8 is an integer xor: xor_pd would need AVX-512DQ). */
+static inline __m512d exp8(__m512d x) {
+    x = _mm512_min_pd(_mm512_set1_pd(708.0), x);   /* operand order keeps NaN */
+    x = _mm512_max_pd(_mm512_set1_pd(-708.0), x);
+    __m512d n = _mm512_roundscale_pd(_mm512_mul_pd(x, _mm512_set1_pd(1.4426950408889634)),
+                                     _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+    __m512d r = _mm512_fnmadd_pd(n, _mm512_set1_pd(6.93147180369123816490e-01), x);
+    r = _mm512_fnmadd_pd(n, _mm512_set1_pd(1.90821492927058770002e-10), r);
+    __m512d p = _mm512_set1_pd(1.0 / 6227020800.0);
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0 / 479001600.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0 / 39916800.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0 / 3628800.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0 / 362880.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0 / 40320.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0 / 5040.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0 / 720.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0 / 120.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0 / 24.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0 / 6.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(0.5));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0));
+    p = _mm512_fmadd_pd(p, r, _mm512_set1_pd(1.0));
+    __m512d t = _mm512_add_pd(n, _mm512_set1_pd(6755399441055744.0));   /* 1.5 * 2^52: n in the low bits */
+    __m512i e = _mm512_slli_epi64(_mm512_add_epi64(_mm512_castpd_si512(t), _mm512_set1_epi64(1023)), 52);
+    return _mm512_mul_pd(p, _mm512_castsi512_pd(e));
 }
 
-#define OUT_ACT(work, p) ((work) + ((p) * TOT_UNITS + TOT_UNITS - S[NL]) * 4)  /* pattern p's outputs */
+static inline __m512d sigmoid8(__m512d z) {
+    const __m512d one = _mm512_set1_pd(1.0);
+    const __m512i sign = _mm512_set1_epi64(INT64_MIN);  /* the bits of -0.0 */
+    const __m512d minus_z = _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(z), sign));
+    return _mm512_div_pd(one, _mm512_add_pd(one, exp8(minus_z)));
+}
 
-static inline __attribute__((always_inline)) void
-forward_patterns(const int np, const double *w, double *work, const double *X, int64_t n,
-                 int64_t N, int64_t r0, double *out)
+#define VL 8
+#define VEC __m512d
+#define VOP(op) _mm512_##op
+#define VSIGMOID sigmoid8
+#define VF(name) name##_8
+#include "eval.h"
+
+/* Groups g and g+1 of W [G][P_TOTAL][4] as one [P_TOTAL][8] block (lanes 0-3: group g, 4-7: group g+1),
+   the layout forward_act_8 reads: one zmm load per weight, not two loads and an insert every time. */
+static void pack_pair(const double *W, int64_t g, double *w8)
 {
-    const int64_t nout = S[NL];
-    forward_act(np, w, work, X, n);
-#pragma GCC unroll 8
-    EACHP {  /* lane k is replica r0 + k: out[r][n][o] */
-        for (int64_t o = 0; o < nout; o++) {
-            double v[4];
-            _mm256_storeu_pd(v, LD(OUT_ACT(work, p) + o * 4));
-            for (int k = 0; k < 4; k++) out[((r0 + k) * N + n + p) * nout + o] = v[k];
-        }
-    }
-#undef EACHP
+    const double *a = W + g * P_TOTAL * 4, *b = a + P_TOTAL * 4;
+    for (int64_t p = 0; p < P_TOTAL; p++)
+        _mm512_storeu_pd(w8 + p * 8,
+                         _mm512_insertf64x4(_mm512_castpd256_pd512(LD(a + p * 4)), LD(b + p * 4), 1));
+}
+#else
+#define EVAL_LANES 4
+#endif
+
+/* The vector width evaluation runs at in this build (8: AVX-512F pairs of groups; 4: AVX2), so the caller
+   can record what ran. */
+int selpres_eval_lanes(void) { return EVAL_LANES; }
+
+/* Work arrays of one evaluation call: NPAT patterns' activations and accumulators at the widest width,
+   then (8 lanes) one packed pair of groups. 64-byte aligned, sizes multiples of 64 (aligned_alloc). */
+static double *eval_work(void)
+{
+    size_t n = (size_t)NPAT * (TOT_UNITS + MAXW) * EVAL_LANES + (EVAL_LANES == 8 ? P_TOTAL * 8 : 0);
+    return (double *)aligned_alloc(64, n * sizeof(double));
 }
 
 /* Outputs of the replicas of groups [g0, g1) on patterns [n0, n1) of X [N][S[0]]: out [G*4][N][S[NL]].
@@ -354,14 +388,17 @@ int selpres_forward(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_
 {
     if (nl != NL || P != P_TOTAL) return -3;
     for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
-    double *work = (double *)aligned_alloc(32, (size_t)NPAT * TOT_UNITS * 32);
+    double *work = eval_work();
     if (!work) return -1;
-    for (int64_t g = g0; g < g1; g++) {
-        const double *w = W + g * P_TOTAL * 4;
-        int64_t n = n0;
-        for (; n + NPAT <= n1; n += NPAT) forward_patterns(NPAT, w, work, X, n, N, g * 4, out);
-        for (; n < n1; n++) forward_patterns(1, w, work, X, n, N, g * 4, out);
+    int64_t g = g0;
+#if EVAL_LANES == 8
+    double *w8 = work + NPAT * (TOT_UNITS + MAXW) * 8;
+    for (; g + 2 <= g1; g += 2) {
+        pack_pair(W, g, w8);
+        forward_range_8(w8, work, X, n0, n1, N, g * 4, out);
     }
+#endif
+    for (; g < g1; g++) forward_range_4(W + g * P_TOTAL * 4, work, X, n0, n1, N, g * 4, out);
     free(work);
     return 0;
 }
@@ -373,51 +410,26 @@ int selpres_forward(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_
    Patterns are cut into blocks of bn (fixed by the caller, not by the thread count); sums gets one
    partial sum per block, sums[b][g*4 + k][o] for group g of G, and the caller adds the blocks in order.
    Within a block, pattern n adds into accumulator n mod NPAT (the leftover patterns into accumulator
-   0), and the accumulators are added 0, 1, ..., NPAT-1: the result depends on bn only, never on how
-   groups or blocks are spread over threads. Y [N][S[NL]] in the network's (scaled) units. */
+   0), and the accumulators are added 0, 1, ..., NPAT-1 (sqerr_blocks in eval.h): the result depends on
+   bn only, never on how groups or blocks are spread over threads, nor on the vector width. Y [N][S[NL]]
+   in the network's (scaled) units. */
 int selpres_sqerr(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t b0, int64_t b1, int64_t bn,
                   int64_t P, const double *W, const double *X, const double *Y, int64_t N, int64_t G,
                   double *sums)
 {
     if (nl != NL || P != P_TOTAL || bn < 1) return -3;
     for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
-    const int64_t nout = S[NL];
-    double *work = (double *)aligned_alloc(32, (size_t)NPAT * (TOT_UNITS + MAXW) * 32);
+    double *work = eval_work();
     if (!work) return -1;
-    double *acc = work + NPAT * TOT_UNITS * 4;  /* [NPAT][MAXW][4] */
-    for (int64_t g = g0; g < g1; g++) {
-        const double *w = W + g * P_TOTAL * 4;
-        for (int64_t b = b0; b < b1; b++) {
-            const int64_t n1 = (b + 1) * bn < N ? (b + 1) * bn : N;
-            memset(acc, 0, (size_t)NPAT * MAXW * 32);
-            int64_t n = b * bn;
-            for (; n + NPAT <= n1; n += NPAT) {
-                forward_act(NPAT, w, work, X, n);
-#pragma GCC unroll 8
-                for (int p = 0; p < NPAT; p++)
-                    for (int64_t o = 0; o < nout; o++) {
-                        double *a = acc + (p * MAXW + o) * 4;
-                        __m256d d = _mm256_sub_pd(LD(OUT_ACT(work, p) + o * 4),
-                                                  _mm256_set1_pd(Y[(n + p) * nout + o]));
-                        ST(a, _mm256_fmadd_pd(d, d, LD(a)));
-                    }
-            }
-            for (; n < n1; n++) {
-                forward_act(1, w, work, X, n);
-                for (int64_t o = 0; o < nout; o++) {
-                    __m256d d = _mm256_sub_pd(LD(OUT_ACT(work, 0) + o * 4), _mm256_set1_pd(Y[n * nout + o]));
-                    ST(acc + o * 4, _mm256_fmadd_pd(d, d, LD(acc + o * 4)));
-                }
-            }
-            for (int64_t o = 0; o < nout; o++) {
-                __m256d s = LD(acc + o * 4);
-                for (int p = 1; p < NPAT; p++) s = _mm256_add_pd(s, LD(acc + (p * MAXW + o) * 4));
-                double v[4];
-                _mm256_storeu_pd(v, s);
-                for (int k = 0; k < 4; k++) sums[(b * G * 4 + g * 4 + k) * nout + o] = v[k];
-            }
-        }
+    int64_t g = g0;
+#if EVAL_LANES == 8
+    double *w8 = work + NPAT * (TOT_UNITS + MAXW) * 8;
+    for (; g + 2 <= g1; g += 2) {
+        pack_pair(W, g, w8);
+        sqerr_blocks_8(w8, work, X, Y, N, b0, b1, bn, G * 4, g * 4, sums);
     }
+#endif
+    for (; g < g1; g++) sqerr_blocks_4(W + g * P_TOTAL * 4, work, X, Y, N, b0, b1, bn, G * 4, g * 4, sums);
     free(work);
     return 0;
 }
