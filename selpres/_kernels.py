@@ -8,8 +8,9 @@ as macros (``-DNL=2 -DSIZES=6,13,2 ...``, see :func:`macros`): one small shared 
 The sigmoid's ``exp`` is an inline AVX2 polynomial, so there is no -ffast-math and no vector-math
 library: only a C compiler is needed. Evaluation (:meth:`Kernel.forward`, :meth:`Kernel.squared_errors`)
 is written once for a vector width (``kernels/eval.h``) and built at 4 lanes and, where the compiler
-targets AVX-512F, at 8 (two groups per zmm, ~1.7x the FMA work per cycle here); the numbers are bitwise
-the same at either width, and :attr:`Kernel.eval_lanes` says which one the loaded library runs.
+targets AVX-512F, at 8 (two groups per zmm: 1.3x faster here, where the sigmoid's division bounds both);
+the numbers are bitwise the same at either width, and :attr:`Kernel.eval_lanes` says which one the loaded
+library runs (results.json: ``evaluation``).
 
 Build: ``$CC`` (default ``cc``/``gcc``) ``-O3 -march=native -fPIC -shared`` on the real source path (so
 compiler messages name its lines), once per (source and the headers it includes, topology, flags -- with

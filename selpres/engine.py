@@ -63,6 +63,7 @@ log = logging.getLogger("selpres")
 class Engine(Protocol):
     name: str
     fallback_reason: str | None
+    evaluation: str  # what runs the forward passes of scoring (native: its vector width), for results.json
 
     def train_epoch(self, X: torch.Tensor, Y: torch.Tensor, order: torch.Tensor) -> torch.Tensor: ...
 
@@ -124,6 +125,10 @@ def _default_threads(threads: int | None) -> int:
 class ScoredByPredict:
     """``squared_errors`` from ``predict``'s [R, N, out] outputs: for the engines without a fused scoring
     pass (reference, torch, batch); needs ``self.sizes`` and ``self.predict``."""
+
+    @property
+    def evaluation(self) -> str:
+        return f"{self.name} (outputs from predict)"
 
     def squared_errors(self, X, Y):
         X, Y = _check_scoring(self.sizes, X, Y)
@@ -261,6 +266,12 @@ class NativeEngine:
 
     name = "native"
     fallback_reason: str | None = None
+
+    @property
+    def evaluation(self) -> str:
+        lanes = self._k.eval_lanes
+        return f"native, {lanes} lanes ({'AVX-512' if lanes == 8 else 'AVX2'})"
+
     LANES = 4
 
     def __init__(self, sizes, params, lr, momentum, batch_size, threads: int | None = None):

@@ -83,6 +83,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "engine": engine.name,  # what ran
         "engine_requested": cfg.engine.value,
         "engine_fallback": engine.fallback_reason,  # why "fast" did not run natively (None if it did)
+        "evaluation": engine.evaluation,  # e.g. "native, 8 lanes (AVX-512)": the same numbers, not the same speed
         "shuffle": shuffle_implementation(),  # native, or numpy (why): the same permutations either way
         "replicas": R,
         "seeds": prob.seeds,

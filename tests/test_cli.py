@@ -272,6 +272,7 @@ def test_a_fallback_from_the_native_engine_is_said_and_recorded(tmp_path):
     assert (res["engine"], res["engine_requested"]) == ("torch", "fast")
     assert "SELPRES_NO_NATIVE" in res["engine_fallback"]
     assert res["shuffle"] == "numpy (disabled by SELPRES_NO_NATIVE)"  # the shuffles fell back too, and say so
+    assert res["evaluation"] == "torch (outputs from predict)"
     log = (folder / "train.log").read_text()
     assert "shuffles run in numpy" in log
     assert sum("SELPRES_NO_NATIVE" in line for line in (proc.stdout + proc.stderr).splitlines()) >= 1

@@ -197,6 +197,11 @@ def test_fast_engine_is_native_where_the_kernel_runs(caplog):
     with caplog.at_level(logging.WARNING, logger="selpres"):
         eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
     assert eng.name == "native" and eng.fallback_reason is None and not _fallback_warnings(caplog)
+    from selpres._kernels import cpu_flags
+
+    # -march=native: the evaluation runs at 8 lanes exactly where the CPU has AVX-512F, and says so
+    avx512 = "avx512f" in cpu_flags()
+    assert eng.evaluation == ("native, 8 lanes (AVX-512)" if avx512 else "native, 4 lanes (AVX2)")
 
 
 def test_fast_engine_falls_back_to_torch_and_says_why(monkeypatch, caplog):
