@@ -88,3 +88,20 @@ def test_replicas_finite_flags_nan_and_inf_in_any_tensor():
     params[3][2, 1] = float("-inf")
     params[1][0, 0] = 1e308  # huge is still finite
     assert model.replicas_finite(params).tolist() == [True, False, False, True]
+
+
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+@pytest.mark.parametrize("sizes", [(6, 13, 2), (6, 5, 5, 2), (18, 40, 6), (3, 1, 1)])
+def test_initial_weights_are_nn_linears_draws_tensor_by_tensor(sizes, dtype):
+    """Each replica's weights are what drawing weight then bias, layer by layer, from its own generator
+    gives, scaled to U(-1/sqrt(fan_in), 1/sqrt(fan_in)) as nn.Linear's default init (the definition)."""
+    seeds = [0, 1, 7, 123456]
+    got = init_replica_params(sizes, seeds, dtype)
+    for r, seed in enumerate(seeds):
+        gen = torch.Generator().manual_seed(seed)
+        for k, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
+            bound = 1.0 / fan_in**0.5
+            w = (torch.rand(fan_out, fan_in, generator=gen, dtype=dtype) * 2 - 1) * bound
+            b = (torch.rand(fan_out, generator=gen, dtype=dtype) * 2 - 1) * bound
+            assert torch.equal(got[2 * k][r], w) and torch.equal(got[2 * k + 1][r], b)
+            assert got[2 * k].dtype == dtype and float(got[2 * k].abs().max()) <= bound
