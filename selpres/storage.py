@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, BinaryIO
+
+import orjson
 
 # what a job folder holds besides Hydra's record: results.json marks it finished
 RESULTS = "results.json"
@@ -40,23 +43,34 @@ def write_json(path: Path, obj: Any) -> None:
 
 
 _CONTAINERS = (dict, list, tuple)
+_NUMBERS = {int, float}
 _encode = json.JSONEncoder(default=str).encode  # one encoder: json.dumps(default=) builds one per call
 
 
 def to_json(obj: Any, depth: int = 0) -> str:
     """JSON laid out for reading: a dict one key per line, a list of dicts or lists one item per line,
-    and any other value (a list of numbers: one per replica) on one line. The leaves go through
-    ``json``'s C encoder; ``indent=`` would send everything through the pure-Python one, seconds for
-    the curves of a 1000-replica job."""
+    and any other value (a list of numbers: one per replica) on one line. The leaves go through ``json``'s
+    C encoder (``indent=`` would send everything through the pure-Python one, seconds for the curves of a
+    1000-replica job), lists of finite numbers through orjson: Python's shortest float repr took 0.17 s for
+    the 330,000 numbers of an R = 1000 job's curves, orjson's 0.01 s (the same values: both write the
+    shortest digits that read back exactly, orjson without spaces and with its own exponent rule:
+    ``[0.00001,1.5e-7]`` where json writes ``[1e-05, 1.5e-07]``)."""
     pad, end = " " * (depth + 1), "\n" + " " * depth
     if isinstance(obj, dict) and obj:
         items = (
             f"{pad}{_encode(k if isinstance(k, str) else _encode(k))}: {to_json(v, depth + 1)}" for k, v in obj.items()
         )
         return "{\n" + ",\n".join(items) + end + "}"
-    # the element types in one C-speed pass: a record's lists hold a number per replica (1000s)
-    if isinstance(obj, (list, tuple)) and any(issubclass(t, _CONTAINERS) for t in set(map(type, obj))):
-        return "[\n" + ",\n".join(pad + to_json(v, depth + 1) for v in obj) + end + "]"
+    if isinstance(obj, (list, tuple)):
+        types = set(map(type, obj))  # in one C-speed pass: a record's lists hold a number per replica
+        if any(issubclass(t, _CONTAINERS) for t in types):
+            return "[\n" + ",\n".join(pad + to_json(v, depth + 1) for v in obj) + end + "]"
+        if obj and types <= _NUMBERS:
+            try:  # orjson would write NaN and infinities as null; json keeps them (NaN, Infinity), as before
+                if math.isfinite(sum(obj)):
+                    return orjson.dumps(obj).decode()
+            except (OverflowError, orjson.JSONEncodeError):  # an int beyond float or 64 bits: json writes it
+                pass
     return _encode(obj)
 
 

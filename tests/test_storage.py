@@ -34,3 +34,18 @@ def test_lists_of_numbers_stay_on_one_line_and_non_finite_values_survive(tmp_pat
 def test_keys_that_are_not_strings_become_what_json_dumps_makes_of_them():
     value = {7: "a", 2.5: "b", True: "c", None: "d"}
     assert json.loads(to_json(value)) == json.loads(json.dumps(value))
+
+
+@given(st.lists(st.floats(allow_nan=False, allow_infinity=False) | st.integers(-(2**63), 2**64 - 1), min_size=1))
+def test_lists_of_numbers_read_back_exactly(vals):
+    """Number lists take orjson's shortest round-trip text: every value reads back to the same double/int."""
+    back = json.loads(to_json(vals))
+    assert back == vals and [type(v) for v in back] == [type(v) for v in vals]
+
+
+def test_number_lists_that_orjson_cannot_write_exactly_go_through_json():
+    """orjson would write NaN/inf as null and refuses ints beyond 64 bits: those lists go through json; a
+    plain list of floats goes through orjson (its compact text)."""
+    assert to_json([0.5, 1e-05, 3e-12]) == "[0.5,0.00001,3e-12]"
+    assert to_json([0.5, math.nan]) == "[0.5, NaN]" and to_json([1e308, 1e308]) == "[1e+308, 1e+308]"
+    assert to_json([2**70, 1]) == f"[{2**70}, 1]" and to_json([-math.inf]) == "[-Infinity]"
