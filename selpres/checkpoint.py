@@ -107,29 +107,39 @@ class Checkpoints:
         return any((folder / name).exists() for name in (CHECKPOINT, CHECKPOINT_ALT))
 
     def resume(self, engine, replicas: int) -> Progress:
-        """The saved progress (engine state loaded) from the newer checkpoint of this job here, else a fresh
-        start; if either file is of another config or cannot be read, both are set aside (not resumed)."""
-        found, why = [], None
+        """The saved progress (engine state loaded) from the newer readable checkpoint of this job here, else a
+        fresh start. A file that cannot be read is set aside and the other one resumed (a crash can leave the
+        newer file empty: saves do not fsync); a checkpoint of another config sets everything aside, the
+        history log included (it is not this job's). Nothing is resumed or deleted in silence."""
+        found, bad, foreign = [], [], False
         for slot, path in enumerate(self.paths):
             if not path.exists():
                 continue
             try:
                 ck = read(path)
-                if ck.get("config_hash") == self.hash and ck.get("history_format") == HISTORY_FORMAT:
-                    found.append((ck["epoch"], slot, ck))
-                else:
-                    why = f"{path.name} belongs to another config or an older selpres (hash {ck.get('config_hash')}, "
-                    why += f"this job {self.hash})"
             except Exception as exc:  # any unreadable file is set aside, never resumed
-                why = f"{path.name} cannot be read ({type(exc).__name__}: {exc})"
-        if why is not None:
-            moved = self.move_aside()
-            log.warning("%s: %s; moved it to %s and started afresh", self.paths[0].parent, why, moved.name)
-            progress = Progress.fresh(replicas)
-            progress.stale_checkpoint = str(moved)
-            return progress
+                bad.append((path, f"cannot be read ({type(exc).__name__}: {exc})"))
+                continue
+            if ck.get("config_hash") == self.hash and ck.get("history_format") == HISTORY_FORMAT:
+                found.append((ck["epoch"], slot, ck))
+            else:
+                hashes = f"hash {ck.get('config_hash')}, this job {self.hash}"
+                bad.append((path, f"belongs to another config or an older selpres ({hashes})"))
+                foreign = True
+        if foreign or (bad and not found):  # nothing of this job to resume: its history log goes aside too
+            found, aside = [], [*self.paths, self.history_path]
+        else:
+            aside = [path for path, _ in bad]
+        moved = self.move_aside(aside)
+        for path, why in bad:
+            log.warning("%s %s; moved it to %s", path, why, moved[path].name)
+        stale = str(moved[bad[0][0]]) if bad else None
         if not found:
-            return Progress.fresh(replicas)
+            if bad:
+                log.warning("%s: no checkpoint of this job left to resume; started afresh", self.paths[0].parent)
+            progress = Progress.fresh(replicas)
+            progress.stale_checkpoint = stale
+            return progress
         _, slot, ck = max(found, key=lambda f: f[:2])
         self._next = 1 - slot
         engine.load_state_dict(ck["engine"])
@@ -150,6 +160,7 @@ class Checkpoints:
             orders=ck["orders"],
             seconds=ck["seconds"],
             resumed_from=ck["epoch"],
+            stale_checkpoint=stale,
         )
 
     def save(self, engine, progress: Progress) -> None:
@@ -177,17 +188,16 @@ class Checkpoints:
         atomic_write(target, lambda f: f.write(data))
         self._next = 1 - self._next
 
-    def move_aside(self) -> Path:
-        """Rename the checkpoints (and their history log) to ``*.stale-<time>``; returns where the first went."""
+    def move_aside(self, paths: list[Path]) -> dict[Path, Path]:
+        """Rename those of ``paths`` that exist to ``<name>.stale-<time>.<suffix>``; returns old -> new."""
         stamp = time.strftime("%Y%m%d-%H%M%S")
-        moved = []
-        for path in (*self.paths, self.history_path):
+        moved = {}
+        for path in paths:
             if path.exists():
-                name, dot, suffix = path.name.partition(".")
-                target = path.with_name(f"{name}.stale-{stamp}.{suffix}")
-                path.rename(target)
-                moved.append(target)
-        return moved[0]
+                name, _, suffix = path.name.partition(".")
+                moved[path] = path.with_name(f"{name}.stale-{stamp}.{suffix}")
+                path.rename(moved[path])
+        return moved
 
     def discard(self) -> None:
         """A finished (or deliberately restarted) job needs none of the files."""

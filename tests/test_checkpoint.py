@@ -92,13 +92,30 @@ def test_a_kill_while_the_older_checkpoint_is_replaced_resumes_from_the_newer(tm
     assert Checkpoints(tmp_path, "h").resume(engine, 2).epoch == 3
 
 
-def test_a_checkpoint_of_another_config_beside_ours_sets_both_aside(tmp_path):
-    """If either file is not this job's, neither is resumed and nothing is deleted: all move aside."""
+def test_an_unreadable_partner_is_set_aside_and_ours_resumed(tmp_path):
+    """A crash can leave the newer file empty (saves do not fsync): it is moved aside, named in the record,
+    and the other checkpoint of this job resumed."""
+    engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
+    Checkpoints(tmp_path, "h").save(engine, Progress([record(-1), record(0)], [None, None], epoch=1))
+    (tmp_path / "checkpoint.alt.pt").write_bytes(b"")
+    back = Checkpoints(tmp_path, "h").resume(engine, 2)
+    assert back.epoch == 1 and [r["epoch"] for r in back.history] == [-1, 0]
+    (moved,) = tmp_path.glob("checkpoint.stale-*.alt.pt")
+    assert back.stale_checkpoint == str(moved) and moved.read_bytes() == b""
+    assert (tmp_path / "checkpoint.pt").exists() and (tmp_path / "history.pkl").exists()
+
+
+def test_a_checkpoint_of_another_config_beside_ours_sets_everything_aside(tmp_path):
+    """The history log may then be the other job's: neither checkpoint is resumed and nothing is deleted."""
+    from selpres.checkpoint import dumps
+
     engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
     Checkpoints(tmp_path, "h").save(engine, Progress([record(-1)], [None, None], epoch=1))
-    (tmp_path / "checkpoint.alt.pt").write_bytes(b"junk")
+    (tmp_path / "checkpoint.alt.pt").write_bytes(dumps({"config_hash": "other", "epoch": 9}))
     back = Checkpoints(tmp_path, "h").resume(engine, 2)
-    assert back.epoch == 0 and back.stale_checkpoint is not None
+    assert back.epoch == 0 and back.history == []
+    (foreign,) = tmp_path.glob("checkpoint.stale-*.alt.pt")
+    assert back.stale_checkpoint == str(foreign)
     names = sorted(p.name.split("-")[0] + "|" + p.suffix for p in tmp_path.iterdir())
     assert names == ["checkpoint.stale|.pt", "checkpoint.stale|.pt", "history.stale|.pkl"]
     assert not Checkpoints.present(tmp_path)

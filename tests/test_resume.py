@@ -92,4 +92,4 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
     wa = torch.load(killed / "weights.pt")["params"]
     wb = torch.load(straight / "weights.pt")["params"]
     assert all(torch.equal(x, y) for x, y in zip(wa, wb))
-    assert not ckpt.exists()  # a finished run keeps results, not its checkpoint
+    assert not list(killed.glob("checkpoint*.pt"))  # a finished run keeps results, not its checkpoints
