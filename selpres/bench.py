@@ -227,13 +227,15 @@ def run_job_process(configs: Path, overrides: list[str], out_dir: Path) -> dict:
     return res
 
 
-def bench_jobs(table: EngineTable, quick: bool, configs: Path) -> bool:
+def bench_jobs(table: EngineTable, quick: bool, configs: Path, repeats: int = 1) -> bool:
     """train() end to end at R = 1, 30, 1000 (conventional 6-13-2, default settings) beside the engine alone.
 
     Prints ms per replica-run of the whole job (the ``train()`` call) and of the engine alone (random data,
     same R and engine, extrapolated to 150 epochs), the share of each part that results.json's
     ``wall_seconds`` reports (the keys present: ``train`` is the updates alone) and ``results``, the writing
-    of the job's files after it, and whole job / updates. Returns False if a job failed.
+    of the job's files after it, and whole job / updates. With ``repeats`` > 1 each job runs that many
+    times (fresh processes, one after another) and a line gives the ratios' spread. Returns False if a job
+    failed.
     """
     print(
         "\njob level: train() end to end, conventional 6-13-2, default settings (eval, TensorBoard, "
@@ -246,37 +248,47 @@ def bench_jobs(table: EngineTable, quick: bool, configs: Path) -> bool:
             overrides = ["schedule=conventional", "topology=6-13-2", f"replicas={R}"]
             if epochs != EPOCHS:
                 overrides.append(f"schedule.epochs=[{epochs}]")
-            try:
-                res = run_job_process(configs, overrides, Path(tmp) / f"R{R}")
-            except (RuntimeError, ValueError, json.JSONDecodeError) as exc:
-                print(f"R={R}: {exc}")
-                ok = False
-                continue
-            ws = res["wall_seconds"]
-            # the whole job is the train() call: wall_seconds' total plus writing results.json, weights.pt
-            # and TensorBoard's last events, which results.json cannot time (it is written by them)
-            total, updates = res["train_call_seconds"], ws.get("train")
-            per_run = total / R * 1e3
-            line = (
-                f"job         R={R:<5} ep={epochs:<4} {per_run:>10.2f} ms/replica-run (whole job, "
-                f"{total:.2f} s; process {res['process_seconds']:.2f} s with imports)"
-            )
-            if updates:
-                line += f"   whole job / updates x{total / updates:.2f}"
-                if "loop" in ws:  # what the loop spends besides the updates: shuffles, eval, log, checkpoints
-                    line += f"   loop bookkeeping / updates x{(ws['loop'] - updates) / updates:.2f}"
-            print(line, flush=True)
-            shares = {k: ws[k] for k in JOB_PARTS if k in ws}
-            shares["results"] = total - ws["total"]
-            parts = "  ".join(f"{k} {v:.3f} s ({v / total:.0%})" for k, v in shares.items())
-            missing = [k for k in JOB_PARTS if k not in ws]
-            absent = f"   (not in this results.json: {', '.join(missing)})" if missing else ""
-            print(f"   parts: {parts}{absent}")
+            whole, bookkeeping = [], []
+            for k in range(repeats):
+                try:
+                    res = run_job_process(configs, overrides, Path(tmp) / f"R{R}-{k}")
+                except (RuntimeError, ValueError, json.JSONDecodeError) as exc:
+                    print(f"R={R}: {exc}")
+                    ok = False
+                    continue
+                ratios = _job_lines(R, epochs, res)
+                whole.append(ratios[0])
+                bookkeeping.append(ratios[1])
+            if repeats > 1 and whole:
+                spread = lambda v: f"x{min(v):.2f}-{max(v):.2f} (median {statistics.median(v):.2f})"
+                print(
+                    f"job         R={R:<5} {len(whole)} runs: whole job / updates {spread(whole)}, "
+                    f"loop bookkeeping / updates {spread(bookkeeping)}"
+                )
             eng_epochs, reps = (EPOCHS, 3) if R == 1 else (30, 3) if R == 30 else (5 if quick else 30, 1)
             bench_engine(table, "fast", R, eng_epochs, reps, note=f"engine alone beside the R={R} job")
     if quick:
         print("(--quick: the R=1000 job runs 30 of its 150 epochs, so its fixed costs weigh 5x more)")
     return ok
+
+
+def _job_lines(R: int, epochs: int, res: dict) -> tuple[float, float]:
+    """Print one job's line and its parts; returns (whole job / updates, loop bookkeeping / updates)."""
+    ws = res["wall_seconds"]
+    # the whole job is the train() call: wall_seconds' total plus writing results.json, weights.pt and
+    # TensorBoard's last events, which results.json cannot time (it is written by them)
+    total, updates = res["train_call_seconds"], ws["train"]
+    bookkeeping = (ws["loop"] - updates) / updates  # what the loop spends besides the updates
+    print(
+        f"job         R={R:<5} ep={epochs:<4} {total / R * 1e3:>10.2f} ms/replica-run (whole job, {total:.2f} s; "
+        f"process {res['process_seconds']:.2f} s with imports)   whole job / updates x{total / updates:.2f}   "
+        f"loop bookkeeping / updates x{bookkeeping:.2f}",
+        flush=True,
+    )
+    shares = {k: ws[k] for k in JOB_PARTS if k in ws}
+    shares["results"] = total - ws["total"]
+    print("   parts: " + "  ".join(f"{k} {v:.3f} s ({v / total:.0%})" for k, v in shares.items()))
+    return total / updates, bookkeeping
 
 
 # --------------------------------------------------------------------------------- shuffles and orders
@@ -509,6 +521,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--quick", action="store_true", help="fewer epochs and repeats (about a minute)")
     ap.add_argument(
+        "--jobs-only", action="store_true", help="only the job-level section (with --job-repeats: its spread)"
+    )
+    ap.add_argument(
+        "--job-repeats", type=int, default=1, metavar="N", help="run each job-level job N times (default 1)"
+    )
+    ap.add_argument(
         "--configs",
         type=Path,
         default=CONFIG_DIR,
@@ -536,9 +554,13 @@ def main(argv: list[str] | None = None) -> int:
         native = False
 
     table = EngineTable()
+    if args.job_repeats < 1:
+        ap.error(f"--job-repeats={args.job_repeats}: expected a whole number >= 1")
+    if args.jobs_only:
+        return 0 if bench_jobs(table, q, args.configs.resolve(), args.job_repeats) else 1
     bench_engines(table, q, native)
     bench_batch_engines(table, q, args.configs.resolve())
-    jobs_ok = bench_jobs(table, q, args.configs.resolve())
+    jobs_ok = bench_jobs(table, q, args.configs.resolve(), args.job_repeats)
     bench_shuffles(q)
     bench_orders(q)
     jobs_ok = bench_selection(q, args.configs.resolve()) and jobs_ok

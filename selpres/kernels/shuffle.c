@@ -10,7 +10,7 @@
  * hash at most a bucket away from its place, then an insertion sort by the full 64 bits that moves each
  * hash only past the few others of its bucket. Expected O(size) per replica instead of O(size log size).
  * With AVX-512DQ the hashes are computed 8 at a time (the same bits); the insertion skips, without
- * writing, every hash already after its predecessor (most of them): together ~15% of a 1000-replica epoch.
+ * writing, every hash already after its predecessor (most of them).
  */
 #include <immintrin.h>
 #include <stdint.h>
