@@ -69,14 +69,15 @@ NATIVE_REASON = _native_reason()
 requires_native = pytest.mark.skipif(NATIVE_REASON is not None, reason=f"native kernel unavailable: {NATIVE_REASON}")
 
 
-def run_python(*args: str, timeout: int = 600):
-    """``python <args>`` in the repository as a user runs it (without HYDRA_FULL_ERROR), output captured."""
+def run_python(*args: str, timeout: int = 600, cwd=REPO):
+    """``python <args>`` as a user runs it (without HYDRA_FULL_ERROR), in ``cwd`` (default: the repository),
+    output captured."""
     import os
     import subprocess
     import sys
 
     env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
-    return subprocess.run([sys.executable, *args], cwd=REPO, env=env, capture_output=True, text=True, timeout=timeout)
+    return subprocess.run([sys.executable, *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
 
 
 def report_of(sweep, out) -> None:

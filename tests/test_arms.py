@@ -18,7 +18,7 @@ from selpres.robot import TwoLinkArm, make_arm
 from selpres.serial import SerialArm
 from selpres.urdf import UrdfError, load_urdf, to_urdf
 
-from conftest import cfg_of, load_group
+from conftest import cfg_of, load_group, run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 F64 = torch.float64
@@ -91,13 +91,7 @@ def test_identity_is_the_arm_not_the_file(tmp_path):
 
 
 def _export(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "selpres.export", "--out", str(tmp_path / "ex"), *args],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    return run_python("-m", "selpres.export", "--out", str(tmp_path / "ex"), *args, timeout=300)
 
 
 @pytest.mark.slow
@@ -180,18 +174,13 @@ def test_train_refuses_a_bad_urdf_with_exit_2(tmp_path):
     path = tmp_path / "loop.urdf"
     path.write_text('<robot name="r"><link name="a"/></robot>')
     run = tmp_path / "run"
-    out = subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "train.py"),
-            "robot=urdf",
-            f"robot.path={path}",
-            "data=sampled",
-            f"hydra.run.dir={run}",
-        ],
+    out = run_python(
+        str(ROOT / "train.py"),
+        "robot=urdf",
+        f"robot.path={path}",
+        "data=sampled",
+        f"hydra.run.dir={run}",
         cwd=tmp_path,
-        capture_output=True,
-        text=True,
         timeout=300,
     )
     assert out.returncode == 2 and f"error: {path}: <robot>: has no revolute or continuous joint" in out.stderr

@@ -3,8 +3,6 @@ SARCOS-shaped file with every schedule, order and optimizer, and errors that nam
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +14,7 @@ from selpres.datafile import DataFileError, load_columns
 from selpres.errors import ConfigError
 from selpres.task import load_task
 
-from conftest import CONFIGS, cfg_of
+from conftest import CONFIGS, cfg_of, run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 INPUTS = [f"{p}{i}" for p in ("q", "dq", "ddq") for i in range(1, 8)]  # SARCOS: 7 joints, 21 inputs
@@ -223,20 +221,15 @@ def test_command_line_exits_2_and_writes_nothing(tmp_path):
     path = tmp_path / "bad.csv"
     path.write_text("a,y\n1,2\n3,x\n" + "".join(f"{i},{i}\n" for i in range(40)))
     run = tmp_path / "run"
-    out = subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "train.py"),
-            "data=file",
-            f"data.path={path}",
-            "data.inputs=[a]",
-            "data.outputs=[y]",
-            "topology.layers=1-4-1",
-            f"hydra.run.dir={run}",
-        ],
+    out = run_python(
+        str(ROOT / "train.py"),
+        "data=file",
+        f"data.path={path}",
+        "data.inputs=[a]",
+        "data.outputs=[y]",
+        "topology.layers=1-4-1",
+        f"hydra.run.dir={run}",
         cwd=tmp_path,
-        capture_output=True,
-        text=True,
         timeout=300,
     )
     assert out.returncode == 2, out.stderr
