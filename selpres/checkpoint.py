@@ -11,10 +11,10 @@ the append and the checkpoint's atomic rename loses nothing and duplicates nothi
 same records as JSON, once, at the end.
 
 The checkpoint itself is a plain pickle whose tensors travel as numpy arrays (:func:`dumps`): torch.save
-pickles through Python-level hooks for every object, 0.2 ms of a 0.7 ms checkpoint at R = 1, where a
-checkpoint comes every 2.7 ms of updates. A checkpoint of another config (or one that cannot be read,
+pickles through Python-level hooks for every object (one-off timing: 0.2 ms of a 0.7 ms checkpoint at R = 1, where a
+checkpoint comes every 2.7 ms of updates). A checkpoint of another config (or one that cannot be read,
 such as the torch.save files of an older selpres) is never resumed and never overwritten in silence: it is
-moved aside with a warning, and ``results.json`` names where it went.
+moved aside with a warning, and ``results.json`` names where it went (:meth:`Checkpoints.resume`).
 """
 
 from __future__ import annotations
@@ -87,9 +87,8 @@ class Checkpoints:
 
     Saves alternate between the two names, each written to a temporary file and renamed onto a name freed
     just before, while the other name keeps the newest checkpoint, so a kill at any moment leaves one whole
-    checkpoint (a resume takes the newer). Renaming over an existing file makes ext4 allocate the new file's
-    blocks at once (its replace-via-rename safeguard): 0.1-0.3 ms a checkpoint, where an R = 1 job
-    checkpoints every 2.7 ms; onto a free name the rename costs ~0.01 ms.
+    checkpoint (a resume takes the newer). Renaming over an existing file took 0.1-0.3 ms on this machine's
+    ext4 disk (one-off timings), where an R = 1 job checkpoints every 2.7 ms; onto a free name ~0.01 ms.
     """
 
     def __init__(self, folder: Path, config_hash: str):

@@ -46,8 +46,8 @@ def test_the_engine_state_comes_back_exactly(tmp_path):
 
 
 def test_saves_alternate_and_never_rename_over_a_file(tmp_path, monkeypatch):
-    """Each save renames onto a name that is free at that moment (ext4 makes a rename over a file allocate
-    its blocks at once), and the two names take turns, so the other always holds the newest checkpoint."""
+    """Each save renames onto a name that is free at that moment (a rename over a file was slow on ext4),
+    and the two names take turns, so the other always holds the newest checkpoint."""
     import os
 
     from selpres import storage
