@@ -3,8 +3,8 @@
 import hydra
 from omegaconf import DictConfig
 
-import selpres.config  # noqa: F401  (registers the typed schema and resolvers before Hydra composes)
-from selpres.cli import run_job
+import selpres.run.config  # noqa: F401  (registers the typed schema and resolvers before Hydra composes)
+from selpres.run.cli import run_job
 
 
 @hydra.main(version_base="1.3", config_path="configs", config_name="train")

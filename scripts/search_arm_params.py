@@ -16,9 +16,9 @@ import time
 import torch
 from omegaconf import OmegaConf
 
-from selpres.config import CONFIG_DIR
-from selpres.data import accel_filter, grid_accelerations
-from selpres.robot import TwoLinkArm
+from selpres.arms.two_link import TwoLinkArm
+from selpres.data.paper import accel_filter, grid_accelerations
+from selpres.run.config import CONFIG_DIR
 
 
 def evaluate(arm: TwoLinkArm, cfg) -> tuple[int, float, torch.Tensor]:

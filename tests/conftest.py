@@ -21,16 +21,16 @@ def load_group(group: str, option: str):
 @pytest.fixture(scope="session")
 def exemplar():
     """The paper's exemplar set (n = 1002) built from configs/robot/two_link.yaml and configs/data/paper.yaml."""
-    from selpres.data import build_exemplar_set
-    from selpres.robot import TwoLinkArm
+    from selpres.arms.two_link import TwoLinkArm
+    from selpres.data.paper import build_exemplar_set
 
     return build_exemplar_set(TwoLinkArm.from_config(load_group("robot", "two_link")), load_group("data", "paper"))
 
 
 def compose(*overrides: str, hydra: bool = False):
-    """The ``train`` config composed as ``python train.py`` composes it (``selpres.config.compose_train``).
+    """The ``train`` config composed as ``python train.py`` composes it (``selpres.run.config.compose_train``).
     The one place tests compose configs."""
-    from selpres.config import compose_train
+    from selpres.run.config import compose_train
 
     return compose_train(CONFIGS, list(overrides), hydra)
 
@@ -56,7 +56,7 @@ def numbers(res: dict) -> dict:
 
 def _native_reason() -> str | None:
     """Why the native kernel cannot run here (None when it can): native-only tests skip with this reason."""
-    from selpres import _kernels
+    from selpres.native import build as _kernels
 
     try:
         _kernels.load((6, 13, 2))

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 import torch
 
-from selpres.data import config_hash, load_csv, load_exported
+from selpres.arms.serial import SerialArm
+from selpres.arms.two_link import TwoLinkArm, make_arm
+from selpres.arms.urdf import UrdfError, load_urdf, to_urdf
+from selpres.data.paper import config_hash, load_csv, load_exported
 from selpres.errors import ConfigError
-from selpres.robot import TwoLinkArm, make_arm
-from selpres.serial import SerialArm
-from selpres.urdf import UrdfError, load_urdf, to_urdf
 
 from conftest import cfg_of, load_group, run_python
 
@@ -60,7 +60,7 @@ def test_two_link_config_is_the_closed_form_and_agrees_with_the_general_code():
     ],
 )
 def test_bad_robot_configs_name_the_key(overrides, key, value):
-    from selpres.checks import validate
+    from selpres.run.checks import validate
 
     with pytest.raises(ConfigError) as ei:
         validate(cfg_of("data=sampled", *overrides))
@@ -91,7 +91,7 @@ def test_identity_is_the_arm_not_the_file(tmp_path):
 
 
 def _export(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
-    return run_python("-m", "selpres.export", "--out", str(tmp_path / "ex"), *args, timeout=300)
+    return run_python("-m", "selpres.run.export", "--out", str(tmp_path / "ex"), *args, timeout=300)
 
 
 @pytest.mark.slow
@@ -158,7 +158,7 @@ def test_two_link_urdf_loads_as_eq6(tmp_path):
 )
 def test_export_refusals_exit_2_and_write_nothing(tmp_path, args):
     out = subprocess.run(
-        [sys.executable, "-m", "selpres.export", "--out", str(tmp_path / "ex"), *args],
+        [sys.executable, "-m", "selpres.run.export", "--out", str(tmp_path / "ex"), *args],
         cwd=tmp_path,
         capture_output=True,
         text=True,

@@ -8,13 +8,13 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-import selpres.batch_engine as batch_engine
-from selpres.batch_engine import BatchEngine
-from selpres.checkpoint import dumps
-from selpres.engine import TorchEngine
+import selpres.engines.batch as batch_engine
+from selpres.engines.batch import BatchEngine
+from selpres.engines.model import BPN, init_replica_params, load_into
+from selpres.engines.online import TorchEngine
+from selpres.engines.optim import DeltaBarDelta, QuickProp
 from selpres.errors import ConfigError
-from selpres.model import BPN, init_replica_params, load_into
-from selpres.optim import DeltaBarDelta, QuickProp
+from selpres.run.checkpoint import dumps
 
 SIZES = (6, 5, 2)
 R, N, M, EPOCHS = 3, 40, 25, 5

@@ -6,9 +6,9 @@ import pickle
 
 import torch
 
-from selpres.checkpoint import Checkpoints, Progress
-from selpres.engine import make_engine
-from selpres.model import init_replica_params
+from selpres.engines.model import init_replica_params
+from selpres.engines.online import make_engine
+from selpres.run.checkpoint import Checkpoints, Progress
 
 SIZES = (6, 3, 2)
 
@@ -107,7 +107,7 @@ def test_an_unreadable_partner_is_set_aside_and_ours_resumed(tmp_path):
 
 def test_a_checkpoint_of_another_config_beside_ours_sets_everything_aside(tmp_path):
     """The history log may then be the other job's: neither checkpoint is resumed and nothing is deleted."""
-    from selpres.checkpoint import dumps
+    from selpres.run.checkpoint import dumps
 
     engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
     Checkpoints(tmp_path, "h").save(engine, Progress([record(-1)], [None, None], epoch=1))

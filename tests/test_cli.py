@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from selpres.checkpoint import dumps
+from selpres.run.checkpoint import dumps
 
 from conftest import REPO
 
@@ -86,8 +86,8 @@ def test_same_command_again_is_skipped(smoke):
 def test_summary_table_for_a_budget_below_one_epoch(smoke):
     """schedule=matched with a budget < n has no full epoch, only a partial one: the summary table must
     still render it (a crash there would turn a finished job into a 'failed' results.json)."""
-    from selpres.cli import summary_table
-    from selpres.schedule import build_schedule
+    from selpres.presentation.schedule import build_schedule
+    from selpres.run.cli import summary_table
 
     _, run_dir = smoke
     res = json.loads((run_dir / "results.json").read_text())

@@ -7,9 +7,9 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from selpres.checks import validate
-from selpres.config import EngineName, TrainConfig
 from selpres.errors import ConfigError
+from selpres.run.checks import validate
+from selpres.run.config import EngineName, TrainConfig
 
 from conftest import CONFIGS, compose
 
@@ -51,8 +51,8 @@ def user_files(tmp_path_factory):
     """A URDF (planar3 exported) for robot=urdf and a small CSV for data=file."""
     import numpy as np
 
-    from selpres.robot import make_arm
-    from selpres.urdf import to_urdf
+    from selpres.arms.two_link import make_arm
+    from selpres.arms.urdf import to_urdf
 
     folder = tmp_path_factory.mktemp("user")
     to_urdf(make_arm(compose("robot=planar3", "topology.layers=9-13-3").robot), folder / "arm.urdf")
@@ -85,7 +85,7 @@ _OPTIONS = [pytest.param(g, o, marks=pytest.mark.slow) if (g, o) in _HEAVY else 
 
 @pytest.mark.parametrize("group, option", _OPTIONS, ids=[f"{g}={o}" for g, o in OPTIONS])
 def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, group, option):
-    from selpres.train import prepare
+    from selpres.run.train import prepare
 
     extra = companions(group, option, user_files)
     cfg = compose_cfg(*SMALL, f"{group}={option}", *extra)
@@ -195,7 +195,7 @@ def test_schema_rejects_at_compose(compose_cfg, override, key):
 
 
 def _config_error(compose_cfg, *ov) -> ConfigError:
-    from selpres.train import prepare
+    from selpres.run.train import prepare
 
     cfg = compose_cfg(*SMALL, *ov)
     with pytest.raises(ConfigError) as ei:
@@ -274,7 +274,7 @@ def test_more_test_patterns_from_the_exemplar_set_than_it_holds_is_a_config_erro
 
 def test_every_test_pattern_drawn_from_the_exemplar_set_works(compose_cfg):
     """test_from_exemplar == test_patterns is inside the documented range [0, test_patterns]."""
-    from selpres.train import prepare
+    from selpres.run.train import prepare
 
     prob = prepare(compose_cfg(*SMALL, "data.test_from_exemplar=10"))
     assert prob.tests["test10"][0].shape[0] == 10
@@ -297,7 +297,7 @@ def test_huge_grid_is_rejected_before_allocation(compose_cfg):
     ],
 )
 def test_valid_variants_prepare(compose_cfg, overrides, sizes, presentations):
-    from selpres.train import prepare
+    from selpres.run.train import prepare
 
     prob = prepare(compose_cfg(*SMALL, *overrides))
     assert prob.schedule.sizes == sizes and prob.schedule.presentations == presentations
@@ -307,7 +307,7 @@ def test_errors_survive_pickling():
     """Parallel launchers pickle a failed job's exception back to the sweep: it must round-trip."""
     import pickle
 
-    from selpres.model import TopologyError
+    from selpres.engines.model import TopologyError
 
     e = pickle.loads(pickle.dumps(ConfigError("optim.lr", -1.0, "a learning rate > 0")))
     assert (e.key, e.value, e.allowed) == ("optim.lr", -1.0, "a learning rate > 0") and "optim.lr=-1.0" in str(e)
@@ -324,12 +324,12 @@ def test_validation_checks_the_optimizer_without_building_one():
 
     code = (
         "import sys\n"
-        "from selpres.config import CONFIG_DIR, compose_train\n"
-        "from selpres.train import prepare\n"
+        "from selpres.run.config import CONFIG_DIR, compose_train\n"
+        "from selpres.run.train import prepare\n"
         "prepare(compose_train(CONFIG_DIR, ['replicas=2']))\n"
         "print('torch._dynamo' in sys.modules)\n"
         "import torch\n"
-        "from selpres.optim import make_optimizer\n"
+        "from selpres.engines.optim import make_optimizer\n"
         "make_optimizer('sgd', [torch.zeros(1)], {'lr': 0.1})\n"
         "print('torch._dynamo' in sys.modules)\n"
     )

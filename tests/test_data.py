@@ -11,8 +11,8 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from selpres import data as D
-from selpres.robot import TwoLinkArm
+from selpres.arms.two_link import TwoLinkArm
+from selpres.data import paper as D
 
 CONFIGS = Path(__file__).parents[1] / "configs"
 ROBOT_CFG = OmegaConf.load(CONFIGS / "robot/two_link.yaml")

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from selpres.data import DataMismatchError, load_csv, load_exported
+from selpres.data.paper import DataMismatchError, load_csv, load_exported
 
 from conftest import cfg_of
 
@@ -21,7 +21,7 @@ pytestmark = pytest.mark.slow  # subprocesses
 def exported(tmp_path_factory):
     stem = tmp_path_factory.mktemp("data") / "ex"
     out = subprocess.run(
-        [sys.executable, "-m", "selpres.export", "--out", str(stem), "data.heldout=300"],
+        [sys.executable, "-m", "selpres.run.export", "--out", str(stem), "data.heldout=300"],
         cwd=ROOT,
         capture_output=True,
         text=True,
@@ -52,7 +52,7 @@ def test_files_made_under_another_config_are_refused(exported, change):
 def test_export_refuses_bad_overrides_without_a_traceback(tmp_path):
     for bad in ("data.tau1.step=0.3", "seed=3", "data.nope=1", "--bogus", "nonsense"):
         out = subprocess.run(
-            [sys.executable, "-m", "selpres.export", "--out", str(tmp_path / "x"), bad],
+            [sys.executable, "-m", "selpres.run.export", "--out", str(tmp_path / "x"), bad],
             cwd=tmp_path,
             capture_output=True,
             text=True,
@@ -65,7 +65,11 @@ def test_export_refuses_bad_overrides_without_a_traceback(tmp_path):
 def test_export_help_prints_usage_and_writes_nothing(tmp_path):
     """--help is an option, not an output stem (it used to write --help.npz into the checkout)."""
     out = subprocess.run(
-        [sys.executable, "-m", "selpres.export", "--help"], cwd=tmp_path, capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "selpres.run.export", "--help"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert out.returncode == 0 and "usage:" in out.stdout and "--out" in out.stdout
     assert not list(tmp_path.iterdir())

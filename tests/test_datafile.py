@@ -10,9 +10,9 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from selpres.datafile import DataFileError, load_columns
+from selpres.data.file import DataFileError, load_columns
+from selpres.data.task import load_task
 from selpres.errors import ConfigError
-from selpres.task import load_task
 
 from conftest import CONFIGS, cfg_of, run_python
 
@@ -87,7 +87,7 @@ def test_npz_columns_and_table_read_as_the_csv(sarcos, tmp_path):
 
 def test_exported_csv_loads_as_user_data(tmp_path):
     """selpres-export's own CSV (its '#' lines skipped) trains as data=file."""
-    from selpres.export import compose_data_config, export_data
+    from selpres.run.export import compose_data_config, export_data
 
     robot, data = compose_data_config(["data.heldout=50"])
     export_data(tmp_path / "ex", robot, data)
@@ -111,7 +111,7 @@ def _schedules() -> list[str]:
     + [pytest.param(f"schedule.order={o}", marks=pytest.mark.slow) for o in ("random", "coverage")],
 )
 def test_every_schedule_order_and_optimizer_trains_on_it(sarcos, variant):
-    from selpres.train import train
+    from selpres.run.train import train
 
     cfg = file_cfg(sarcos, variant, "replicas=2", "eval.every=0", "checkpoint.enabled=false")
     res = train(cfg)
@@ -126,7 +126,7 @@ def test_every_schedule_order_and_optimizer_trains_on_it(sarcos, variant):
 
 # --------------------------------------------------------------------------------------------- errors
 def _error(path: Path, *overrides: str, **kw) -> ConfigError:
-    from selpres.train import prepare
+    from selpres.run.train import prepare
 
     with pytest.raises(ConfigError) as ei:
         prepare(file_cfg(path, *overrides, **kw))
@@ -202,7 +202,7 @@ def test_too_few_rows_for_the_split(tmp_path):
     ],
 )
 def test_config_errors_name_the_key(sarcos, overrides, key):
-    from selpres.checks import validate
+    from selpres.run.checks import validate
 
     cfg = file_cfg(sarcos, *overrides)
     with pytest.raises(ConfigError) as ei:

@@ -7,9 +7,9 @@ import json
 import pytest
 import torch
 
-import selpres.task as task
+import selpres.data.task as task
+from selpres.run.train import train
 from selpres.storage import RESULTS
-from selpres.train import train
 
 from conftest import cfg_of, numbers, requires_native
 

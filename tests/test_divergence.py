@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import json
 
-from selpres.train import train
+from selpres.run.train import train
 
 from conftest import cfg_of
 
 
 def test_divergence_is_reported_not_fatal(monkeypatch):
     """Sigmoid nets saturate rather than overflow, so poison one replica's weights after epoch 3."""
-    import selpres.train as T
+    import selpres.run.train as T
 
     real = T.make_engine
 
@@ -44,7 +44,7 @@ def test_divergence_is_reported_not_fatal(monkeypatch):
 
 
 def test_a_job_whose_replicas_all_diverged_stops(monkeypatch):
-    import selpres.train as T
+    import selpres.run.train as T
 
     real = T.make_engine
 

@@ -8,9 +8,9 @@ import math
 import pytest
 import torch
 
-from selpres import _kernels
-from selpres.engine import make_engine
-from selpres.model import forward_replicas, init_replica_params
+from selpres.engines.model import forward_replicas, init_replica_params
+from selpres.engines.online import make_engine
+from selpres.native import build as _kernels
 
 from conftest import requires_native
 
@@ -129,7 +129,7 @@ TOL = 1e-12
 @pytest.fixture(scope="module")
 def scaled_exemplar(exemplar):
     """The exemplar set as the network sees it (inputs and targets in [0.1, 0.9])."""
-    from selpres.data import Scaler
+    from selpres.data.paper import Scaler
 
     from conftest import load_group
 
@@ -197,7 +197,7 @@ def test_fast_engine_is_native_where_the_kernel_runs(caplog):
     with caplog.at_level(logging.WARNING, logger="selpres"):
         eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
     assert eng.name == "native" and eng.fallback_reason is None and not _fallback_warnings(caplog)
-    from selpres._kernels import cpu_flags
+    from selpres.native.build import cpu_flags
 
     # -march=native: the evaluation runs at 8 lanes exactly where the CPU has AVX-512F, and says so
     avx512 = "avx512f" in cpu_flags()
@@ -345,7 +345,7 @@ def test_bad_inputs_are_rejected():
 # ---------------------------------------------------------------- evaluation: predict
 def _bpn_outputs(sizes, params, X):
     """The reference forward pass: one BPN (nn.Linear + sigmoid) per replica."""
-    from selpres.model import BPN, load_into
+    from selpres.engines.model import BPN, load_into
 
     with torch.no_grad():
         return torch.stack([load_into(BPN(sizes), params, r)(X) for r in range(params[0].shape[0])])
@@ -393,7 +393,7 @@ def test_native_evaluation_keeps_a_nan_replica_to_itself(method):
 
 # ---------------------------------------------------------------- scoring: squared_errors
 def _batch_engine(sizes, params):
-    from selpres.batch_engine import BatchEngine
+    from selpres.engines.batch import BatchEngine
 
     return BatchEngine(sizes, params, "sgd", {"lr": LR})
 
@@ -528,8 +528,8 @@ def test_finite_sees_weights_that_diverge_in_training(name):
 def test_padded_lanes_stay_out_of_subnormal_numbers():
     """Padding lanes of zeros presented pattern 0 only settled on subnormal momentum buffers, which slowed
     their whole group ~13x (found in experiment=large); they now shadow replica 0 and stay normal."""
-    from selpres.engine import make_engine
-    from selpres.model import init_replica_params
+    from selpres.engines.model import init_replica_params
+    from selpres.engines.online import make_engine
 
     sizes, R, n = (6, 13, 2), 10, 200  # 10 replicas: 3 groups of 4, the last with 2 padded lanes
     gen = torch.Generator().manual_seed(0)

@@ -11,10 +11,10 @@ import pytest
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
-from selpres.checks import check_topology
+from selpres.data.task import Shape
 from selpres.errors import ConfigError
-from selpres.task import Shape
-from selpres.train import prepare, train
+from selpres.run.checks import check_topology
+from selpres.run.train import prepare, train
 
 from conftest import compose
 

@@ -14,7 +14,7 @@ import textwrap
 import pytest
 import torch
 
-from selpres import _kernels
+from selpres.native import build as _kernels
 
 from conftest import REPO, requires_native
 
@@ -145,8 +145,8 @@ def test_wide_layer_does_not_overflow_the_stack(tmp_path):
     so a crash fails this test instead of killing pytest."""
     code = textwrap.dedent("""
         import torch
-        from selpres.engine import make_engine
-        from selpres.model import init_replica_params
+        from selpres.engines.online import make_engine
+        from selpres.engines.model import init_replica_params
         sizes = (6, 40000, 2)
         g = torch.Generator().manual_seed(0)
         X = torch.rand(5, 6, generator=g, dtype=torch.float64)
@@ -189,8 +189,8 @@ def test_small_calls_never_touch_the_pool_and_large_ones_do(monkeypatch):
     thread; the same calls with MIN_THREAD_WORK = 1 go to the pool, with bitwise the same numbers."""
     import torch
 
-    from selpres.engine import make_engine
-    from selpres.model import init_replica_params
+    from selpres.engines.model import init_replica_params
+    from selpres.engines.online import make_engine
 
     sizes = (6, 13, 2)
     g = torch.Generator().manual_seed(0)

@@ -14,10 +14,10 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf
 
-from selpres.checks import validate
-from selpres.config import to_container
 from selpres.report.groups import label_methods
 from selpres.report.jobs import Job
+from selpres.run.checks import validate
+from selpres.storage import to_container
 
 from conftest import compose, load_group
 

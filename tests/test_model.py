@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from selpres import model
-from selpres.model import BPN, forward_replicas, init_replica_params, load_into
+from selpres.engines import model
+from selpres.engines.model import BPN, forward_replicas, init_replica_params, load_into
 
 
 def _per_replica(sizes, params, X):

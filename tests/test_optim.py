@@ -7,8 +7,8 @@ import math
 import pytest
 import torch
 
+from selpres.engines.optim import DeltaBarDelta, QuickProp, make_optimizer, offset_sigmoid
 from selpres.errors import ConfigError
-from selpres.optim import DeltaBarDelta, QuickProp, make_optimizer, offset_sigmoid
 
 
 def _descend(opt_factory, energy, w0, steps):

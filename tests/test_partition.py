@@ -1,14 +1,14 @@
-"""Strata in any dimension (selpres.partition): the paper's grid kept, k-means cells where a grid degenerates,
-and prefixes that estimate U's averages better than random prefixes do."""
+"""Strata in any dimension (selpres.presentation.partition): the paper's grid kept, k-means cells where a grid
+degenerates, and prefixes that estimate U's averages better than random prefixes do."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from selpres import partition as P
-from selpres.orders import stratified_orders
-from selpres.partition import grid_strata
+from selpres.presentation import partition as P
+from selpres.presentation.orders import stratified_orders
+from selpres.presentation.partition import grid_strata
 
 N, DIM = 8192, 18  # a 6-joint arm's inputs
 

@@ -16,7 +16,7 @@ from selpres.report.compare import Margin, Options, reading, time_to_target_rows
 from selpres.report.jobs import job_folders
 from selpres.report.paper import paper_setting
 from selpres.report.sections.table1 import table1_rows
-from selpres.stats import t_quantile
+from selpres.run.stats import t_quantile
 
 SCHED = {
     "conventional": ([1002], [150]),

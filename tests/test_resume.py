@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from selpres.checkpoint import read as read_checkpoint
+from selpres.run.checkpoint import read as read_checkpoint
 
 from conftest import requires_native
 

@@ -9,7 +9,7 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from selpres.robot import TwoLinkArm
+from selpres.arms.two_link import TwoLinkArm
 
 ARM = TwoLinkArm(m1=0.42, m2=3.0, l1=0.2, l2=0.26, g=9.81)
 D = torch.float64

@@ -9,11 +9,11 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from torch.utils.data import DataLoader, TensorDataset
 
-from selpres import sampler as S
 from selpres.errors import ConfigError
-from selpres.orders import priority_order
-from selpres.sampler import SelectivePresentationSampler, epoch_orders
-from selpres.schedule import Schedule, Stage, build_schedule
+from selpres.presentation import sampler as S
+from selpres.presentation.orders import priority_order
+from selpres.presentation.sampler import SelectivePresentationSampler, epoch_orders
+from selpres.presentation.schedule import Schedule, Stage, build_schedule
 from selpres.seeding import derive_seed, generator
 
 from conftest import requires_native
@@ -32,7 +32,7 @@ def _sampler(X, kind="stratified", sizes=PAPER_SIZES, epochs=(2, 2, 2, 2, 2), se
 
 
 def _strata_independent(X: np.ndarray, bins: int) -> np.ndarray:
-    """Own binning (not selpres.sampler.strata): ``bins`` equal-width bins per column over X's range."""
+    """Own binning (not selpres.presentation.sampler.strata): ``bins`` equal-width bins per column over X's range."""
     lo, hi = X.min(0), X.max(0)
     cells = np.zeros(X.shape, dtype=np.int64)
     for j in range(X.shape[1]):

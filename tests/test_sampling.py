@@ -1,4 +1,4 @@
-"""Sampled exemplar sets for any arm and any n (selpres.sampling through selpres.task): what each route
+"""Sampled exemplar sets for any arm and any n (selpres.data.sampled through selpres.data.task): what each route
 keeps, the acceptance rate against an independent change-of-variables estimate, the wrench against virtual
 work, Sobol evenness, independent streams, and the errors."""
 
@@ -9,9 +9,9 @@ import math
 import pytest
 import torch
 
+from selpres.arms.two_link import make_arm
+from selpres.data.task import _task, load_task
 from selpres.errors import ConfigError
-from selpres.robot import make_arm
-from selpres.task import _task, load_task
 
 from conftest import cfg_of
 
@@ -197,7 +197,7 @@ def test_commanded_scaling_uses_the_boxes():
     ],
 )
 def test_bad_sampled_configs_name_the_key(overrides, key, value):
-    from selpres.train import prepare
+    from selpres.run.train import prepare
 
     with pytest.raises(ConfigError) as ei:
         prepare(cfg_of("data=sampled", "data.n=500", *overrides))
@@ -206,7 +206,7 @@ def test_bad_sampled_configs_name_the_key(overrides, key, value):
 
 
 def test_the_paper_grid_refuses_other_arms_and_says_what_to_use():
-    from selpres.checks import validate
+    from selpres.run.checks import validate
 
     # an arm's file picks data=sampled for it; asking for the paper's grid explicitly is refused
     assert cfg_of("robot=puma560", "topology.layers=18-40-6").data.kind.value == "sampled"
@@ -216,7 +216,7 @@ def test_the_paper_grid_refuses_other_arms_and_says_what_to_use():
 
 
 def test_topology_that_does_not_fit_names_both():
-    from selpres.checks import validate
+    from selpres.run.checks import validate
 
     with pytest.raises(ConfigError) as ei:
         validate(cfg_of("robot=puma560", "data=sampled"))

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from selpres.errors import ConfigError
-from selpres.schedule import Schedule, Stage, build_schedule, resolve_sizes
+from selpres.presentation.schedule import Schedule, Stage, build_schedule, resolve_sizes
 
 from conftest import load_group
 

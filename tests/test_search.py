@@ -1,4 +1,4 @@
-"""Schedule search (selpres.search, the Optuna sweeper plugin): schedules from a few numbers, worked out by
+"""Schedule search (selpres.presentation.search, the Optuna sweeper plugin): schedules from a few numbers, worked out by
 hand; a real Optuna study in SQLite that resumes (needs hydra-optuna-sweeper, else skipped)."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from selpres import search
 from selpres.errors import ConfigError
-from selpres.schedule import build_schedule
-from selpres.search import schedule_overrides, shaped_schedule, shaped_sizes
+from selpres.presentation import search
+from selpres.presentation.schedule import build_schedule
+from selpres.presentation.search import schedule_overrides, shaped_schedule, shaped_sizes
 
 from conftest import compose, run_python
 
@@ -121,8 +121,8 @@ def test_the_validation_set_shares_no_pattern_with_the_held_out_set_and_seeds_no
     held-out sets are two draws of 10,000 patterns with no pattern in common."""
     import torch
 
-    from selpres.task import load_task
-    from selpres.train import train
+    from selpres.data.task import load_task
+    from selpres.run.train import train
 
     base = [
         "replicas=2",
@@ -157,7 +157,7 @@ def test_the_validation_set_shares_no_pattern_with_the_held_out_set_and_seeds_no
     order=st.sampled_from(["stratified", "loss_high", "reselect"]),
 )
 def test_every_searched_schedule_builds_and_spends_the_budget(p, first, growth, tilt, order):
-    """Any point of the search space is a valid schedule (selpres.schedule accepts it) whose training and
+    """Any point of the search space is a valid schedule (selpres.presentation.schedule accepts it) whose training and
     selection presentations sum to the budget within n / 2, unless one epoch a stage already exceeds it."""
     n, budget = 1002, 70_560
     s = shaped_schedule(p, first, growth, tilt, n, budget, order, 1 / 3)

@@ -1,5 +1,5 @@
-"""Stage-wise orders (selpres.selection): each order's defining property against an independent computation,
-and the cost of choosing, written out by hand."""
+"""Stage-wise orders (selpres.presentation.selection): each order's defining property against an independent
+computation, and the cost of choosing, written out by hand."""
 
 from __future__ import annotations
 
@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 import torch
 
-from selpres.checks import validate
+from selpres.data.task import load_task
+from selpres.engines.model import BPN, load_into
 from selpres.errors import ConfigError
-from selpres.model import BPN, load_into
-from selpres.orders import priority_order, strata
+from selpres.presentation.orders import priority_order, strata
+from selpres.presentation.selection import enlarge_by_loss, pattern_errors, reselected_orders, selection_charge
+from selpres.run.checks import validate
+from selpres.run.train import Clock, run_epoch, start, train
 from selpres.seeding import generator
-from selpres.selection import enlarge_by_loss, pattern_errors, reselected_orders, selection_charge
-from selpres.task import load_task
-from selpres.train import Clock, run_epoch, start, train
 
 from conftest import cfg_of, numbers
 

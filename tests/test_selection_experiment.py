@@ -13,10 +13,10 @@ import pytest
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf
 
-from selpres.checks import validate
-from selpres.selection import planned_charge
+from selpres.presentation.selection import planned_charge
+from selpres.run.checks import validate
+from selpres.run.train import prepare
 from selpres.storage import flatten
-from selpres.train import prepare
 
 from conftest import CONFIGS, cfg_of, compose, report_of, run_python
 
@@ -134,11 +134,11 @@ def test_every_staged_run_has_a_one_stage_partner_at_exactly_its_total_cost_and_
 
 def test_on_the_larger_task_every_staged_run_has_its_partner_closest_and_within_a_hundredth_of_a_percent():
     """experiment=selection data=sampled (n = 10,000): the points' counts apply as fractions of n and the
-    partners' budgets scale by n/1002 (selpres.proportions), so totals match only to rounding. By hand for
+    partners' budgets scale by n/1002 (selpres.presentation.proportions), so totals match only to rounding. By hand for
     the loss orders at 25 %: stages 499, 998, 3992, 7984, 10000 x 16 = 375,568 trained + 3167 + 3001 +
     2003 + 672 = 8,843 charged = 384,411, against 38,520 x 10,000 / 1002 = 384,431 (20 more)."""
-    from selpres.proportions import fit_schedule
-    from selpres.schedule import build_schedule
+    from selpres.presentation.proportions import fit_schedule
+    from selpres.presentation.schedule import build_schedule
 
     n, totals = 10_000, {}
     for point in POINTS:

@@ -15,10 +15,10 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.core.override_parser.types import Glob
 from omegaconf import OmegaConf
 
-from selpres.checks import validate
-from selpres.config import to_container
-from selpres.results import job_hash
-from selpres.train import prepare
+from selpres.run.checks import validate
+from selpres.run.results import job_hash
+from selpres.run.train import prepare
+from selpres.storage import to_container
 
 from conftest import CONFIGS, cfg_of, compose, report_of, run_python
 

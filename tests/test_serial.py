@@ -1,9 +1,9 @@
 """SerialArm (eq. 4/5 for N revolute joints) against independent derivations written here.
 
-The reference kinematics below share nothing with selpres.serial but the arm's parameters: joint rotations
+The reference kinematics below share nothing with selpres.arms.serial but the arm's parameters: joint rotations
 come from unit quaternions, frames are composed as 4x4 homogeneous transforms, and every velocity,
 Jacobian and energy derivative is taken by autograd. Published numbers (Corke's Robotics Toolbox tests for
-the PUMA 560) and the paper's closed form (eq. 6, selpres.robot) are the other two references.
+the PUMA 560) and the paper's closed form (eq. 6, selpres.arms.two_link) are the other two references.
 """
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-import selpres.serial as serial
+import selpres.arms.serial as serial
+from selpres.arms.serial import Link, SerialArm
+from selpres.arms.two_link import TwoLinkArm
 from selpres.errors import ConfigError
-from selpres.robot import TwoLinkArm
-from selpres.serial import Link, SerialArm
 
 from conftest import load_group
 
@@ -382,7 +382,7 @@ def test_any_leading_shape_and_chunks(monkeypatch):
         ),
         whole.reshape(3, 10, 10, 6),
     )
-    tau_grid = torch.rand(4, 5, 6, dtype=D)  # states [S, 1, 1, N] against torques [T1, T2, N] (selpres.data)
+    tau_grid = torch.rand(4, 5, 6, dtype=D)  # states [S, 1, 1, N] against torques [T1, T2, N] (selpres.data.paper)
     acc = arm.forward_dynamics(q[:3, None, None], qd[:3, None, None], tau_grid)
     assert acc.shape == (3, 4, 5, 6)
     assert_rel(acc[2, 3, 4], arm.forward_dynamics(q[2], qd[2], tau_grid[3, 4]), 1e-15)

@@ -1,4 +1,4 @@
-"""selpres.stats against numbers worked out independently: textbook t quantiles, the closed-form t CDF
+"""selpres.run.stats against numbers worked out independently: textbook t quantiles, the closed-form t CDF
 for small df, a TOST and a paired t-test done by hand, and a Holm correction done by hand."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from selpres.stats import holm, median, summarize, t_cdf, t_quantile, t_test, tost
+from selpres.run.stats import holm, median, summarize, t_cdf, t_quantile, t_test, tost
 
 
 @pytest.mark.parametrize(

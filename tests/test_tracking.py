@@ -5,7 +5,7 @@ from __future__ import annotations
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensorboard.plugins.hparams import plugin_data_pb2
 
-from selpres.train import train
+from selpres.run.train import train
 
 from conftest import cfg_of
 
@@ -52,7 +52,7 @@ def test_event_files_are_what_tensorboards_record_writer_writes(tmp_path):
     from tensorboard.compat.tensorflow_stub.pywrap_tensorflow import masked_crc32c as stub
     from tensorboard.summary.writer.record_writer import RecordWriter
 
-    from selpres.tracking import EventFile, event_checksum
+    from selpres.run.tracking import EventFile, event_checksum
 
     crc, in_c = event_checksum()
     assert in_c and crc is not stub
@@ -77,7 +77,7 @@ def test_hparams_summaries_are_torchs():
     """What the job writes for TensorBoard's HParams plugin equals torch's add_hparams summaries."""
     from torch.utils.tensorboard.summary import hparams
 
-    from selpres.tracking import hparams_summaries
+    from selpres.run.tracking import hparams_summaries
 
     hp = {"schedule": "selective", "replicas": 30, "lr": 0.15, "overwrite": False, "note": None, "ü": "δ"}
     metrics = {"final/heldout_rms_nm_overall": 0.21, "final/test10_rms_nm_overall": 0.3}
@@ -93,7 +93,7 @@ def test_hand_encoded_events_are_what_protobuf_serialises():
 
     from tensorboard.compat.proto import event_pb2, summary_pb2
 
-    from selpres.tracking import ScalarEvents
+    from selpres.run.tracking import ScalarEvents
 
     rng = random.Random(7)
     enc = ScalarEvents()

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from selpres.train import train
+from selpres.run.train import train
 
 from conftest import NATIVE_REASON, cfg_of, requires_native
 
@@ -90,9 +90,9 @@ def test_compute_matched_schedule_spends_the_budget():
 
 def test_saved_weights_and_scaler_reproduce_the_reported_error(tmp_path):
     """weights.pt is enough to use a trained net: BPN + saved scaler give results.json's held-out RMS."""
-    from selpres.data import Scaler, rms_errors
-    from selpres.model import BPN, load_into
-    from selpres.train import prepare
+    from selpres.data.paper import Scaler, rms_errors
+    from selpres.engines.model import BPN, load_into
+    from selpres.run.train import prepare
 
     cfg = cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2")
     res = train(cfg, tmp_path)

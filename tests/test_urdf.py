@@ -13,9 +13,9 @@ import test_serial as serial_tests  # tests/ is on sys.path (pytest's rootdir-re
 import torch
 from test_serial import states
 
+from selpres.arms.serial import Link, SerialArm, rot_z, rpy_matrix
+from selpres.arms.urdf import UrdfError, load_urdf, to_urdf
 from selpres.errors import ConfigError
-from selpres.serial import Link, SerialArm, rot_z, rpy_matrix
-from selpres.urdf import UrdfError, load_urdf, to_urdf
 
 D = torch.float64
 
@@ -220,7 +220,7 @@ def test_axis_defaults_to_x_and_damping_is_reported(tmp_path, caplog):
     text = HAND.replace('<axis xyz="0 1 0"/>', "").replace('damping="0" friction="0"', 'damping="0.5"')
     path = tmp_path / "hand.urdf"
     path.write_text(text)
-    with caplog.at_level(logging.WARNING, logger="selpres.urdf"):
+    with caplog.at_level(logging.WARNING, logger="selpres.arms.urdf"):
         arm = load_urdf(path)
     assert arm.links[1].axis == (1.0, 0.0, 0.0)
     assert any(

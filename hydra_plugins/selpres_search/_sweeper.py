@@ -1,4 +1,4 @@
-"""The Hydra Optuna sweeper, searching schedules by the few numbers of ``selpres.search``.
+"""The Hydra Optuna sweeper, searching schedules by the few numbers of ``selpres.presentation.search``.
 
 ``configs/experiment/search.yaml`` sets ``hydra.sweeper._target_`` to :class:`ShapedScheduleSweeper`. Optuna
 samples the search numbers (``search_p``, ``search_first``, ``search_growth``, ``search_tilt``; the budget
@@ -17,7 +17,7 @@ A trial whose schedule its job refuses (rounding merged two stage sizes) fails a
 as failed, and ``max_failure_rate: 1.0`` keeps the study going.
 
 At the end the confirmation of the best trial and of the best trial of each other order
-(``selpres.search.confirmation_commands``: each schedule on fresh seeds and the held-out set, beside
+(``selpres.presentation.search.confirmation_commands``: each schedule on fresh seeds and the held-out set, beside
 conventional training stopped at its total cost) is logged and written to ``confirm.sh`` in the sweep
 folder: ``bash outputs/sweeps/search/confirm.sh``. Several are confirmed because the validation RMS of 10
 search seeds is noisy and the best of many trials is biased low; the report's ``--holm`` adjusts for them.
@@ -34,8 +34,8 @@ from hydra.utils import instantiate
 from hydra_plugins.hydra_optuna_sweeper.optuna_sweeper import OptunaSweeper
 from omegaconf import DictConfig
 
-from selpres.search import SEARCH_KEYS, confirmation_commands, schedule_overrides
-from selpres.task import load_task
+from selpres.data.task import load_task
+from selpres.presentation.search import SEARCH_KEYS, confirmation_commands, schedule_overrides
 
 log = logging.getLogger("selpres")
 

@@ -22,7 +22,7 @@ The package reads in the data's direction, one concern per module:
 
 Conventions: diverged replicas are left out of every mean and interval but counted; comparisons with
 ``selective`` are paired by seed (only seeds complete in both); intervals are Student-t 95 % intervals
-from :mod:`selpres.stats`; a verdict reads *better/worse*, *equivalent within ±m* (TOST) or *no
+from :mod:`selpres.run.stats`; a verdict reads *better/worse*, *equivalent within ±m* (TOST) or *no
 detectable difference*, three different things.
 """
 

@@ -17,7 +17,7 @@ from selpres.errors import ConfigError
 from selpres.report.families import paper_conventional, paper_run
 from selpres.report.groups import BASELINE, REFERENCE, SETS, Group, base
 from selpres.report.markdown import signed_interval
-from selpres.stats import holm, summarize, t_test, tost
+from selpres.run.stats import holm, summarize, t_test, tost
 
 ALPHA = 0.05  # every test's level: 95 % intervals for differences, 90 % intervals for TOST
 

@@ -53,7 +53,8 @@ class Group:
 
     @property
     def cost(self) -> int | None:
-        """Presentations charged in all: training plus the forward passes spent choosing A_i (selpres.selection)."""
+        """Presentations charged in all: training plus the forward passes spent choosing A_i
+        (selpres.presentation.selection)."""
         if self.sched is None:
             return None
         return self.sched["presentations"] + (self.used[0].results.get("selection_presentations") or 0)

@@ -20,7 +20,7 @@ from selpres.report.context import Context, Section
 from selpres.report.families import Family, families, paper_conventional
 from selpres.report.groups import Group
 from selpres.report.sections.plots import family_styles, pyplot, save_png
-from selpres.stats import summarize
+from selpres.run.stats import summarize
 
 NOTE = (
     "Points: mean final held-out RMS over complete seeds (all held-out patterns), bars: its 95 % t-interval; "

@@ -10,7 +10,7 @@ from selpres.report.context import Context, Section
 from selpres.report.families import families, paper_run
 from selpres.report.groups import REFERENCE
 from selpres.report.paper import PAPER, PAPER_UNITS_NOTE
-from selpres.stats import summarize
+from selpres.run.stats import summarize
 from selpres.storage import atomic_write
 
 

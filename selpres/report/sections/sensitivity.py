@@ -34,7 +34,7 @@ from selpres.report.families import (
 )
 from selpres.report.groups import Group
 from selpres.report.markdown import fmt, signed_interval, table
-from selpres.stats import median, summarize
+from selpres.run.stats import median, summarize
 
 TOLERANCE = 0.10  # "within 10 % of its own best" (issue 10, item 3); a level within it is "the best level"
 FAMILY, PAPER_TOTAL, FIXED = "family", "at the paper's total epochs", "at fixed other parameters"

@@ -7,7 +7,7 @@ from selpres.report.context import Context, Section
 from selpres.report.groups import SETS, UNITS, Group
 from selpres.report.markdown import ci, engine_text, fmt, mean_std, table
 from selpres.report.paper import PAPER, paper_setting
-from selpres.stats import summarize
+from selpres.run.stats import summarize
 
 FOOTNOTE = (
     "¹ The paper's RMS error is over 10 test patterns with units unstated; it is shown next to both of our "

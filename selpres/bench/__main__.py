@@ -1,0 +1,3 @@
+from selpres.bench.bench import main
+
+main()

@@ -1,0 +1,196 @@
+"""Speed at scale (issue 11, item 9), every row measured side by side in one run.
+
+    python -m selpres.bench.scale            # about a minute on an idle 2-core machine
+    python -m selpres.bench.scale --quick    # fewer repeats and presentations
+
+Rows:
+
+* exemplar generation: 10^6 patterns of the PUMA 560 (the 6-joint arm of ``configs/robot/puma560.yaml``)
+  through ``selpres.data.sampled`` (route inverse: q, q̇, q̈ drawn, τ by Newton-Euler), Sobol and uniform
+  points, and the two-link arm for comparison. Target: <= 5 s.
+* engine throughput: presentations per second of the training engine (``engine=fast``) for one topology
+  and R, on exemplar sets of n = 10^3, 10^5 and 10^6 patterns, the same number of presentations each
+  (random indices into the set, as a shuffled epoch presents them). Large sets leave the caches, so the
+  ratio to n = 10^3 is the figure of merit. Target: within 25 %. The sizes are interleaved over the
+  repeats (ABCABC...) and the median taken, so a load change on a shared machine hits every size alike.
+* padded lanes: the kernel trains replicas in groups of 4 lanes, so R = 10 and R = 12 both run 3 groups
+  and should take the same time. Measured after a warm-up epoch (the padded lanes' momentum buffers reach
+  their steady state), interleaved, 6-13-2 on n = 10^4: the ratio R = 10 / R = 12 is the figure of merit
+  (ideal 1.0; why configs/experiment/large.yaml runs 12 replicas).
+
+The load average before and after is printed: on a busy machine every row is slower, the ratios less so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from selpres.run.config import CONFIG_DIR, compose_train
+
+GENERATION_N = 1_000_000
+ENGINE_SIZES = (1_000, 100_000, 1_000_000)
+TOPOLOGY, REPLICAS = (18, 40, 6), 4
+PADDING_TOPOLOGY, PADDING_N, PADDING_REPLICAS = (6, 13, 2), 10_000, (12, 10)  # 3 groups of 4 lanes each
+
+
+def _load() -> str:
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:  # pragma: no cover
+        return "n/a"
+
+
+def generation_rows(repeats: int) -> list[dict]:
+    """Seconds to draw 10^6 patterns (median of ``repeats``), per arm and kind of points."""
+    from selpres.arms.two_link import make_arm
+    from selpres.data import sampled as S
+
+    rows = []
+    for robot, draw in (("puma560", "sobol"), ("puma560", "uniform"), ("two_link", "sobol")):
+        arm = make_arm(compose_train(CONFIG_DIR, [f"robot={robot}"]).robot)
+        data = {
+            "route": "inverse",
+            "q": None,
+            "dq": [-1.0, 1.0],
+            "accel_limit": 2.0,
+            "tau": None,
+            "wrench": None,
+        }
+        box = S.boxes(arm, data)
+        times = []
+        for r in range(repeats):
+            t0 = time.perf_counter()
+            drawn = S.sample(arm, box, "inverse", S.Points(draw, 3 * arm.dof, r), GENERATION_N)
+            times.append(time.perf_counter() - t0)
+        assert drawn.tau.shape == (GENERATION_N, arm.dof)
+        rows.append({"arm": robot, "points": draw, "patterns": GENERATION_N, "seconds": statistics.median(times)})
+    return rows
+
+
+def engine_rows(repeats: int, presentations: int) -> list[dict]:
+    """Presentations per second of engine=fast at each n (same topology, R and number of presentations)."""
+    from selpres.engines.model import init_replica_params
+    from selpres.engines.online import make_engine
+
+    gen = torch.Generator().manual_seed(0)
+    sets = {
+        n: (
+            torch.rand(n, TOPOLOGY[0], dtype=torch.float64, generator=gen),
+            0.1 + 0.8 * torch.rand(n, TOPOLOGY[-1], dtype=torch.float64, generator=gen),
+        )
+        for n in ENGINE_SIZES
+    }
+    orders = {n: torch.randint(n, (REPLICAS, presentations), generator=gen) for n in ENGINE_SIZES}
+    params = init_replica_params(TOPOLOGY, list(range(REPLICAS)))
+    times: dict[int, list[float]] = {n: [] for n in ENGINE_SIZES}
+    name = None
+    for _ in range(repeats):
+        for n in ENGINE_SIZES:  # interleaved: a load change hits every size alike
+            engine = make_engine("fast", TOPOLOGY, [p.clone() for p in params], 0.01, 0.9, 1)
+            name = engine.name
+            X, Y = sets[n]
+            t0 = time.perf_counter()
+            engine.train_epoch(X, Y, orders[n])
+            times[n].append(time.perf_counter() - t0)
+    base = statistics.median(times[ENGINE_SIZES[0]])
+    return [
+        {
+            "n": n,
+            "engine": name,
+            "topology": "-".join(map(str, TOPOLOGY)),
+            "replicas": REPLICAS,
+            "presentations": presentations * REPLICAS,
+            "presentations_per_s": presentations * REPLICAS / statistics.median(t),
+            "time_ratio_to_n_1e3": statistics.median(t) / base,
+        }
+        for n, t in times.items()
+    ]
+
+
+def padding_rows(repeats: int, presentations: int) -> list[dict]:
+    """Seconds per epoch of ``presentations`` per replica for R = 12 (no padded lane) and R = 10 (two),
+    after a warm-up epoch of as many presentations, interleaved over the repeats."""
+    from selpres.engines.model import init_replica_params
+    from selpres.engines.online import make_engine
+
+    gen = torch.Generator().manual_seed(0)
+    X = torch.rand(PADDING_N, PADDING_TOPOLOGY[0], dtype=torch.float64, generator=gen)
+    Y = 0.1 + 0.8 * torch.rand(PADDING_N, PADDING_TOPOLOGY[-1], dtype=torch.float64, generator=gen)
+    engines, orders = {}, {}
+    for R in PADDING_REPLICAS:
+        params = init_replica_params(PADDING_TOPOLOGY, list(range(R)))
+        engines[R] = make_engine("fast", PADDING_TOPOLOGY, params, 0.15, 0.9, 1)  # the paper's lr, momentum
+        orders[R] = torch.randint(PADDING_N, (R, presentations), generator=gen)
+        engines[R].train_epoch(X, Y, orders[R])  # warm-up: not timed
+    times: dict[int, list[float]] = {R: [] for R in PADDING_REPLICAS}
+    for _ in range(repeats):
+        for R in PADDING_REPLICAS:  # interleaved
+            t0 = time.perf_counter()
+            engines[R].train_epoch(X, Y, orders[R])
+            times[R].append(time.perf_counter() - t0)
+    base = statistics.median(times[PADDING_REPLICAS[0]])
+    return [
+        {
+            "replicas": R,
+            "engine": engines[R].name,
+            "topology": "-".join(map(str, PADDING_TOPOLOGY)),
+            "presentations_per_replica": presentations,
+            "seconds": statistics.median(t),
+            "time_ratio_to_R_12": statistics.median(t) / base,
+        }
+        for R, t in times.items()
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m selpres.bench.scale",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=__doc__.split("\n\n", 2)[2],
+    )
+    ap.add_argument("--quick", action="store_true", help="fewer repeats and presentations")
+    ap.add_argument("--json", type=Path, default=None, help="also write the rows to this JSON file")
+    args = ap.parse_args(argv)
+    repeats, presentations = (2, 100_000) if args.quick else (5, 400_000)
+    print(f"load average before: {_load()}  (torch threads {torch.get_num_threads()})")
+    gen = generation_rows(max(1, repeats - 2))
+    print(f"\nexemplar generation, {GENERATION_N:,} patterns (route inverse; target <= 5 s):")
+    for r in gen:
+        print(f"  {r['arm']:9s} {r['points']:8s} {r['seconds']:6.2f} s")
+    eng = engine_rows(repeats, presentations)
+    print(
+        f"\nengine throughput, topology {eng[0]['topology']}, R = {REPLICAS}, engine {eng[0]['engine']}, "
+        f"{eng[0]['presentations']:,} presentations per measurement "
+        "(target: n = 1e5, 1e6 within 25 % of 1e3):"
+    )
+    for r in eng:
+        print(
+            f"  n = {r['n']:>9,}  {r['presentations_per_s']:12,.0f} presentations/s  "
+            f"time x{r['time_ratio_to_n_1e3']:.2f} of n = 1e3"
+        )
+    pad = padding_rows(repeats, presentations)
+    print(
+        f"\npadded lanes, topology {pad[0]['topology']}, engine {pad[0]['engine']}, n = {PADDING_N:,}, "
+        f"{presentations:,} presentations per replica (3 groups of 4 lanes either way; ideal x1.00):"
+    )
+    for r in pad:
+        ratio = r["time_ratio_to_R_12"]
+        print(f"  R = {r['replicas']:>2}  {r['seconds']:7.3f} s  time x{ratio:.2f} of R = 12")
+    print(f"\nload average after: {_load()}")
+    if args.json is not None:
+        rows = {"generation": gen, "engine": eng, "padding": pad, "load": _load()}
+        args.json.write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,10 @@
+"""Data: exemplar sets and test sets for an arm (stage 2 of arm -> data -> presentation -> engine -> loop ->
+results -> report).
+
+Owns the paper's exemplar grid and acceleration filter (``paper``), exemplar sets drawn for any arm (``sampled``),
+the user's CSV / .npz files (``file``), and the learning task of a robot/data config: exemplar set, the 10-pattern
+and held-out test sets and the scaler, cached per config (``task``). The config groups ``data/paper``,
+``data/sampled`` and ``data/file`` are these modules.
+
+May import: ``selpres.arms`` and the foundation (``errors``, ``seeding``, ``storage``).
+"""

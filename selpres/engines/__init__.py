@@ -1,0 +1,12 @@
+"""Engines: the network and the ways it is trained on a presented epoch (stage 4 of arm -> data -> presentation ->
+engine -> loop -> results -> report).
+
+Owns the BPN module, topology parsing and the replica weight layout (``model``), the online-SGD engines
+(``online``: ``reference``, the executable definition of correct; ``torch``; ``native``, the C kernel), batch-mode
+training with the speed-up methods of the paper's section 2 (``batch``) and those methods as
+``torch.optim.Optimizer`` classes (``optim``). An engine takes an epoch's order of pattern indices and updates
+its replicas; it does not choose the order.
+
+May import: ``selpres.presentation``, ``selpres.data``, ``selpres.arms`` and the foundation (``errors``,
+``seeding``, ``storage``, ``native`` for the C kernel).
+"""

@@ -1,0 +1,393 @@
+"""Training engines: online / mini-batch SGD with momentum for R independent replicas of a sigmoid BPN.
+
+Every engine does the same thing, defined by :class:`ReferenceEngine` (plain PyTorch, one
+``nn.Module`` and one ``torch.optim.SGD`` per replica); the others only do it faster:
+
+* ``"reference"`` -- :class:`ReferenceEngine`: the idiomatic loop. Read it to know what the others do.
+* ``"torch"``     -- :class:`TorchEngine`: all replicas at once in eager PyTorch (batched matmuls,
+  hand-written sigmoid/MSE backward). Pure torch; the fallback when no native kernel can be built.
+* ``"native"``    -- :class:`NativeEngine`: an AVX2 C kernel (4 float64 replicas per vector, inline
+  vector ``exp``, topology compiled in; ``selpres/native/kernels/sgd.c``), built with the system C compiler at
+  first use and cached (see :mod:`selpres.native.build`). Its ``predict`` runs the kernel's forward pass on
+  the packed weights; its ``squared_errors`` sums inside that pass, writing no outputs; its ``finite``
+  reads the packed weights once, without unpacking them.
+* ``"fast"``      -- ``native`` if the kernel can be had here, else ``torch``. Not a class: the returned
+  engine's ``name`` says which one runs, and its ``fallback_reason`` why it is not native (the
+  compiler's message, "no AVX2/FMA ...", "disabled by SELPRES_NO_NATIVE"); one warning line goes to the
+  ``selpres`` logger. ``make_engine("native")`` raises :class:`selpres.native.build.KernelUnavailable` instead.
+
+Interface (all engines)::
+
+    eng = make_engine(name, sizes, params, lr, momentum, batch_size)   # params [W1, b1, ...], leading dim R
+    eng.name              # the engine that actually runs: "reference", "torch" or "native"
+    eng.fallback_reason   # None, or (engine "fast" only) why native could not run
+    losses = eng.train_epoch(X, Y, order)   # order [R, m] int64; returns [R] mean pre-update pattern loss
+    eng.predict(X)        # [N, in] -> [R, N, out] float64: every replica's scaled outputs (evaluation);
+                          # reference/torch: model.forward_replicas(eng.params(), X)
+    eng.squared_errors(X, Y)  # [N, in], [N, out] scaled targets -> [R, out] float64: per replica and
+                          # output, sum over patterns of (output - Y)^2 (scoring without [R, N, out])
+    eng.finite()          # [R] bool: every weight of replica r finite (the divergence check)
+    eng.params(); eng.state_dict(); eng.load_state_dict(state)
+
+Semantics: replica r presents ``X[order[r, j]]`` for j = 0..m-1 in consecutive mini-batches of
+``batch_size`` (the last may be smaller); per mini-batch the loss is
+``mse_loss(out, target)`` (mean over batch and outputs), then ``zero_grad(); backward(); step()`` with
+``SGD(lr, momentum)`` (no dampening/nesterov/weight decay): ``buf = momentum*buf + g; p -= lr*buf``.
+Momentum buffers persist across ``train_epoch`` calls and are part of ``state_dict``.
+
+Threads: ``native`` splits replicas (in groups of 4; in ``predict`` and ``squared_errors``, patterns when
+there are fewer groups than threads) over up to ``threads`` OS threads, and runs small calls (a few
+replicas, a few patterns) in the calling thread (see :data:`selpres.native.build.MIN_THREAD_WORK`); the
+default is
+``torch.get_num_threads()`` (set it, or pass ``threads=1`` to ``make_engine``, e.g. when a joblib
+sweep already runs one process per core). Environment variable ``SELPRES_THREADS`` overrides the default.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from typing import Protocol
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from selpres.engines.model import BPN, forward_replicas, load_into, replicas_finite, squared_errors_of
+
+ENGINE_NAMES = ("reference", "torch", "native", "fast")
+
+log = logging.getLogger("selpres")
+
+
+class Engine(Protocol):
+    name: str
+    fallback_reason: str | None
+    evaluation: str  # what runs the forward passes of scoring (native: its vector width), for results.json
+
+    def train_epoch(self, X: torch.Tensor, Y: torch.Tensor, order: torch.Tensor) -> torch.Tensor: ...
+
+    def predict(self, X: torch.Tensor) -> torch.Tensor: ...
+
+    def squared_errors(self, X: torch.Tensor, Y: torch.Tensor) -> torch.Tensor: ...
+
+    def finite(self) -> torch.Tensor: ...
+
+    def params(self) -> list[torch.Tensor]: ...
+
+    def state_dict(self) -> dict: ...
+
+    def load_state_dict(self, state: dict) -> None: ...
+
+
+def _check_inputs(sizes, X: torch.Tensor, Y: torch.Tensor, order: torch.Tensor, R: int) -> None:
+    if X.dim() != 2 or X.shape[1] != sizes[0]:
+        raise ValueError(f"X must be [n, {sizes[0]}], got {tuple(X.shape)}")
+    if Y.dim() != 2 or Y.shape[1] != sizes[-1] or Y.shape[0] != X.shape[0]:
+        raise ValueError(f"Y must be [{X.shape[0]}, {sizes[-1]}], got {tuple(Y.shape)}")
+    if order.dim() != 2 or order.shape[0] != R:
+        raise ValueError(f"order must be [R={R}, m], got {tuple(order.shape)}")
+    o = order.detach().cpu().numpy()  # numpy: see NativeEngine.train_epoch
+    if o.dtype == np.int64:  # one pass: viewed as unsigned, a negative index is larger than any valid one
+        bad = o.size and int(o.view(np.uint64).max()) >= X.shape[0]
+    else:
+        bad = o.size and (int(o.min()) < 0 or int(o.max()) >= X.shape[0])
+    if bad:
+        raise IndexError(f"order has indices outside [0, {X.shape[0]})")
+
+
+def _check_patterns(sizes, X: torch.Tensor) -> torch.Tensor:
+    if X.dim() != 2 or X.shape[1] != sizes[0]:
+        raise ValueError(f"X must be [N, {sizes[0]}], got {tuple(X.shape)}")
+    return X.detach().to(torch.float64)
+
+
+def _check_scoring(sizes, X: torch.Tensor, Y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``squared_errors``' inputs as float64, or a ValueError naming the bad shape."""
+    X = _check_patterns(sizes, X)
+    if Y.dim() != 2 or Y.shape != (X.shape[0], sizes[-1]):
+        raise ValueError(
+            f"Y must be [{X.shape[0]}, {sizes[-1]}] (scaled targets of X's patterns), got {tuple(Y.shape)}"
+        )
+    return X, Y.detach().to(torch.float64)
+
+
+def _default_threads(threads: int | None) -> int:
+    if threads is None:
+        env = os.environ.get("SELPRES_THREADS")
+        threads = int(env) if env else torch.get_num_threads()
+    return max(1, int(threads))
+
+
+# ----------------------------------------------------------------------------------------------
+# reference: the idiomatic code that defines correct results
+# ----------------------------------------------------------------------------------------------
+class ScoredByPredict:
+    """``squared_errors`` from ``predict``'s [R, N, out] outputs: for the engines without a fused scoring
+    pass (reference, torch, batch); needs ``self.sizes`` and ``self.predict``."""
+
+    @property
+    def evaluation(self) -> str:
+        return f"{self.name} (outputs from predict)"
+
+    def squared_errors(self, X, Y):
+        X, Y = _check_scoring(self.sizes, X, Y)
+        return squared_errors_of(self.predict(X), Y)
+
+
+class ReferenceEngine(ScoredByPredict):
+    """One ``BPN`` + one ``torch.optim.SGD`` per replica, trained pattern by pattern with autograd."""
+
+    name = "reference"
+    fallback_reason: str | None = None
+
+    def __init__(self, sizes, params, lr, momentum, batch_size):
+        self.sizes = tuple(sizes)
+        self.batch_size = int(batch_size)
+        self.R = params[0].shape[0]
+        self.models = [load_into(BPN(self.sizes), params, r) for r in range(self.R)]
+        self.optimizers = [torch.optim.SGD(m.parameters(), lr=lr, momentum=momentum) for m in self.models]
+
+    def train_epoch(self, X, Y, order):
+        _check_inputs(self.sizes, X, Y, order, self.R)
+        m = order.shape[1]
+        losses = torch.zeros(self.R, dtype=torch.float64)
+        for r, (model, opt) in enumerate(zip(self.models, self.optimizers)):
+            total = 0.0
+            for start in range(0, m, self.batch_size):
+                idx = order[r, start : start + self.batch_size]
+                out = model(X[idx])
+                loss = F.mse_loss(out, Y[idx])
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                total += loss.item() * len(idx)  # loss is the batch mean: back to a per-pattern sum
+            losses[r] = total / m if m else float("nan")
+        return losses
+
+    def predict(self, X):
+        return forward_replicas(self.params(), _check_patterns(self.sizes, X))
+
+    def finite(self):
+        return replicas_finite(self.params())
+
+    def params(self):
+        return [
+            torch.stack(group)
+            for group in zip(*([p.detach().clone() for p in model.flat_params()] for model in self.models))
+        ]
+
+    def _momentum(self, model, opt):
+        out = []
+        for p in model.flat_params():
+            buf = opt.state.get(p, {}).get("momentum_buffer")
+            out.append(torch.zeros_like(p.detach()) if buf is None else buf.detach().clone())
+        return out
+
+    def state_dict(self):
+        mom = [self._momentum(model, opt) for model, opt in zip(self.models, self.optimizers)]
+        return {"params": self.params(), "momentum": [torch.stack(group) for group in zip(*mom)]}
+
+    def load_state_dict(self, state):
+        for r, (model, opt) in enumerate(zip(self.models, self.optimizers)):
+            load_into(model, state["params"], r)
+            for p, buf in zip(model.flat_params(), state["momentum"]):
+                opt.state[p]["momentum_buffer"] = buf[r].detach().clone().to(p.dtype)
+
+
+# ----------------------------------------------------------------------------------------------
+# torch: all replicas at once, eager PyTorch (the pure-torch fallback)
+# ----------------------------------------------------------------------------------------------
+class TorchEngine(ScoredByPredict):
+    """Replica-batched eager PyTorch with a hand-written backward. Same updates as the reference."""
+
+    name = "torch"
+    fallback_reason: str | None = None
+
+    def __init__(self, sizes, params, lr, momentum, batch_size):
+        self.sizes = tuple(sizes)
+        self.lr, self.mom, self.batch_size = float(lr), float(momentum), int(batch_size)
+        self.R = params[0].shape[0]
+        self.p = [t.detach().to(torch.float64).clone().contiguous() for t in params]
+        self.buf = [torch.zeros_like(t) for t in self.p]
+
+    @torch.no_grad()
+    def train_epoch(self, X, Y, order):
+        _check_inputs(self.sizes, X, Y, order, self.R)
+        R, m = order.shape
+        X, Y = X.to(torch.float64), Y.to(torch.float64)
+        Ws, bs = self.p[0::2], self.p[1::2]
+        Wm, bm = self.buf[0::2], self.buf[1::2]
+        nout = self.sizes[-1]
+        total = torch.zeros(R, dtype=torch.float64)
+        for start in range(0, m, self.batch_size):
+            idx = order[:, start : start + self.batch_size]  # [R, B]
+            B = idx.shape[1]
+            acts = [X[idx]]  # [R, B, in]
+            for W, b in zip(Ws, bs):
+                acts.append(torch.sigmoid(torch.baddbmm(b.unsqueeze(1), acts[-1], W.transpose(1, 2))))
+            y, t = acts[-1], Y[idx]
+            diff = y - t
+            total += diff.square().sum(dim=(1, 2)) / nout
+            delta = diff * (2.0 / (B * nout)) * y * (1 - y)  # dL/dz of the output layer, [R, B, out]
+            for layer in range(len(Ws) - 1, -1, -1):
+                a_prev = acts[layer]
+                gW = torch.bmm(delta.transpose(1, 2), a_prev)
+                gb = delta.sum(dim=1)
+                if layer:
+                    delta = torch.bmm(delta, Ws[layer]) * a_prev * (1 - a_prev)  # uses W before its update
+                for p, buf, g in ((Ws[layer], Wm[layer], gW), (bs[layer], bm[layer], gb)):
+                    buf.mul_(self.mom).add_(g)
+                    p.sub_(buf, alpha=self.lr)
+        return total / m if m else torch.full((R,), float("nan"), dtype=torch.float64)
+
+    def predict(self, X):
+        return forward_replicas(self.p, _check_patterns(self.sizes, X))
+
+    def finite(self):
+        return replicas_finite(self.p)
+
+    def params(self):
+        return [t.clone() for t in self.p]
+
+    def state_dict(self):
+        return {"params": self.params(), "momentum": [t.clone() for t in self.buf]}
+
+    def load_state_dict(self, state):
+        self.p = [t.detach().to(torch.float64).clone().contiguous() for t in state["params"]]
+        self.buf = [t.detach().to(torch.float64).clone().contiguous() for t in state["momentum"]]
+
+
+# ----------------------------------------------------------------------------------------------
+# native: the C kernel
+# ----------------------------------------------------------------------------------------------
+class NativeEngine:
+    """AVX2 C kernel over groups of 4 replicas (replica index innermost), threads over groups."""
+
+    name = "native"
+    fallback_reason: str | None = None
+
+    @property
+    def evaluation(self) -> str:
+        lanes = self._k.eval_lanes
+        return f"native, {lanes} lanes ({'AVX-512' if lanes == 8 else 'AVX2'})"
+
+    LANES = 4
+
+    def __init__(self, sizes, params, lr, momentum, batch_size, threads: int | None = None):
+        from selpres.native import build as _kernels
+
+        self._k = _kernels.load(sizes)  # raises _kernels.KernelUnavailable when it cannot be built
+        self.sizes = tuple(sizes)
+        self.lr, self.mom, self.batch_size = float(lr), float(momentum), int(batch_size)
+        self.threads = _default_threads(threads)
+        self.R = params[0].shape[0]
+        self.G = -(-self.R // self.LANES)
+        self.shapes = [tuple(t.shape[1:]) for t in params]
+        self.P = sum(int(torch.Size(s).numel()) for s in self.shapes)
+        self.w = self._pack(params)
+        self.buf = torch.zeros_like(self.w)
+
+    # [W1, b1, ...] with leading R  <->  [G, P, 4] (per group: parameters in list order, 4 lanes innermost)
+    def _pack(self, tensors):
+        flat = torch.cat([t.detach().to(torch.float64).reshape(self.R, -1) for t in tensors], dim=1)  # [R, P]
+        # padding lanes (R not a multiple of 4) shadow replica 0, here and in train_epoch's orders: lanes of
+        # zeros trained on one pattern drive their errors into subnormal numbers, which made the whole group
+        # ~13x slower (found by bench_scale); a copy of replica 0 stays as normal as replica 0 itself
+        padded = flat[:1].repeat(self.G * self.LANES, 1)
+        padded[: self.R] = flat
+        return padded.reshape(self.G, self.LANES, self.P).transpose(1, 2).contiguous()
+
+    def _unpack(self, packed):
+        """Per-layer copies in numpy: a torch copy here wakes torch's OpenMP pool, ~1 ms a call between
+        epochs of the kernel (see train_epoch); checkpoints unpack both weights and momenta."""
+        a, out, k = packed.numpy(), [], 0
+        for s in self.shapes:
+            n = int(torch.Size(s).numel())
+            layer = np.ascontiguousarray(a[:, k : k + n, :].transpose(0, 2, 1)).reshape(self.G * self.LANES, n)
+            out.append(torch.from_numpy(layer[: self.R].reshape(self.R, *s)))
+            k += n
+        return out
+
+    def train_epoch(self, X, Y, order):
+        _check_inputs(self.sizes, X, Y, order, self.R)
+        m = order.shape[1]
+        X = X.detach().to(torch.float64).contiguous()
+        Y = Y.detach().to(torch.float64).contiguous()
+        # numpy, not torch, for the padding: a large torch op would wake torch's OpenMP pool, whose
+        # spinning threads then compete with the kernel's threads for the cores
+        if self.R == self.G * self.LANES and order.dtype == torch.int64 and order.is_contiguous():
+            padded_order = order  # no padding lanes: the kernel reads the orders as they are
+        else:
+            o = order.detach().cpu().numpy()
+            padded = np.empty((self.G * self.LANES, m), dtype=np.int64)
+            padded[: self.R] = o
+            padded[self.R :] = o[:1]  # the padding lanes shadow replica 0 (see _pack)
+            padded_order = torch.from_numpy(padded)
+        loss = torch.zeros(self.G * self.LANES, dtype=torch.float64)
+        self._k.train(
+            self.sizes, self.w, self.buf, X, Y, padded_order, self.batch_size, self.lr, self.mom, loss, self.threads
+        )
+        return (loss[: self.R] / m) if m else torch.full((self.R,), float("nan"), dtype=torch.float64)
+
+    def predict(self, X):
+        """The kernel's forward pass on the packed weights (4 replicas per vector, threads over groups)."""
+        out = self._k.forward(self.sizes, self.w, _check_patterns(self.sizes, X), self.threads)
+        return out[: self.R]
+
+    def squared_errors(self, X, Y):
+        """Summed inside the kernel's forward pass: no [R, N, out] outputs are written (the RMS follows in
+        the train loop: sqrt(sum / N), in Nm times (y_max - y_min) / (hi - lo) of the output's scaler)."""
+        X, Y = _check_scoring(self.sizes, X, Y)
+        return self._k.squared_errors(self.sizes, self.w, X, Y, self.threads)[: self.R]
+
+    def finite(self):
+        """On the packed [G, P, 4] weights, in one pass (no unpacking)."""
+        return self._k.finite(self.w)[: self.R]
+
+    def params(self):
+        return self._unpack(self.w)
+
+    def state_dict(self):
+        return {"params": self._unpack(self.w), "momentum": self._unpack(self.buf)}
+
+    def load_state_dict(self, state):
+        self.w = self._pack(state["params"])
+        self.buf = self._pack(state["momentum"])
+
+
+def make_engine(
+    name: str, sizes, params, lr: float, momentum: float, batch_size: int, threads: int | None = None
+) -> Engine:
+    """``name``: ``"reference"``, ``"torch"``, ``"native"`` or ``"fast"`` (native if it can be had, else
+    torch, with ``fallback_reason`` set and one warning logged); ``"native"`` raises ``KernelUnavailable``.
+
+    ``threads`` (native only): OS threads over replica groups; default ``$SELPRES_THREADS`` or
+    ``torch.get_num_threads()``.
+    """
+    sizes = tuple(int(s) for s in sizes)
+    if len(params) != 2 * (len(sizes) - 1):
+        raise ValueError(f"{len(params)} parameter tensors for topology {sizes}: expected {2 * (len(sizes) - 1)}")
+    if int(batch_size) < 1:
+        raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+    if name == "reference":
+        return ReferenceEngine(sizes, params, lr, momentum, batch_size)
+    if name == "torch":
+        return TorchEngine(sizes, params, lr, momentum, batch_size)
+    if name == "native":
+        return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
+    if name == "fast":
+        from selpres.native import build as _kernels
+
+        try:
+            return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
+        except _kernels.KernelUnavailable as exc:
+            engine = TorchEngine(sizes, params, lr, momentum, batch_size)
+            engine.fallback_reason = str(exc)
+            line = " ".join(str(exc).split())  # one line, however long the compiler's message
+            log.warning(
+                "engine 'fast' runs the torch engine: native kernel unavailable: %s",
+                line if len(line) <= 400 else line[:400] + " ...",
+            )
+            return engine
+    raise ValueError(f"unknown engine {name!r}: choose one of {ENGINE_NAMES}")

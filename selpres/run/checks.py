@@ -1,0 +1,174 @@
+"""Checks a type cannot express, run before any training or output: each failure is one ConfigError
+naming the key, the bad value and what is allowed (exit code 2 from ``python train.py``).
+
+``validate`` checks values against each other (ranges, grid steps, the robot and data configs of each
+kind, topology widths against the task's inputs and outputs); the checks that need the exemplar set
+(stage sizes against n, filters that keep nothing, a data file's cells) run in
+``selpres.run.train.prepare``, still before anything is written.
+"""
+
+from __future__ import annotations
+
+import math
+
+from omegaconf import DictConfig
+
+from selpres.data.paper import grid_points, heldout_count
+from selpres.data.sampled import MAX_N
+from selpres.data.task import DATA_KEYS, Shape, task_shape
+from selpres.engines.batch import check_batch_options
+from selpres.engines.model import TopologyError, parse_topology
+from selpres.engines.optim import HPARAM_KEYS, checked_hparams
+from selpres.errors import ConfigError
+from selpres.storage import to_container
+
+MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
+MAX_LAYER_WIDTH = 4096  # wider layers are refused: a guard against typos such as 6-13000-2
+
+
+def _walk(node, prefix=""):
+    """(dotted key, value) for every leaf of a plain container."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _walk(v, f"{prefix}.{k}" if prefix else str(k))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _walk(v, f"{prefix}[{i}]")
+    else:
+        yield prefix, node
+
+
+def batch_mode(o: DictConfig) -> bool:
+    """One optimizer step per epoch (selpres.engines.batch) rather than online/mini-batch SGD."""
+    return o.name.value != "sgd" or o.batch_size == 0
+
+
+def optim_hparams(o: DictConfig) -> dict:
+    """The optimizer keys of ``cfg.optim`` (None = not set), as ``checked_hparams`` takes them."""
+    return {k: o[k] for k in HPARAM_KEYS}
+
+
+def validate(cfg: DictConfig) -> tuple[int, ...]:
+    """Checks that need more than a type; returns the parsed topology. Raises ConfigError."""
+    for key, value in _walk(to_container(cfg)):
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
+    o = cfg.optim
+    checked_hparams(o.name.value, optim_hparams(o))  # ConfigError naming optim.<key>
+    check_batch_options(o.sigmoid_prime_offset, o.reduction.value)
+    if o.batch_size < 0 or (o.name.value != "sgd" and o.batch_size != 0):
+        allowed = (
+            "0 (the whole epoch): a batch method"
+            if o.name.value != "sgd"
+            else "0 (the whole epoch) or a whole number >= 1 (1 = online, as in the paper)"
+        )
+        raise ConfigError("optim.batch_size", o.batch_size, allowed)
+    if batch_mode(o) and cfg.engine.value not in ("fast", "torch"):
+        raise ConfigError(
+            "engine",
+            cfg.engine.value,
+            f"fast or torch with optim.name={o.name.value} and "
+            f"optim.batch_size={o.batch_size}: batch mode runs replica-batched in torch",
+        )
+    if cfg.replicas < 1:
+        raise ConfigError("replicas", cfg.replicas, "a whole number >= 1")
+    if cfg.threads < 0:
+        raise ConfigError("threads", cfg.threads, "0 (all cores) or a positive number of threads")
+    if cfg.eval.every < 0:
+        raise ConfigError("eval.every", cfg.eval.every, "0 (stage ends only) or a positive number of epochs")
+    if cfg.eval.heldout_curve < 1:
+        raise ConfigError("eval.heldout_curve", cfg.eval.heldout_curve, "a positive number of held-out patterns")
+    if cfg.checkpoint.every < 0:
+        raise ConfigError(
+            "checkpoint.every", cfg.checkpoint.every, "0 (stage boundaries only) or a positive number of epochs"
+        )
+    if cfg.schedule.strata_bins < 1:
+        raise ConfigError("schedule.strata_bins", cfg.schedule.strata_bins, "a whole number >= 1")
+    if not 0 <= cfg.schedule.selection_cost <= 1:
+        raise ConfigError(
+            "schedule.selection_cost",
+            cfg.schedule.selection_cost,
+            "a fraction of a training presentation in [0, 1] charged per candidate scored "
+            "(0 = choosing is free; default 1/3, a forward pass of forward + backward)",
+        )
+    return check_topology(cfg.topology.layers, check_task(cfg))
+
+
+def check_task(cfg: DictConfig) -> Shape:
+    """The robot and data configs: keys each kind reads set, the others unset, values in range; returns
+    the shape of the task (``selpres.data.task.task_shape``: builds the arm or reads a data file's header)."""
+    d = cfg.data
+    kind = d.kind.value
+    reads = DATA_KEYS[kind]
+    for other in DATA_KEYS.values():
+        for k in other:
+            if k not in reads and d[k] is not None:
+                raise ConfigError(f"data.{k}", d[k], f"unset (null) for data.kind={kind}, which reads {list(reads)}")
+    optional = ("q", "tau", "wrench")  # sampled: null = the joint limits, no torque box, no wrench
+    for k in reads:
+        if d[k] is None and k not in optional:
+            raise ConfigError(f"data.{k}", None, f"a value: data.kind={kind} reads it")
+    if d.test_patterns < 1:
+        raise ConfigError("data.test_patterns", d.test_patterns, "a whole number >= 1")
+    if not 0 <= d.test_from_exemplar <= d.test_patterns:
+        raise ConfigError(
+            "data.test_from_exemplar", d.test_from_exemplar, f"a count in [0, data.test_patterns = {d.test_patterns}]"
+        )
+    heldout_count(d.heldout, 1, "the patterns")  # type and range only: selpres.data.task counts a fraction
+    s = d.scaling
+    if not (0 <= s.lo < s.hi <= 1):
+        raise ConfigError("data.scaling.lo", s.lo, f"0 <= lo < hi <= 1 (the sigmoid's range); hi = {s.hi}")
+    if s.margin < 0:
+        raise ConfigError("data.scaling.margin", s.margin, "a margin >= 0 (fraction of each column's range)")
+    if kind != "file" and not d.accel_limit > 0:
+        raise ConfigError("data.accel_limit", d.accel_limit, "a positive acceleration bound in rad/s²")
+    if kind == "grid":
+        _check_grid(d)
+    if kind == "sampled":
+        if not 1 <= d.n <= MAX_N:
+            raise ConfigError("data.n", d.n, f"a whole number of patterns in [1, {MAX_N:,}]")
+        if isinstance(d.heldout, int) and d.heldout > MAX_N:
+            raise ConfigError("data.heldout", d.heldout, f"at most {MAX_N:,} held-out patterns")
+    return task_shape(cfg.robot, d)
+
+
+def _check_grid(d: DictConfig) -> None:
+    """The paper's grid: whole steps, and not so many candidates that building it would exhaust memory."""
+    points = {}
+    for k in ("theta", "dtheta", "tau1", "tau2"):
+        r = d[k]
+        if not r.step > 0:
+            raise ConfigError(f"data.{k}.step", r.step, "a positive grid step")
+        if not r.hi >= r.lo:
+            raise ConfigError(f"data.{k}.hi", r.hi, f"a value >= data.{k}.lo = {r.lo}")
+        try:
+            points[k] = grid_points(r.lo, r.hi, r.step, f"data.{k}")
+        except ValueError:
+            raise ConfigError(
+                f"data.{k}.step", r.step, f"a step that divides hi - lo = {r.hi - r.lo:g} into whole steps"
+            ) from None
+    candidates = points["theta"] ** 2 * points["dtheta"] ** 2 * points["tau1"] * points["tau2"]
+    if candidates > MAX_GRID_CANDIDATES:
+        finest = max(points, key=points.get)
+        raise ConfigError(
+            f"data.{finest}.step",
+            d[finest].step,
+            f"a coarser step: the grid (θ² × θ̇² × τ1 × τ2 points) would have {candidates:,} candidates, "
+            f"at most {MAX_GRID_CANDIDATES:,} are allowed (the paper's has 1,050,625)",
+        )
+
+
+def check_topology(layers: str, shape: Shape) -> tuple[int, ...]:
+    """Layer widths that parse and fit the task: its numbers of inputs and outputs, named in the message."""
+    try:
+        sizes = parse_topology(layers)
+    except TopologyError as e:
+        raise ConfigError("topology.layers", layers, e.allowed) from None
+    n_in, n_out = len(shape.input_names), len(shape.output_names)
+    if sizes[0] != n_in or sizes[-1] != n_out:
+        hidden = "-".join(str(w) for w in sizes[1:-1]) or "13"
+        fits = f"a network that fits {shape.source}: {shape.describe()}"
+        raise ConfigError("topology.layers", layers, f"{fits}, e.g. {n_in}-{hidden}-{n_out}")
+    if max(sizes) > MAX_LAYER_WIDTH:
+        raise ConfigError("topology.layers", layers, f"layer widths of at most {MAX_LAYER_WIDTH} units")
+    return sizes

@@ -1,0 +1,248 @@
+"""Typed configuration schema (Hydra structured configs): types here, values in ``configs/``.
+
+The dataclasses are registered in Hydra's ConfigStore as ``selpres_schema`` and listed first in
+``configs/train.yaml``'s defaults, so omegaconf itself rejects unknown keys and wrong types with a
+message naming the key. Every value a user reads lives in YAML: a field is ``MISSING`` here when a
+config file supplies it, so no default is written twice. Checks that need more than a type (ranges,
+values against each other and against the data) live in :mod:`selpres.run.checks`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any, List, Optional
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING, OmegaConf
+
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"  # train.py's configs (a source checkout)
+
+
+class EngineName(Enum):
+    reference = "reference"  # nn.Module + torch.optim.SGD, one replica at a time: defines correct results
+    fast = "fast"  # native if the kernel can be built and run here, else torch (the fallback is recorded)
+    native = "native"  # AVX2 C kernel, 4 replicas a vector, built with the system C compiler at first use
+    torch = "torch"  # replica-batched eager PyTorch: the pure-torch fallback
+
+
+class OptimName(Enum):
+    sgd = "sgd"  # SGD + momentum (Rumelhart et al.): online/mini-batch engines; batch_size 0 = batch mode
+    quickprop = "quickprop"  # the batch methods run in selpres.engines.batch.BatchEngine
+    delta_bar_delta = "delta_bar_delta"
+    rprop = "rprop"
+    adam = "adam"
+
+
+class Reduction(Enum):
+    sum = "sum"  # the epoch's error E = ½Σe², as Fahlman and Jacobs published their rules
+    mean = "mean"  # mse_loss over the epoch, the online engines' per-pattern loss
+
+
+class Order(Enum):
+    stratified = "stratified"  # the paper's uniform sampling: every prefix a proportional stratified sample
+    random = "random"  # random growth (Wu, Dyer & Neyshabur 2021)
+    coverage = "coverage"  # greedy farthest-point: every prefix a near-minimal-radius cover of U
+    loss_high = "loss_high"  # adaptive: each enlargement adds the patterns the current network errs most on
+    loss_low = "loss_low"  # adaptive: ... errs least on (easy first)
+    reselect = "reselect"  # each stage a fresh stratified draw of its size (not nested)
+
+
+class ScalingMode(Enum):
+    exemplar = "exemplar"
+    commanded = "commanded"
+
+
+class RobotKind(Enum):
+    two_link = "two_link"  # the paper's arm, closed form of eq. (6) (selpres.arms.two_link.TwoLinkArm)
+    serial = "serial"  # N revolute joints from links or DH rows in the YAML (selpres.arms.serial.SerialArm)
+    urdf = "urdf"  # a serial chain of revolute joints read from robot.path (selpres.arms.urdf.load_urdf)
+
+
+@dataclass
+class RobotConfig:
+    """One schema for every arm: ``kind`` says which fields a robot file sets; the others stay None
+    (``selpres.arms.two_link.make_arm`` refuses a missing one, naming it)."""
+
+    kind: RobotKind = MISSING
+    m1: Optional[float] = None  # two_link: point masses (kg), link lengths (m)
+    m2: Optional[float] = None
+    l1: Optional[float] = None
+    l2: Optional[float] = None
+    g: Optional[float] = None  # two_link, urdf: gravity's magnitude (m/s²)
+    name: Optional[str] = None  # serial: the spec of selpres.arms.serial (links from the base outwards)
+    convention: Optional[str] = None
+    gravity: Optional[List[float]] = None
+    end_point: Optional[List[float]] = None
+    base: Optional[str] = None
+    tip: Optional[str] = None  # serial, urdf: the link whose origin is the wrench's end point
+    links: Optional[List[Any]] = None
+    path: Optional[str] = None  # urdf: the file
+
+
+@dataclass
+class GridRange:
+    lo: float = MISSING
+    hi: float = MISSING
+    step: float = MISSING
+
+
+@dataclass
+class ScalingConfig:
+    mode: ScalingMode = MISSING
+    margin: float = MISSING
+    lo: float = MISSING
+    hi: float = MISSING
+
+
+class DataKind(Enum):
+    grid = "grid"  # the paper's section 5.1 (robot.kind two_link): a grid of θ, θ̇, τ kept if |θ̈| <= limit
+    sampled = "sampled"  # any arm, any n: random or low-discrepancy draws (selpres.data.sampled)
+    file = "file"  # the user's own table, CSV or .npz (selpres.data.file)
+
+
+class Route(Enum):
+    forward = "forward"  # the paper's route: q, q̇, τ drawn, q̈ simulated (eq. 5), |q̈| > accel_limit dropped
+    inverse = "inverse"  # q, q̇, q̈ drawn, τ from eq. (4); kept unless data.tau bounds it
+
+
+class Draw(Enum):
+    uniform = "uniform"  # pseudo-random points (a seeded torch.Generator)
+    sobol = "sobol"  # scrambled Sobol points (torch.quasirandom.SobolEngine): every prefix low-discrepancy
+
+
+@dataclass
+class DataConfig:
+    """One schema for every data kind: the group file sets ``kind`` and its keys; the others stay None
+    (``selpres.run.checks`` refuses a key a kind does not read, naming it)."""
+
+    kind: DataKind = MISSING
+    theta: Optional[GridRange] = None  # grid: both joints' angles (rad) and rates (rad/s), the torque boxes
+    dtheta: Optional[GridRange] = None
+    tau1: Optional[GridRange] = None
+    tau2: Optional[GridRange] = None
+    accel_limit: Optional[float] = None  # grid, sampled: |q̈| bound (rad/s²): a filter or q̈'s box (inverse)
+    n: Optional[int] = None  # sampled: exemplar set size
+    route: Optional[Route] = None
+    draw: Optional[Draw] = None
+    seed: Optional[int] = None  # sampled: the exemplar set's draws (the test sets draw from test_seed)
+    q: Optional[List[Any]] = None  # sampled: [lo, hi] for every joint or one per joint; q null: joint limits
+    dq: Optional[List[Any]] = None
+    tau: Optional[List[Any]] = None  # sampled: torque box (forward: drawn from it; inverse: a filter)
+    wrench: Optional[List[float]] = None  # sampled: constant k of eq. (4), base frame, (force, moment)
+    path: Optional[str] = None  # file: a CSV with a header row, or an .npz
+    inputs: Optional[List[str]] = None  # file: the columns the network reads, in this order
+    outputs: Optional[List[str]] = None  # file: the columns it predicts
+    test_patterns: int = MISSING
+    test_from_exemplar: int = MISSING
+    heldout: Any = MISSING  # a count, or a fraction (float in (0, 1)) of all patterns (file: of the rows)
+    test_seed: int = MISSING
+    scaling: ScalingConfig = field(default_factory=ScalingConfig)
+
+
+@dataclass
+class ScheduleConfig:
+    name: str = MISSING
+    # counts (ints) or fractions of n (floats in (0, 1]); Any keeps 50 and 0.05 apart
+    sizes: List[Any] = MISSING
+    epochs: Optional[List[int]] = None
+    budget: Optional[int] = None  # total presentations for a one-stage, compute-matched schedule
+    order: Order = MISSING
+    strata_bins: int = MISSING
+    selection_cost: float = MISSING  # presentations charged per candidate scored (selpres.presentation.selection)
+
+
+@dataclass
+class TopologyConfig:
+    layers: str = MISSING
+
+
+@dataclass
+class OptimConfig:
+    """One schema for every optimizer: a group file sets ``name`` and its own keys; the rest stay None
+    (an optimizer refuses a key it does not use, naming it)."""
+
+    name: OptimName = MISSING
+    lr: float = MISSING
+    batch_size: int = MISSING  # 1 = online (the paper); 0 = the whole epoch (batch mode)
+    momentum: Optional[float] = None  # sgd, delta_bar_delta
+    mu: Optional[float] = None  # quickprop
+    weight_decay: Optional[float] = None  # quickprop, adam
+    kappa: Optional[float] = None  # delta_bar_delta
+    phi: Optional[float] = None
+    theta: Optional[float] = None
+    eta_minus: Optional[float] = None  # rprop
+    eta_plus: Optional[float] = None
+    step_min: Optional[float] = None
+    step_max: Optional[float] = None
+    beta1: Optional[float] = None  # adam
+    beta2: Optional[float] = None
+    eps: Optional[float] = None
+    sigmoid_prime_offset: float = 0.0  # batch mode: added to σ' in the backward pass (Fahlman: 0.1)
+    reduction: Reduction = Reduction.sum  # batch mode: the epoch's error, summed or mean
+
+
+@dataclass
+class EvalConfig:
+    every: int = MISSING
+    heldout_curve: int = MISSING
+
+
+@dataclass
+class LoggingConfig:
+    tensorboard: bool = MISSING
+    per_replica: bool = MISSING
+    progress: bool = MISSING
+
+
+@dataclass
+class CheckpointConfig:
+    every: int = MISSING
+    enabled: bool = MISSING
+
+
+@dataclass
+class TrainConfig:
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+    schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
+    topology: TopologyConfig = field(default_factory=TopologyConfig)
+    optim: OptimConfig = field(default_factory=OptimConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    logging: LoggingConfig = field(default_factory=LoggingConfig)
+    checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
+    seed: int = MISSING
+    replicas: int = MISSING
+    engine: EngineName = MISSING
+    threads: int = MISSING
+    overwrite: bool = MISSING
+    name: str = MISSING
+
+
+def _dirname(overrides: str) -> str:
+    """A job folder's name from its overrides ('default' when there are none)."""
+    return overrides.replace("/", "_") or "default"
+
+
+def register() -> None:
+    ConfigStore.instance().store(name="selpres_schema", node=TrainConfig)
+    if not OmegaConf.has_resolver("dirname"):
+        OmegaConf.register_new_resolver("dirname", _dirname)
+
+
+register()
+
+
+def compose_train(configs: str | Path, overrides: list[str], hydra: bool = False):
+    """The ``train`` config composed from ``configs`` as ``python train.py <overrides>`` composes it (Hydra's
+    compose API; the global Hydra state is cleared before and after; ``hydra``: with the ``hydra`` node)."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(configs), version_base="1.3"):
+            return compose("train", overrides=list(overrides), return_hydra_config=hydra)
+    finally:
+        GlobalHydra.instance().clear()

@@ -1,0 +1,124 @@
+"""What a job reports: ``results.json`` (identity, cost, timing, per-replica and summary metrics, curves).
+
+A job's identity is the hash of everything that can change its numbers (``job_hash``); the knobs that
+cannot (logging, threads, checkpoints, the sweep's name, overwrite) are left out, so changing them finds
+the same finished job.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from pathlib import Path
+
+from omegaconf import DictConfig
+
+from selpres.data.file import file_digest
+from selpres.presentation.sampler import shuffle_implementation
+from selpres.run.stats import summarize
+from selpres.storage import stable_hash, to_container
+
+NOT_IDENTITY = ("logging", "overwrite", "threads", "checkpoint", "name")
+SETS = ("test10", "heldout")
+UNITS = ("nm", "scaled")
+
+
+def job_hash(cfg: DictConfig) -> str:
+    """Identity of a job's numbers: everything but the knobs that cannot change them, and the contents of the
+    files it reads (``robot.path``, ``data.path``), so an edited URDF or CSV is not taken for the finished job."""
+    c = to_container(cfg)
+    for k in NOT_IDENTITY:
+        c.pop(k, None)
+    files = [c[g].get("path") for g in ("robot", "data")]
+    c["file_sha256"] = [file_digest(p) if isinstance(p, str) and Path(p).is_file() else None for p in files]
+    return stable_hash(c)
+
+
+def replica_results(seeds: list[int], final: dict, diverged_at: list, last_train_mse: list) -> list[dict]:
+    """One entry per replica: its seed, status, final metrics (None once diverged) and last training MSE."""
+    out = []
+    for r, seed in enumerate(seeds):
+        ok = diverged_at[r] is None
+        metrics = {
+            name: {unit: {k: (v[r].item() if ok else None) for k, v in ev[unit].items()} for unit in UNITS}
+            for name, ev in final.items()
+        }
+        out.append(
+            {
+                "seed": seed,
+                "status": "complete" if ok else "diverged",
+                "diverged": diverged_at[r],
+                "final": metrics,
+                "train_mse": last_train_mse[r] if ok else None,
+            }
+        )
+    return out
+
+
+def summary(replicas: list[dict]) -> dict:
+    """mean / std / 95 % interval over complete replicas of every final metric (overall, tau1..tauK)."""
+    joints = list(replicas[0]["final"]["heldout"]["nm"]) if replicas else []
+    return {
+        f"{name}_rms_{unit}_{joint}": summarize(rep["final"][name][unit][joint] for rep in replicas)
+        for name in SETS
+        for unit in UNITS
+        for joint in joints
+    }
+
+
+def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seconds: dict) -> dict:
+    """results.json of a finished job (``prob``: selpres.run.train.Problem; ``progress``: its Progress)."""
+    R = len(prob.seeds)
+    reps = replica_results(prob.seeds, final, progress.diverged_at, progress.history[-1]["train_mse"])
+    n_div = sum(d is not None for d in progress.diverged_at)
+    heldout_n = int(prob.tests["heldout"][0].shape[0])
+    training = sum(ep.presentations for ep in prob.plan[: progress.epoch])
+    return {
+        "status": "diverged" if n_div == R else "complete",
+        "diverged_replicas": n_div,
+        "config_hash": chash,
+        "schedule": {"name": cfg.schedule.name, "order": cfg.schedule.order.value, **prob.schedule.describe()},
+        "topology": cfg.topology.layers,
+        "engine": engine.name,  # what ran
+        "engine_requested": cfg.engine.value,
+        "engine_fallback": engine.fallback_reason,  # why "fast" did not run natively (None if it did)
+        "evaluation": engine.evaluation,  # e.g. "native, 8 lanes (AVX-512)": the same numbers, not the same speed
+        "shuffle": shuffle_implementation(),  # native, or numpy (why): the same permutations either way
+        "replicas": R,
+        "seeds": prob.seeds,
+        "presentations_done": progress.presentations,  # the cost: training + selection presentations
+        "training_presentations": training,
+        "selection_presentations": progress.selection_presentations,  # forward passes (selpres.presentation.selection)
+        "selection_cost": cfg.schedule.selection_cost,  # the charge per candidate scored
+        "tests": {
+            "test10": {"n": int(prob.tests["test10"][0].shape[0])},
+            "heldout": {"n": heldout_n, "curve_n": min(cfg.eval.heldout_curve, heldout_n)},
+            "heldout_curve_every": cfg.eval.every,
+        },
+        "data": prob.task.info if prob.task is not None else None,  # what data was made, how, its hash
+        "schedule_note": prob.schedule_note,  # how a named schedule's counts were applied to this n
+        "resumed_from_epoch": progress.resumed_from,
+        "stale_checkpoint": progress.stale_checkpoint,
+        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "git_commit": _git_commit(),
+        "wall_seconds": seconds,
+        "seconds_per_presentation": seconds["train"] / max(1, training * R),
+        "summary": summary(reps),
+        "replica_results": reps,
+        "curves": progress.history,
+        "config": to_container(cfg),
+    }
+
+
+def _git_commit() -> str | None:
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=Path(__file__).parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+        return out.stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        return None

@@ -1,0 +1,408 @@
+"""The training loop: one job trains R replicas of one (schedule, topology) through every stage.
+
+Read top to bottom: ``prepare`` turns a config into a validated problem (data, schedule, samplers,
+initial weights) without writing anything; ``train`` runs the epochs of the schedule's plan, asking each
+replica's sampler for its presentation order and the engine for the updates, scores the test sets,
+logs, checkpoints, and returns the results that ``results.json`` holds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import logging
+import math
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+from omegaconf import DictConfig
+
+from selpres.data import paper as D
+from selpres.data.file import DataFileError
+from selpres.data.task import Task, load_task
+from selpres.engines.batch import BatchEngine
+from selpres.engines.model import init_replica_params
+from selpres.engines.online import make_engine
+from selpres.errors import ConfigError
+from selpres.presentation.orders import priority_orders
+from selpres.presentation.proportions import fit_schedule, with_fraction_form
+from selpres.presentation.sampler import SelectivePresentationSampler, epoch_orders, shuffle_implementation
+from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
+from selpres.presentation.selection import StageSelection, initial_kind, stage_selection
+from selpres.run import results as results_json
+from selpres.run.checkpoint import Checkpoints, Progress
+from selpres.run.checks import batch_mode, optim_hparams, validate
+from selpres.run.tracking import Tracker
+from selpres.seeding import derive_seed, generator, seed_everything
+from selpres.storage import RESULTS, WEIGHTS, atomic_write, to_container, write_json
+
+log = logging.getLogger("selpres")
+
+
+@dataclass
+class Problem:
+    """Everything a config determines before the first update."""
+
+    sizes: tuple[int, ...]
+    schedule: Schedule
+    seeds: list[int]
+    scaler: D.Scaler
+    X: torch.Tensor  # exemplar inputs, scaled
+    Y: torch.Tensor  # exemplar targets, scaled
+    tests: dict  # name -> (X scaled, Y in Nm)
+    samplers: list[SelectivePresentationSampler]
+    init_params: list[torch.Tensor]
+    selection: StageSelection | None = None  # loss_high/loss_low/reselect: A_k chosen at each stage start
+    task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
+    schedule_note: str | None = None  # how a named schedule's counts were applied to this n (None: as given)
+
+    @functools.cached_property
+    def plan(self) -> list[EpochPlan]:
+        return self.schedule.plan()
+
+    @functools.cached_property
+    def stage_ends(self) -> frozenset[int]:
+        return frozenset(self.schedule.stage_ends())
+
+    @functools.cached_property
+    def scored(self) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
+        """name -> (inputs, targets), both scaled: what the engines score (tests holds targets in Nm)."""
+        return {name: (X, self.scaler.transform_y(Y)) for name, (X, Y) in self.tests.items()}
+
+    @functools.cached_property
+    def nm_per_scaled(self) -> torch.Tensor:
+        """Nm per scaled unit of each output (the scaler is affine): scaled errors times this are errors in Nm."""
+        return (self.scaler.y_max - self.scaler.y_min) / (self.scaler.hi - self.scaler.lo)
+
+    @functools.cached_property
+    def nm2_per_scaled2(self) -> torch.Tensor:
+        """Its square: what sums of squared scaled errors are multiplied by to be in Nm^2."""
+        return self.nm_per_scaled.square()
+
+
+def prepare(cfg: DictConfig) -> Problem:
+    """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
+    sizes = validate(cfg)
+    task = load_task(cfg.robot, cfg.data)
+    schedule, note = task_schedule(cfg, task)
+    seed = int(cfg.seed)  # read once: an OmegaConf access costs ~20 us, 1000 of them 23 ms at R = 1000
+    seeds = [seed + r for r in range(cfg.replicas)]
+    kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
+    gens = [generator(s, "subset") for s in seeds]
+    orders = priority_orders(task.exemplar.X, initial_kind(kind), gens, bins)
+    samplers = [SelectivePresentationSampler(order, schedule, s) for order, s in zip(orders, seeds)]
+    X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
+    return Problem(
+        sizes=sizes,
+        schedule=schedule,
+        seeds=seeds,
+        scaler=task.scaler,
+        X=X,
+        Y=Y,
+        tests=task.scaled_tests(),
+        samplers=samplers,
+        init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
+        selection=stage_selection(
+            kind, schedule, seeds, task.exemplar.X, bins, X, Y, cfg.schedule.selection_cost, samplers
+        ),
+        task=task,
+        schedule_note=note,
+    )
+
+
+def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
+    """The schedule on the task's n: the paper's counts by their proportions when n is not 1002
+    (``selpres.presentation.proportions``, logged), refusals with the fraction form, and a data file too short for
+    the schedule named as such."""
+    sch = to_container(cfg.schedule)
+    sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
+    if note:
+        log.info(note)
+    try:
+        return build_schedule(sizes, sch["epochs"], task.n, budget), note
+    except ConfigError as e:
+        if e.key == "schedule.sizes" and task.info.get("kind") == "file":
+            i = task.info
+            raise DataFileError(
+                i["path"],
+                "rows",
+                f"{i['rows']:,} rows ({task.n:,} for training after "
+                f"holding out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} "
+                f"({e.allowed})",
+            ) from None
+        raise with_fraction_form(e, sizes) from None
+
+
+def job_engine(cfg: DictConfig, prob: Problem):
+    """The engine the config asks for; ``engine=native`` where the kernel cannot run is a user error.
+    Batch methods (QuickProp, Delta-Bar-Delta, Rprop, Adam, batch SGD) step once per epoch in torch."""
+    from selpres.native.build import KernelUnavailable
+
+    o = cfg.optim
+    if batch_mode(o):
+        return BatchEngine(
+            prob.sizes,
+            prob.init_params,
+            o.name.value,
+            optim_hparams(o),
+            sigmoid_prime_offset=o.sigmoid_prime_offset,
+            reduction=o.reduction.value,
+        )
+    try:
+        momentum = 0.0 if o.momentum is None else o.momentum
+        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, o.lr, momentum, o.batch_size)
+    except KernelUnavailable as exc:
+        raise ConfigError(
+            "engine", cfg.engine.value, f"fast, torch or reference: the native kernel cannot run here ({exc})"
+        ) from None
+
+
+class Clock:
+    """Seconds per named phase of a job (``with clock("eval"): ...``), accumulated over resumes."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = defaultdict(float)
+        self._t0 = time.perf_counter()
+
+    @contextmanager
+    def __call__(self, phase: str):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[phase] += time.perf_counter() - t0
+
+    def add(self, earlier: dict) -> None:
+        """Count the seconds of an earlier process of this job (from its checkpoint)."""
+        for k, v in earlier.items():
+            self.seconds[k] += v
+
+    def snapshot(self) -> dict:
+        """The phases so far, and ``total``: wall seconds of this job, earlier processes included."""
+        total = self.seconds["total"] + time.perf_counter() - self._t0
+        return {**self.seconds, "total": total}
+
+
+def _as_list(t: torch.Tensor) -> list:
+    return [v if math.isfinite(v) else None for v in t.tolist()]
+
+
+def _rms(sums: torch.Tensor, n: int) -> torch.Tensor:
+    """Overall RMS of every replica from its per-output sums of squared errors [R, out] over n patterns."""
+    return sums.sum(1).div(n * sums.shape[1]).sqrt()
+
+
+def _rms_nm(sums: torch.Tensor, n: int, prob: Problem) -> torch.Tensor:
+    """Overall RMS in Nm from sums of squared *scaled* errors [R, out]."""
+    return _rms(sums * prob.nm2_per_scaled2, n)
+
+
+@dataclass(frozen=True)
+class Cadence:
+    """The config values the loop reads every epoch, read once: an OmegaConf access costs ~10 us, and an
+    epoch's bookkeeping at R = 1 must stay below its updates (~0.3 ms)."""
+
+    heldout_every: int  # eval.every
+    heldout_curve: int  # eval.heldout_curve
+    checkpoint_every: int  # checkpoint.every
+
+    @classmethod
+    def of(cls, cfg: DictConfig) -> Cadence:
+        return cls(int(cfg.eval.every), int(cfg.eval.heldout_curve), int(cfg.checkpoint.every))
+
+
+def curve_point(engine, prob: Problem, cad: Cadence, ep: EpochPlan | None, loss, progress: Progress) -> dict:
+    """One history record: where the job is, the training MSE, test-10 RMS and (when due) held-out RMS."""
+    epoch = -1 if ep is None else ep.index
+    every = cad.heldout_every
+    heldout_due = ep is None or epoch in prob.stage_ends or (every and (epoch + 1) % every == 0)
+    rms = lambda X, Y: _as_list(_rms_nm(engine.squared_errors(X, Y), X.shape[0], prob))
+    return {
+        "epoch": epoch,
+        "stage": 0 if ep is None else ep.stage,
+        "size": (ep or prob.plan[0]).size,
+        "presentations": progress.presentations,
+        "train_mse": [None] * len(prob.seeds) if loss is None else _as_list(loss),
+        "test10_rms_nm": rms(*prob.scored["test10"]),
+        "heldout_rms_nm": rms(*(t[: cad.heldout_curve] for t in prob.scored["heldout"])) if heldout_due else None,
+    }
+
+
+def mark_diverged(progress: Progress, engine, loss: torch.Tensor, epoch: int) -> None:
+    """A replica whose loss or weights are no longer finite diverged here (its results are withheld)."""
+    if math.isfinite(float(loss.sum())) and bool(engine.finite().all()):  # the usual case, in few small ops
+        return  # (a sum that overflows while every loss is finite only takes the slow path below)
+    finite = torch.isfinite(loss) & engine.finite()
+    for r in torch.nonzero(~finite).flatten().tolist():
+        if progress.diverged_at[r] is None:
+            progress.diverged_at[r] = {"epoch": epoch + 1, "presentations": progress.presentations}
+
+
+def final_scores(engine, prob: Problem) -> dict:
+    """RMS of every replica on each test set, per joint and overall, in Nm and scaled units."""
+    out = {}
+    for name, (X, Y) in prob.scored.items():
+        sums, n = engine.squared_errors(X, Y), X.shape[0]  # [R, out] in scaled units
+        scores = {}
+        for unit, unit_sums in (("nm", sums * prob.nm2_per_scaled2), ("scaled", sums)):
+            per_joint = unit_sums.div(n).sqrt()
+            scores[unit] = {
+                "overall": _rms(unit_sums, n),
+                **{joint: per_joint[:, k] for k, joint in enumerate(D.metric_names(sums.shape[1])[1:])},
+            }
+        out[name] = scores
+    return out
+
+
+@dataclass
+class Job:
+    """A job under way: its problem, engine, progress and where it writes (``out`` None: nowhere)."""
+
+    cfg: DictConfig
+    prob: Problem
+    engine: object
+    progress: Progress
+    chash: str
+    out: Path | None
+    ckpts: Checkpoints | None
+    tracker: Tracker
+
+    @functools.cached_property
+    def orders_buffer(self) -> torch.Tensor:
+        """Where every epoch's presentation orders are written ([R * the largest epoch], reused)."""
+        return torch.empty(len(self.prob.seeds) * max(p.presentations for p in self.prob.plan), dtype=torch.int64)
+
+    @functools.cached_property
+    def cadence(self) -> Cadence:
+        return Cadence.of(self.cfg)
+
+    def checkpoint_due(self, ep: EpochPlan) -> bool:
+        every = self.cadence.checkpoint_every
+        every = every and (ep.index + 1) % every == 0
+        last = ep.index == len(self.prob.plan) - 1
+        return self.ckpts is not None and not last and (ep.index in self.prob.stage_ends or bool(every))
+
+
+def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
+    """Validate and prepare; resume from this job's checkpoint if there is one (overwrite: start afresh)."""
+    seed_everything(cfg.seed)
+    if cfg.threads > 0:
+        torch.set_num_threads(cfg.threads)
+    prob = prepare(cfg)
+    engine = job_engine(cfg, prob)
+    if shuffle_implementation() != "native":
+        log.warning("the per-epoch shuffles run in numpy (slower, the same permutations): %s", shuffle_implementation())
+    out = Path(out_dir) if out_dir is not None else None
+    chash = results_json.job_hash(cfg)
+    ckpts = Checkpoints(out, chash) if out is not None and cfg.checkpoint.enabled else None
+    if ckpts and cfg.overwrite:
+        ckpts.discard()
+    progress = ckpts.resume(engine, len(prob.seeds)) if ckpts else Progress.fresh(len(prob.seeds))
+    clock.add(progress.seconds)
+    tracker = Tracker(
+        out / "tb" if out else Path("tb"), cfg.logging.tensorboard and out is not None, cfg.logging.per_replica
+    )
+    tracker.replay(progress.history)
+    job = Job(cfg, prob, engine, progress, chash, out, ckpts, tracker)
+    if not progress.history:  # the untrained network: every curve starts at 0 presentations
+        record(job, curve_point(engine, prob, job.cadence, None, None, progress))
+    return job
+
+
+def record(job: Job, rec: dict) -> None:
+    job.progress.history.append(rec)
+    job.tracker.log_epoch(rec)
+
+
+def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
+    """One epoch: (at a stage start of a stage-wise order) the choice of A_i, every replica's shuffle of its
+    current A_i, the engine's updates, then scoring."""
+    prob, progress = job.prob, job.progress
+    if prob.selection is not None:
+        with clock("select"):
+            prob.selection.begin_epoch(ep, job.engine, progress)
+    with clock("shuffle"):
+        for s in prob.samplers:
+            s.set_epoch(ep.index)
+        order = epoch_orders(prob.samplers, job.orders_buffer)
+    with clock("train"):
+        loss = job.engine.train_epoch(prob.X, prob.Y, order)
+    progress.epoch, progress.presentations = ep.index + 1, progress.presentations + ep.presentations
+    with clock("eval"):
+        mark_diverged(progress, job.engine, loss, ep.index)
+        rec = curve_point(job.engine, prob, job.cadence, ep, loss, progress)
+    with clock("log"):
+        record(job, rec)
+    return rec
+
+
+def train(
+    cfg: DictConfig, out_dir: str | Path | None = None, on_stage_end: Callable[[dict, Problem], None] | None = None
+) -> dict:
+    """Train ``cfg.replicas`` replicas through the schedule; returns the results dict.
+
+    With ``out_dir`` the job logs to TensorBoard, checkpoints and writes ``results.json`` and ``weights.pt``
+    there, and resumes from a checkpoint of the same config (``overwrite=true``: starts afresh).
+    ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it).
+    """
+    clock = Clock()
+    with clock("prepare"):
+        job = start(cfg, out_dir, clock)
+    with clock("loop"):
+        for ep in job.prob.plan[job.progress.epoch :]:
+            rec = run_epoch(job, ep, clock)
+            if on_stage_end is not None and ep.index in job.prob.stage_ends:
+                on_stage_end(rec, job.prob)
+            if job.progress.all_diverged:  # nothing left to train: stop the job here
+                log.warning("every replica diverged by epoch %d; stopping", ep.index + 1)
+                break
+            if job.checkpoint_due(ep):
+                with clock("checkpoint"):
+                    job.progress.seconds = clock.snapshot()
+                    job.ckpts.save(job.engine, job.progress)
+                    job.tracker.flush()
+    with clock("eval"):
+        final = final_scores(job.engine, job.prob)
+    return finish(job, final, clock.snapshot())
+
+
+def finish(job: Job, final: dict, seconds: dict) -> dict:
+    """results.json, weights.pt (everything needed to use a trained net: load_into(BPN(topology), params, r)
+    + the scaler) and the TensorBoard hparams; the checkpoint is no longer needed."""
+    cfg, prob = job.cfg, job.prob
+    results = results_json.build(cfg, job.chash, prob, job.engine, final, job.progress, seconds)
+    if job.out is None:
+        return results
+    trained = {
+        "params": job.engine.params(),
+        "seeds": prob.seeds,
+        "topology": cfg.topology.layers,
+        "scaler": dataclasses.asdict(prob.scaler),
+        "config_hash": job.chash,
+    }
+    atomic_write(job.out / WEIGHTS, lambda f: torch.save(trained, f))
+    write_json(job.out / RESULTS, results)
+    hp = {
+        "schedule": cfg.schedule.name,
+        "topology": cfg.topology.layers,
+        "seed": cfg.seed,
+        "replicas": len(prob.seeds),
+        "optim": cfg.optim.name.value,
+        "lr": cfg.optim.lr,
+        "momentum": cfg.optim.momentum,
+        "batch_size": cfg.optim.batch_size,
+        "sizes": str(prob.schedule.sizes),
+        "epochs": str(prob.schedule.epochs),
+        "order": cfg.schedule.order.value,
+        "engine": results["engine"],
+        "engine_requested": results["engine_requested"],
+    }
+    job.tracker.close(hp, {f"final/{k}": v["mean"] for k, v in results["summary"].items()})
+    if job.ckpts:
+        job.ckpts.discard()
+    return results
