@@ -5,12 +5,13 @@ BIN := $(VENV)/bin
 
 .PHONY: setup test test-fast test-fallback lint format table1 readme compare bench clean
 
-# torch==2.13.0 first: the CPU wheel kept on these machines. An unpinned torch would pull a CUDA build.
+# torch==2.13.0 first: the CPU wheel kept on these machines. An unpinned torch would pull a CUDA build, and
+# Lightning asks for torch: constraints.txt holds the pin while the rest installs.
 setup: $(VENV)/.installed
-$(VENV)/.installed: pyproject.toml
+$(VENV)/.installed: pyproject.toml constraints.txt
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q torch==2.13.0
-	$(BIN)/pip install -q -e '.[test,slurm,search]'
+	$(BIN)/pip install -q -c constraints.txt -e '.[test,slurm,search,lightning,robots]'
 	touch $@
 
 test: setup            ## the whole suite (what CI runs, with lint and the fallback tier)
