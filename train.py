@@ -4,11 +4,12 @@ import hydra
 from omegaconf import DictConfig
 
 import selpres.run.config  # noqa: F401  (registers the typed schema and resolvers before Hydra composes)
-from selpres.run.cli import run_job
 
 
 @hydra.main(version_base="1.3", config_path="configs", config_name="train")
 def main(cfg: DictConfig) -> float:
+    from selpres.run.cli import run_job  # torch and the loop only for a job, not for --help or --cfg
+
     return run_job(cfg)
 
 

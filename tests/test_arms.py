@@ -15,7 +15,7 @@ import torch
 from selpres.arms.serial import SerialArm
 from selpres.arms.two_link import TwoLinkArm, make_arm
 from selpres.arms.urdf import UrdfError, load_urdf, to_urdf
-from selpres.data.paper import config_hash, load_csv, load_exported
+from selpres.data.export import config_hash, load_csv, load_exported
 from selpres.errors import ConfigError
 
 from conftest import cfg_of, load_group, run_python

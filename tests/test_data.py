@@ -12,6 +12,7 @@ import torch
 from omegaconf import OmegaConf
 
 from selpres.arms.two_link import TwoLinkArm
+from selpres.data import export as E
 from selpres.data import paper as D
 
 CONFIGS = Path(__file__).parents[1] / "configs"
@@ -306,32 +307,32 @@ def test_rms_errors_units_and_replica_dim(exemplar, tests_small):
 
 
 def test_config_hash_is_canonical():
-    h = D.config_hash(ROBOT_CFG, DATA_CFG)
+    h = E.config_hash(ROBOT_CFG, DATA_CFG)
     assert len(h) == 16 and int(h, 16) >= 0
     as_dict = OmegaConf.to_container(ROBOT_CFG)
     as_dict["m2"] = 3  # int vs float, plain dict vs DictConfig, key order: same data, same hash
-    assert D.config_hash(dict(reversed(list(as_dict.items()))), DATA_CFG) == h
-    assert D.config_hash(OmegaConf.merge(ROBOT_CFG, {"m1": 0.43}), DATA_CFG) != h
-    assert D.config_hash(ROBOT_CFG, _data(accel_limit=2.5)) != h
+    assert E.config_hash(dict(reversed(list(as_dict.items()))), DATA_CFG) == h
+    assert E.config_hash(OmegaConf.merge(ROBOT_CFG, {"m1": 0.43}), DATA_CFG) != h
+    assert E.config_hash(ROBOT_CFG, _data(accel_limit=2.5)) != h
 
 
 def test_export_round_trip_exact(tmp_path, exemplar, tests_small):
     stem = tmp_path / "sub" / "exemplar"
-    paths = D.export(stem, exemplar, tests_small, ROBOT_CFG, DATA_CFG)
+    paths = E.export(stem, exemplar, tests_small, ROBOT_CFG, DATA_CFG)
     assert sorted(p.name for p in (tmp_path / "sub").iterdir()) == [
         "exemplar.npz",
         "exemplar_exemplar.csv",
         "exemplar_heldout.csv",
         "exemplar_test10.csv",
     ]  # no temp files left behind
-    arr = D.load_exported(paths["npz"], ROBOT_CFG, DATA_CFG)
-    h = D.config_hash(ROBOT_CFG, DATA_CFG)
+    arr = E.load_exported(paths["npz"], ROBOT_CFG, DATA_CFG)
+    h = E.config_hash(ROBOT_CFG, DATA_CFG)
     assert str(arr["config_hash"]) == h
     assert tuple(arr["input_names"]) == D.INPUT_NAMES and tuple(arr["target_names"]) == D.TARGET_NAMES
     sets = {"exemplar": exemplar, "test10": tests_small.test10, "heldout": tests_small.heldout}
     for name, p in sets.items():
         assert np.array_equal(arr[f"{name}_X"], p.X.numpy()) and np.array_equal(arr[f"{name}_Y"], p.Y.numpy())
-        found, cols, table = D.load_csv(paths[name], ROBOT_CFG, DATA_CFG)
+        found, cols, table = E.load_csv(paths[name], ROBOT_CFG, DATA_CFG)
         assert found == h and cols == D.COLUMN_NAMES
         assert np.array_equal(table, torch.cat((p.X, p.Y), 1).numpy())  # bit-identical via %.17g
         assert paths[name].read_text().splitlines()[0] == f"# config_hash={h}"
@@ -339,12 +340,12 @@ def test_export_round_trip_exact(tmp_path, exemplar, tests_small):
 
 
 def test_load_refuses_data_made_with_another_config(tmp_path, exemplar, tests_small):
-    paths = D.export(tmp_path / "d", exemplar, tests_small, ROBOT_CFG, DATA_CFG)
+    paths = E.export(tmp_path / "d", exemplar, tests_small, ROBOT_CFG, DATA_CFG)
     other_robot = OmegaConf.merge(ROBOT_CFG, {"l2": 0.27})
-    h_old, h_new = D.config_hash(ROBOT_CFG, DATA_CFG), D.config_hash(other_robot, DATA_CFG)
-    with pytest.raises(D.DataMismatchError, match=f"{h_old}.*{h_new}"):
-        D.load_exported(paths["npz"], other_robot, DATA_CFG)
+    h_old, h_new = E.config_hash(ROBOT_CFG, DATA_CFG), E.config_hash(other_robot, DATA_CFG)
+    with pytest.raises(E.DataMismatchError, match=f"{h_old}.*{h_new}"):
+        E.load_exported(paths["npz"], other_robot, DATA_CFG)
     with pytest.raises(ValueError):
-        D.load_exported(paths["npz"], ROBOT_CFG, _data(heldout=10))
-    with pytest.raises(D.DataMismatchError):
-        D.load_csv(paths["exemplar"], other_robot, DATA_CFG)
+        E.load_exported(paths["npz"], ROBOT_CFG, _data(heldout=10))
+    with pytest.raises(E.DataMismatchError):
+        E.load_csv(paths["exemplar"], other_robot, DATA_CFG)

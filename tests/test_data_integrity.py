@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from selpres.data.paper import DataMismatchError, load_csv, load_exported
+from selpres.data.export import DataMismatchError, load_csv, load_exported
 
 from conftest import cfg_of
 

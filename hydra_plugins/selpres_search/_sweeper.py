@@ -28,14 +28,13 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import optuna
 from hydra.types import HydraContext, TaskFunction
 from hydra.utils import instantiate
 from hydra_plugins.hydra_optuna_sweeper.optuna_sweeper import OptunaSweeper
 from omegaconf import DictConfig
 
-from selpres.data.task import load_task
-from selpres.presentation.search import SEARCH_KEYS, confirmation_commands, schedule_overrides
+# Hydra imports this module at every start (plugin discovery), so Optuna (with scipy and cmaes, ~3 s here) and
+# selpres (torch) are imported only once the sweeper is used.
 
 log = logging.getLogger("selpres")
 
@@ -44,6 +43,11 @@ class ShapedScheduleSweeper(OptunaSweeper):
     """Optuna over (p, first, growth, tilt) at a fixed budget, each trial run as its schedule's overrides."""
 
     def setup(self, *, hydra_context: HydraContext, task_function: TaskFunction, config: DictConfig) -> None:
+        import optuna
+
+        from selpres.data.task import load_task
+        from selpres.presentation.search import SEARCH_KEYS, confirmation_commands, schedule_overrides
+
         super().setup(hydra_context=hydra_context, task_function=task_function, config=config)
         impl = self.sweeper
         n = load_task(config.robot, config.data).n
@@ -83,6 +87,8 @@ class ShapedScheduleSweeper(OptunaSweeper):
     def sweep(self, arguments: list[str]) -> None:
         """The study's trials, then the commands that confirm the best schedule of the study and the best of
         each order, logged and written to ``confirm.sh`` in the sweep folder."""
+        import optuna
+
         super().sweep(arguments)
         impl = self.sweeper
         if impl.storage is None:
@@ -112,6 +118,8 @@ class ShapedScheduleSweeper(OptunaSweeper):
 def best_trials(study, default_order: str) -> list[tuple]:
     """[(trial, search numbers, order)]: the study's best complete trial, then the best of every other
     order tried, by validation RMS."""
+    import optuna
+
     complete = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
     done = sorted(complete, key=lambda t: (t.value, t.number))
     out: dict[str, tuple] = {}
@@ -125,6 +133,8 @@ def _finished_trials(storage, study_name) -> int:
     """Complete or failed trials of the stored study (0 if there is none yet)."""
     if storage is None or study_name is None:
         return 0
+    import optuna
+
     try:
         study = optuna.load_study(study_name=study_name, storage=storage)
     except KeyError:  # no such study yet

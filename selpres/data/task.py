@@ -32,6 +32,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from selpres.arms.two_link import TwoLinkArm, make_arm
+from selpres.data import export as E
 from selpres.data import file as F
 from selpres.data import paper as D
 from selpres.data import sampled as S
@@ -111,7 +112,7 @@ class Task:
 def task_shape(robot_cfg, data_cfg) -> Shape:
     """The network's inputs and outputs for this task, from the arm (built, not simulated) or the data
     file's header; raises ConfigError (naming robot.*, data.* or the file), makes no data."""
-    kind = D.data_kind(data_cfg)
+    kind = E.data_kind(data_cfg)
     if kind == "file":
         ins, outs = F.check_columns(data_cfg.path, data_cfg.inputs, data_cfg.outputs)
         return Shape(ins, outs, f"data=file ({data_cfg.path})")
@@ -148,8 +149,8 @@ def load_task(robot_cfg: DictConfig, data_cfg: DictConfig) -> Task:
 def _task(robot_json: str, data_json: str, files: str) -> Task:
     """``files``: the (path, mtime, size) of the files read, so an edited file is read again."""
     robot_cfg, data_cfg = OmegaConf.create(json.loads(robot_json)), OmegaConf.create(json.loads(data_json))
-    task = {"grid": _grid, "sampled": _sampled, "file": _file}[D.data_kind(data_cfg)](robot_cfg, data_cfg)
-    task.info["hash"] = D.config_hash(robot_cfg, data_cfg)
+    task = {"grid": _grid, "sampled": _sampled, "file": _file}[E.data_kind(data_cfg)](robot_cfg, data_cfg)
+    task.info["hash"] = E.config_hash(robot_cfg, data_cfg)
     i = task.info
     kept = (
         f" kept of {i['candidates']:,} candidates (acceptance {i['acceptance_rate']:.3g})" if "candidates" in i else ""

@@ -24,6 +24,10 @@ Conventions: diverged replicas are left out of every mean and interval but count
 ``selective`` are paired by seed (only seeds complete in both); intervals are Student-t 95 % intervals
 from :mod:`selpres.run.stats`; a verdict reads *better/worse*, *equivalent within ±m* (TOST) or *no
 detectable difference*, three different things.
+
+The report is the last stage of arm -> data -> presentation -> engine -> loop -> results -> report: it reads job
+folders, never trains. May import: ``selpres.run`` (stats, the names of a job folder's files) and the foundation;
+matplotlib only inside the plotting sections, so the command line starts without it.
 """
 
 from selpres.report.build import write_report

@@ -130,6 +130,7 @@ def run_job(cfg: DictConfig) -> float:
     out = Path(hc.runtime.output_dir)
     multirun = hc.mode == RunMode.MULTIRUN
     try:
+        _check_name(hc, multirun)
         res = None if cfg.overwrite else _finished(out, cfg)
         if res is not None:
             log.info("already done: %s (overwrite=true to run it again)", out / RESULTS)
@@ -157,6 +158,19 @@ def run_job(cfg: DictConfig) -> float:
         raise
     log.info("%s\nresults: %s", summary_table(res), out / RESULTS)
     return _objective(res)
+
+
+def _check_name(hc, multirun: bool) -> None:
+    """``name=`` names a sweep's folder; a single run's folder is named by its overrides, so ``name=`` there would be
+    silently ignored: refuse it."""
+    given = [o.split("=", 1)[1] for o in hc.overrides.task if o.split("=", 1)[0] == "name"]
+    if given and not multirun:
+        raise ConfigError(
+            "name",
+            given[0],
+            "only with -m (a sweep's folder outputs/sweeps/<name>/); a single run's folder is named by its "
+            "overrides (or hydra.run.dir=...)",
+        )
 
 
 # ------------------------------------------------------------------------------ what gets printed

@@ -5,7 +5,7 @@
     python -m selpres.run.export --help
 
 The robot and data configs come from ``configs/train.yaml`` with the same schema and defaults as
-``python train.py`` (``data.test_seed`` included), so ``selpres.data.paper.load_exported(path, cfg.robot,
+``python train.py`` (``data.test_seed`` included), so ``selpres.data.export.load_exported(path, cfg.robot,
 cfg.data)`` of a training config accepts the files it matches and refuses any other. The CSVs name
 their columns (``q1..qN, dq1..dqN, ddq1..ddqN, tau1..tauN`` for a sampled arm, ``k_fx..k_mz`` for a
 non-zero wrench; the paper's theta1, dtheta1, ... for its grid) and carry the arm (``# arm=`` its
@@ -26,7 +26,7 @@ from omegaconf import OmegaConf
 
 from selpres.arms.two_link import TwoLinkArm, make_arm
 from selpres.arms.urdf import to_urdf
-from selpres.data import paper as D
+from selpres.data import export as E
 from selpres.data.task import load_task
 from selpres.errors import ConfigError
 from selpres.run.checks import check_task
@@ -77,7 +77,7 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
         except ValueError as e:
             raise ConfigError("--urdf", str(urdf), f"an arm URDF can name: {e}") from None
     paths.update(
-        D.export(
+        E.export(
             stem,
             ex,
             tests,
@@ -89,7 +89,7 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
             wrench=task.wrench,
         )
     )
-    print(f"config_hash={D.config_hash(robot_cfg, data_cfg)}  (robot + data, test_seed={data_cfg.test_seed})")
+    print(f"config_hash={E.config_hash(robot_cfg, data_cfg)}  (robot + data, test_seed={data_cfg.test_seed})")
     for p in paths.values():
         print(f"  wrote {p}")
     return paths

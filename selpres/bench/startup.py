@@ -1,0 +1,62 @@
+"""Start-up of the command line, measured as a user meets it: whole processes, pair by pair in one run.
+
+Each round runs ``python -c "import torch"`` (the floor: every job needs torch), the default ``python train.py``
+(a one-replica selective 6-13-2 job into a fresh folder) and ``python train.py --help``, in that order, so a
+busy machine slows all three alike; the ratios are taken per round and their median reported. Target (issue 19):
+both commands ≤ 1.5× the bare torch import. ``python -m selpres.bench.startup [--rounds N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]  # train.py and configs/ of a source checkout
+
+
+def _wall(cmd: list[str]) -> float:
+    t = time.perf_counter()
+    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed:\n{done.stderr[-2000:]}")
+    return time.perf_counter() - t
+
+
+def measure(rounds: int = 5) -> dict[str, list[float]]:
+    """Wall seconds per round for the three commands."""
+    py = sys.executable
+    out: dict[str, list[float]] = {"import torch": [], "python train.py": [], "python train.py --help": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(rounds):
+            out["import torch"].append(_wall([py, "-c", "import torch"]))
+            out["python train.py"].append(_wall([py, "train.py", f"hydra.run.dir={tmp}/job{r}"]))
+            out["python train.py --help"].append(_wall([py, "train.py", "--help"]))
+    return out
+
+
+def rows(rounds: int = 5) -> list[str]:
+    """Lines for selpres-bench: median (min-max) wall per command and the per-round ratio to the torch import."""
+    t = measure(rounds)
+    base = t["import torch"]
+    lines = [f"start-up, {rounds} rounds, each round the three commands in turn (median, min-max):"]
+    for name, vals in t.items():
+        ratios = [v / b for v, b in zip(vals, base)]
+        ratio = "" if name == "import torch" else f"  = x{statistics.median(ratios):.2f} the torch import"
+        ratio += "" if name == "import torch" else f" (rounds x{min(ratios):.2f}-{max(ratios):.2f})"
+        lines.append(f"  {name:<24} {statistics.median(vals):6.2f} s ({min(vals):.2f}-{max(vals):.2f}){ratio}")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=5)
+    print("\n".join(rows(ap.parse_args(argv).rounds)))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,84 @@
+"""The package's rooms follow the flow arm -> data -> presentation -> engines -> run -> report -> bench: a module
+imports only its own room, rooms before it and the foundation (errors, seeding, storage, native) — lazy imports
+inside functions included. Also: every room says what it owns and may import, and no module outgrows ~450 lines."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+from conftest import REPO
+
+FOUNDATION = ("selpres.errors", "selpres.seeding", "selpres.storage", "selpres.native")
+ROOMS = ("arms", "data", "presentation", "engines", "run", "report", "bench")
+MAX_LINES = 450
+
+
+def room_rank(module: str) -> int:
+    """0 for the foundation, 1.. for the rooms in flow order, len(ROOMS) + 1 for the public API and plugins."""
+    if module.startswith(FOUNDATION) and (module + ".").split(".")[1] in {m.split(".")[1] for m in FOUNDATION}:
+        return 0
+    parts = module.split(".")
+    if parts[0] == "selpres" and len(parts) > 1 and parts[1] in ROOMS:
+        return 1 + ROOMS.index(parts[1])
+    return len(ROOMS) + 1  # selpres itself (the public API), hydra_plugins
+
+
+def imported_modules(source: str, package: str) -> list[tuple[int, str]]:
+    """(line, module) for every selpres import in ``source`` (``from selpres import x`` -> selpres.x when x is a
+    room or module of the package, else selpres itself: the public API)."""
+    names = {p.stem for p in (REPO / "selpres").iterdir() if p.suffix == ".py" or p.is_dir()}
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "selpres"]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            mod = node.module
+            if node.level:  # relative: resolve against the importing package
+                mod = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + [mod])
+            if mod == "selpres":
+                out += [(node.lineno, f"selpres.{a.name}" if a.name in names else "selpres") for a in node.names]
+            elif mod.split(".")[0] == "selpres":
+                out.append((node.lineno, mod))
+    return out
+
+
+def violations(path: Path, module: str, source: str) -> list[str]:
+    own = room_rank(module)
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    return [
+        f"{path.relative_to(REPO)}:{line} imports {target} (a room after it in the flow)"
+        for line, target in imported_modules(source, package)
+        if room_rank(target) > own
+    ]
+
+
+def modules():
+    for path in sorted([*(REPO / "selpres").rglob("*.py"), *(REPO / "hydra_plugins").rglob("*.py")]):
+        rel = path.relative_to(REPO).with_suffix("")
+        parts = list(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        yield path, ".".join(parts)
+
+
+def test_imports_run_one_way():
+    found = [v for path, module in modules() for v in violations(path, module, path.read_text())]
+    assert found == []
+
+
+def test_the_check_sees_a_backward_import_even_inside_a_function():
+    src = "def f():\n    from selpres.run.train import train\n    from selpres.presentation import sampler\n"
+    assert violations(REPO / "selpres/data/task.py", "selpres.data.task", src) == [
+        "selpres/data/task.py:2 imports selpres.run.train (a room after it in the flow)",
+        "selpres/data/task.py:3 imports selpres.presentation (a room after it in the flow)",
+    ]
+    # the foundation may not import a room, and no room may import the public API
+    assert violations(REPO / "selpres/storage.py", "selpres.storage", "import selpres.arms.serial\n")
+    assert violations(REPO / "selpres/run/cli.py", "selpres.run.cli", "from selpres import SelectivePresentation\n")
+    assert not violations(REPO / "selpres/run/cli.py", "selpres.run.cli", "from selpres import native, errors\n")
+
+
+def test_every_room_says_what_it_owns_and_may_import():
+    for room in (*ROOMS, "native"):
+        doc = ast.get_docstring(ast.parse((REPO / "selpres" / room / "__init__.py").read_text())) or ""
+        assert "May import" in doc or "may import" in doc, room
+
