@@ -81,4 +81,3 @@ def test_every_room_says_what_it_owns_and_may_import():
     for room in (*ROOMS, "native"):
         doc = ast.get_docstring(ast.parse((REPO / "selpres" / room / "__init__.py").read_text())) or ""
         assert "May import" in doc or "may import" in doc, room
-
