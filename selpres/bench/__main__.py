@@ -1,3 +1,3 @@
-from selpres.bench.bench import main
+from selpres.bench.main import main
 
-main()
+raise SystemExit(main())
