@@ -61,7 +61,7 @@ def test_paired_t_test_by_hand():
     assert r["p"] == pytest.approx(0.2254033, abs=1e-7)
     assert t_test(D, mu=0.1)["p"] == pytest.approx(1.0)
     assert t_test([0.2])["p"] is None  # one value: no test
-    assert t_test([0.2, 0.2, 0.2])["p"] == 0.0  # no spread, mean ≠ 0: the difference is certain
+    assert t_test([0.2, 0.2, 0.2])["p"] < 1e-30  # no spread (but rounding), mean ≠ 0: the difference is certain
 
 
 def test_tost_by_hand():
@@ -113,3 +113,19 @@ def test_median_odd_even_none_nan_and_inf():
     assert median([1.0, math.inf, math.inf]) == math.inf
     assert median([1.0, 2.0, math.inf]) == 2.0
     assert median([]) is None and median([None]) is None
+
+
+def test_t_test_and_tost_equal_scipy_stats_ttest_1samp():
+    """The paired t-test is scipy's one-sample test on the differences; TOST is two of its one-sided tests."""
+    from scipy import stats as ss
+
+    rng = [0.013, -0.004, 0.021, 0.008, 0.0, 0.017, -0.011, 0.009, 0.026, 0.003, 0.012, -0.002]
+    mine, ref = t_test(rng), ss.ttest_1samp(rng, 0.0)
+    assert mine["t"] == pytest.approx(ref.statistic, rel=1e-12) and mine["p"] == pytest.approx(ref.pvalue, rel=1e-10)
+    m = 0.02
+    eq = tost(rng, m)
+    lower = ss.ttest_1samp(rng, -m, alternative="greater").pvalue
+    upper = ss.ttest_1samp(rng, m, alternative="less").pvalue
+    assert eq["p_lower"] == pytest.approx(lower, rel=1e-10) and eq["p_upper"] == pytest.approx(upper, rel=1e-10)
+    ci = ss.t.interval(0.90, len(rng) - 1, loc=sum(rng) / len(rng), scale=ss.sem(rng))
+    assert eq["ci"] == pytest.approx(list(ci), rel=1e-12)
