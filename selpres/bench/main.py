@@ -9,7 +9,8 @@ beside the engine alone at the same R); the per-epoch shuffles (the native bucke
 of the same hashes); the priority orders' selection cost; the stage-wise orders' cost of choosing
 (``selpres.presentation.selection``: one enlargement batched against a per-replica loop, and whole jobs' "select"
 phase against "train"); the native kernel's build; exemplar-set
-generation; the command line's start-up (``selpres.bench.startup``). A "replica-run" is one conventional run
+generation; the command line's start-up (``selpres.bench.startup``); TensorBoard written by selpres against
+torch's SummaryWriter (``selpres.bench.tracking``, full run only). A "replica-run" is one conventional run
 of the paper: 150 epochs x 1002 single-pattern
 updates of a 6-13-2 sigmoid net (SGD lr 0.15, momentum 0.9). Slow configurations are timed over a few
 epochs and extrapolated to 150 (the ``ep`` column says how many were timed); times are medians. Engine
@@ -35,6 +36,7 @@ from selpres.bench.engines import bench_batch_engines, bench_engines
 from selpres.bench.jobs import bench_jobs
 from selpres.bench.presentation import bench_orders, bench_selection, bench_shuffles
 from selpres.bench.startup import rows as startup_rows
+from selpres.bench.tracking import rows as tracking_rows
 from selpres.run.config import CONFIG_DIR
 
 
@@ -100,6 +102,8 @@ def main(argv: list[str] | None = None) -> int:
         bench_compile()
     bench_exemplar_generation(q, args.configs)
     print("\n" + "\n".join(startup_rows(3 if q else 5)))
+    if not q:  # whole jobs at R = 1 and 1000, twice a round: minutes
+        print("\n" + "\n".join(tracking_rows(3)))
     print(f"\nload average at end {os.getloadavg()[0]:.2f} (other processes on the machine slow every number)")
     return 0 if jobs_ok else 1
 
