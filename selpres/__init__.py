@@ -1,0 +1,56 @@
+"""selpres: selective presentation — train a back-propagation network on a growing training set
+A1 ⊂ A2 ⊂ … ⊂ A_{p+1} = U, and find out honestly whether it pays.
+
+The public API is the names in ``__all__``; everything else is internal and may move. The package's rooms
+follow the data's flow (``docs/architecture.md``)::
+
+    arms -> data -> presentation -> engines -> run -> report      (bench times them all)
+
+Names are imported on first use (PEP 562), so ``import selpres`` costs nothing until one is asked for and the
+command line starts without torch where it does not need it (``python train.py --help``).
+"""
+
+from __future__ import annotations
+
+import importlib
+
+# name -> the module that owns it
+_EXPORTS = {
+    # the method: schedules of nested training sets and the priority orders whose prefixes they are
+    "Schedule": "selpres.presentation.schedule",
+    "build_schedule": "selpres.presentation.schedule",
+    "priority_order": "selpres.presentation.orders",
+    # arms: the paper's two-link arm (eq. 6), any serial chain (eq. 4-5), URDF files in and out
+    "TwoLinkArm": "selpres.arms.two_link",
+    "SerialArm": "selpres.arms.serial",
+    "make_arm": "selpres.arms.two_link",
+    "load_urdf": "selpres.arms.urdf",
+    "to_urdf": "selpres.arms.urdf",
+    # data: a config's task (exemplar set, test sets, scaler), exported files read back
+    "load_task": "selpres.data.task",
+    "load_exported": "selpres.data.export",
+    "load_csv": "selpres.data.export",
+    "Scaler": "selpres.data.paper",
+    # the network and the loop
+    "BPN": "selpres.engines.model",
+    "load_into": "selpres.engines.model",
+    "compose_train": "selpres.run.config",
+    "train": "selpres.run.train",
+    # errors a caller may catch
+    "ConfigError": "selpres.errors",
+    "FileError": "selpres.errors",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'selpres' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    globals()[name] = value  # once imported, a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
