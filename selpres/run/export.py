@@ -95,6 +95,14 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
     return paths
 
 
+def default_stem(robot_cfg, data_cfg) -> Path:
+    """outputs/data/<robot>_<data>: the arm (a URDF by its file's name, else its name or kind) and the data's
+    kind, so exports of different tasks do not land on one name and no name repeats itself
+    (``exemplar_exemplar.csv``)."""
+    robot = Path(robot_cfg.path).stem if robot_cfg.get("path") else (robot_cfg.get("name") or str(robot_cfg.kind))
+    return Path("outputs/data") / f"{robot}_{E.data_kind(data_cfg)}"
+
+
 def _override(text: str) -> str:
     key = text.split("=", 1)[0]
     if "=" not in text or not (key in ("robot", "data") or key.startswith(("robot.", "data."))):
@@ -121,8 +129,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--out",
         type=Path,
-        default=Path("outputs/data/exemplar"),
-        help="output stem: writes STEM.npz and STEM_{exemplar,test10,heldout}.csv (default: %(default)s)",
+        default=None,
+        help="output stem: writes STEM.npz and STEM_{exemplar,test10,heldout}.csv "
+        "(default: outputs/data/<robot>_<data>, e.g. outputs/data/two_link_grid)",
     )
     ap.add_argument(
         "--urdf",
@@ -137,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as e:  # a ConfigError, or Hydra's own message (unknown key, wrong type): no traceback
         ap.exit(2, f"error: {e}\n")
     try:
-        export_data(args.out, robot_cfg, data_cfg, args.urdf)
+        export_data(args.out or default_stem(robot_cfg, data_cfg), robot_cfg, data_cfg, args.urdf)
     except ConfigError as e:  # raised while making the data, before anything is written
         ap.exit(2, f"error: {e}\n")
     return 0
