@@ -118,7 +118,7 @@ def order_of(order, X, n: int, seed: int, strata_bins: int) -> tuple[torch.Tenso
         if order not in ORDERS:
             raise ValueError(
                 f"order={order!r}: expected one of {', '.join(ORDERS)}, or a permutation of range(n); the loss orders"
-                " (loss_high, loss_low) and reselect choose with the network, in the CLI (schedule.order)"
+                " (loss_high, loss_low) and reselect choose with the network, in the CLI's loop (python train.py)"
             )
         if order != "random" and X is None:
             raise TypeError(f"order={order!r} needs the inputs X (it groups or spreads patterns by them)")

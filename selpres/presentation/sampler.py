@@ -349,12 +349,13 @@ class SelectivePresentation(DistributedSampler):
                 f"epoch {self.epoch} presented {done} of its {size} patterns before set_epoch({next_epoch}): the loop "
                 "stopped early. A loop that counts an epoch's batches once (Lightning does) cuts every larger "
                 "stage: with Lightning add selpres.presentation.lightning.SelectivePresentationCallback(sampler)",
+                stacklevel=5,  # the caller of set_epoch
             )
 
-    def _warn(self, what: str, message: str) -> None:
+    def _warn(self, what: str, message: str, stacklevel: int = 3) -> None:
         if what not in self._warned:  # once per sampler and kind
             self._warned.add(what)
-            warnings.warn(message, SelectivePresentationWarning, stacklevel=3)
+            warnings.warn(message, SelectivePresentationWarning, stacklevel=stacklevel)
 
     # ------------------------------------------------------------------------------------ cost
 
