@@ -318,3 +318,12 @@ def test_examples_run(tmp_path):
     light = run_python(str(tmp_path / "lightning_fit.py"), "--data", data, "--epochs", "2", cwd=tmp_path)
     assert light.returncode == 0, light.stderr[-3000:]
     assert "10 epochs, 4,710 presentations (the schedule's 4,710)" in light.stdout
+
+
+def test_the_bench_row_runs(capsys):
+    """selpres/bench/sampler.py on a small set: one row per loop kind, both samplers present n every epoch."""
+    from selpres.bench.sampler import bench_sampler
+
+    bench_sampler(quick=True, n=3000, batch=64)
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("sampler  ")]
+    assert [r.split()[1] for r in rows] == ["TensorDataset", "batch-indexed", "sampler"]
