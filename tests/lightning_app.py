@@ -56,20 +56,23 @@ def data():
     return X, TensorDataset(torch.arange(N), X.float())
 
 
-def fit(callback: bool = True, batch_size: int = 8, **trainer_kw) -> tuple[Recorder, SelectivePresentation]:
+def fit(
+    callback: bool = True, batch_size: int = 8, num_workers: int = 0, ckpt_path=None, callbacks_extra=(), **trainer_kw
+) -> tuple[Recorder, SelectivePresentation]:
     X, ds = data()
     sampler = SelectivePresentation(X, sizes=SIZES, epochs=EPOCHS, seed=3)
     model = Recorder()
     trainer = pl.Trainer(
         accelerator="cpu",
         logger=False,
-        enable_checkpointing=False,
+        enable_checkpointing=trainer_kw.pop("enable_checkpointing", False),
         enable_progress_bar=False,
         enable_model_summary=False,
-        callbacks=[SelectivePresentationCallback(sampler)] if callback else [],
+        callbacks=([SelectivePresentationCallback(sampler)] if callback else []) + list(callbacks_extra),
         **trainer_kw,
     )
-    trainer.fit(model, DataLoader(ds, batch_size=batch_size, sampler=sampler))
+    loader = DataLoader(ds, batch_size=batch_size, sampler=sampler, num_workers=num_workers)
+    trainer.fit(model, loader, ckpt_path=ckpt_path)
     return model, sampler
 
 

@@ -65,3 +65,28 @@ def test_ddp_on_two_cpu_processes_presents_each_stage_exactly(tmp_path):
         a, b = rec["indices"]
         assert len(a) == len(b) == -(-len(subset) // 2)  # equal shares
         assert set(a) | set(b) == subset and len(a) + len(b) - len(set(a) | set(b)) == len(subset) % 2
+
+
+def test_loader_workers_are_not_a_repeated_epoch():
+    """With workers Lightning builds a second iterator each epoch after a prefetch by the first; the callback tells
+    the sampler, so no warning, and every epoch still presents exactly its training set."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SelectivePresentationWarning)
+        model, sampler = app.fit(devices=1, num_workers=2)
+    for rec, subset in zip(model.epochs, _expected(sampler), strict=True):
+        (seen,) = rec["indices"]
+        assert len(seen) == len(subset) and set(seen) == subset
+
+
+def test_a_resumed_fit_continues_the_schedule(tmp_path):
+    """Stop after 3 epochs with a checkpoint, resume in a fresh sampler: epochs 3.. present their own sets."""
+    from lightning.pytorch.callbacks import ModelCheckpoint
+
+    ckpt = ModelCheckpoint(dirpath=tmp_path, save_last=True, every_n_epochs=1)
+    app.fit(devices=1, max_epochs=3, enable_checkpointing=True, callbacks_extra=[ckpt])
+    model, sampler = app.fit(devices=1, ckpt_path=str(tmp_path / "last.ckpt"))
+    want = _expected(sampler)[3:]
+    assert len(model.epochs) == len(want) == 3
+    for rec, subset in zip(model.epochs, want):
+        (seen,) = rec["indices"]
+        assert len(seen) == len(subset) and set(seen) == subset, rec["epoch"]
