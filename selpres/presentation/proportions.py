@@ -20,6 +20,19 @@ from collections.abc import Sequence
 from selpres.errors import ConfigError
 
 PAPER_N = 1002  # the paper's exemplar set (section 5.1)
+_PAPER_SIZES = [50, 100, 400, 800, 1002]  # Table 1's n_i
+
+# ``configs/schedule/*.yaml`` for library callers (``SelectivePresentation(X, schedule="selective")``), who may not
+# have the configs folder (it is not in the wheel); tests/test_selective_presentation.py checks both agree.
+NAMED = {
+    "conventional": {"sizes": [1.0], "epochs": [150], "budget": None, "order": "stratified"},
+    "selective": {"sizes": _PAPER_SIZES, "epochs": [30] * 5, "budget": None, "order": "stratified"},
+    "random_growth": {"sizes": _PAPER_SIZES, "epochs": [30] * 5, "budget": None, "order": "random"},
+    "matched": {"sizes": [1.0], "epochs": None, "budget": 70_560, "order": "stratified"},
+    "geometric": {"sizes": [0.0625, 0.125, 0.25, 0.5, 1.0], "epochs": [30] * 5, "budget": None, "order": "stratified"},
+    "linear": {"sizes": [0.2, 0.4, 0.6, 0.8, 1.0], "epochs": [30] * 5, "budget": None, "order": "stratified"},
+    "two_stage": {"sizes": [0.1, 1.0], "epochs": [75, 75], "budget": None, "order": "stratified"},
+}
 
 
 def _counts(sizes: Sequence) -> bool:

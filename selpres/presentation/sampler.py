@@ -15,11 +15,13 @@ the checkpoint keeps), and the shuffles of all replicas of a job are computed in
 from __future__ import annotations
 
 import functools
+import warnings
 from collections.abc import Iterator
 
 import numpy as np
 import torch
-from torch.utils.data import Sampler
+import torch.distributed as dist
+from torch.utils.data.distributed import DistributedSampler
 
 from selpres.presentation.schedule import Schedule
 from selpres.seeding import derive_seed
@@ -135,16 +137,87 @@ def epoch_orders(samplers: list[SelectivePresentationSampler], buffer: torch.Ten
     return out
 
 
-class SelectivePresentationSampler(Sampler[int]):
-    """Yields the indices presented in one epoch: the current stage's subset of U, freshly shuffled."""
+class SelectivePresentationWarning(UserWarning):
+    """A loop that presents something other than the schedule (an epoch repeated, or cut short)."""
 
-    def __init__(self, order: torch.Tensor, schedule: Schedule, seed: int):
-        self.schedule = schedule
-        self.order = order  # checked and stored contiguous (the setter below)
-        self.seed = int(seed)
+
+@functools.lru_cache(maxsize=64)
+def _stage_firsts(stages: tuple) -> tuple[int, ...]:
+    """Index of each stage's first epoch."""
+    firsts, e = [], 0
+    for st in stages:
+        firsts.append(e)
+        e += st.epochs + (1 if st.extra else 0)
+    return tuple(firsts)
+
+
+class SelectivePresentation(DistributedSampler):
+    """Selective presentation for any PyTorch loop: each epoch yields the current training set A_i, reshuffled.
+
+        sampler = SelectivePresentation(X, sizes=[0.05, 0.1, 0.4, 0.8, 1.0], epochs=[30] * 5, seed=0)
+        loader = DataLoader(dataset, batch_size=32, sampler=sampler)
+        for epoch in range(sampler.num_epochs):
+            sampler.set_epoch(epoch)
+            for batch in loader: ...
+
+    The schedule: ``sizes`` (ints are counts n_i, floats fractions of n, the last the whole set: ``1.0`` or n),
+    ``epochs`` N_i per stage, or ``budget`` presentations of one conventional stage (the compute-matched
+    baseline), or ``schedule=`` a name of ``configs/schedule/`` ("selective", "matched", "random_growth", …).
+    ``order`` grows the nested sets A1 ⊂ … ⊂ U: "stratified" (the paper's uniform sampling of the input space X),
+    "random", "coverage" (farthest-point), or a permutation of range(n) of your own; ``seed`` fixes the order and
+    every epoch's shuffle, exactly as replica 0 of ``python train.py seed=<seed>`` with the same X.
+
+    Distributed as ``DistributedSampler``: ``num_replicas``/``rank`` default to torch.distributed's (read when
+    the sampler is used, so it may be built before the process group); rank r takes ``epoch[r::num_replicas]`` of
+    the epoch's one shuffled order, which every rank computes alike from (seed, epoch) without communicating;
+    ``drop_last=False`` pads that order by repeating its head to a multiple of num_replicas, ``drop_last=True``
+    drops its tail. It *is* a DistributedSampler, so Lightning and other wrappers leave it unwrapped.
+
+    Cost: ``presentations`` counts the patterns presented so far by all ranks together (the paper's T / t),
+    ``rank_presentations`` this rank's: the schedule's epochs before the current one, plus the indices the
+    current epoch has handed out (read it after an epoch for that epoch's total).
+    """
+
+    shuffle = True  # DistributedSampler's attribute: every epoch is a fresh shuffle
+    dataset = None  # DistributedSampler's attribute: sized by the schedule, not by a dataset
+
+    def __init__(
+        self,
+        X=None,
+        *,
+        sizes=None,
+        epochs=None,
+        budget=None,
+        schedule=None,
+        order=None,
+        seed: int = 0,
+        strata_bins: int = 2,
+        n: int | None = None,
+        num_replicas: int | None = None,
+        rank: int | None = None,
+        drop_last: bool = False,
+    ):
+        # DistributedSampler.__init__ is not called: it needs a dataset and an initialised process group, and
+        # every attribute it would set is a property or set here.
+        from selpres.presentation import arguments as A
+
+        X = None if X is None else A.inputs_of(X)
+        n = A.size_of(X, n, order)
+        sched, named_order, note = A.schedule_of(n, sizes, epochs, budget, schedule)
+        self.schedule = sched
+        self.seed = A._whole("seed", seed, 0)
+        bins = A._whole("strata_bins", strata_bins, 1)
+        kind = order if order is not None else named_order or "stratified"
+        self.order, self.order_kind = A.order_of(kind, X, n, self.seed, bins)
+        self.schedule_note = note  # how a named schedule's counts were applied to this n (None: as given)
+        self.drop_last = bool(drop_last)
+        self._replicas, self._rank = A.replicas_of(num_replicas, rank)
         self._key = derive_seed(self.seed, "shuffle")
-        self._plan = schedule.plan()
+        self._plan = sched.plan()
         self.epoch = 0
+        self._passes: list = []  # (iterator, length) of every pass over the current epoch
+        self._another_pass = False  # the loop announced a fresh pass of this epoch (expect_new_pass)
+        self._warned: set[str] = set()
 
     @property
     def order(self) -> torch.Tensor:
@@ -160,26 +233,161 @@ class SelectivePresentationSampler(Sampler[int]):
             )
         self._order = order.to(torch.int64).contiguous().view(-1)
 
+    # ------------------------------------------------------------------------------------ where we are
+
+    @property
+    def num_epochs(self) -> int:
+        """Σ N_i (a budget's partial epoch counts as one): ``range(sampler.num_epochs)`` is the loop."""
+        return len(self._plan)
+
     def set_epoch(self, epoch: int) -> None:
+        """Choose the epoch (and so the stage): call it before each epoch, as for DistributedSampler."""
         if not 0 <= epoch < len(self._plan):
-            raise IndexError(f"epoch {epoch} outside the schedule's {len(self._plan)} epochs")
+            raise IndexError(
+                f"epoch={epoch} is outside the schedule's {len(self._plan)} epochs (0 .. {len(self._plan) - 1}):"
+                " stop after sampler.num_epochs epochs (Lightning: SelectivePresentationCallback sets max_epochs)"
+            )
+        if epoch != self.epoch:
+            if self._passes:
+                self._check_finished(epoch)
+            self._passes, self._another_pass = [], False
         self.epoch = epoch
 
     @property
     def stage(self) -> int:
+        """The current stage's index (0 for A1)."""
         return self._plan[self.epoch].stage
 
     def subset(self, stage: int | None = None) -> torch.Tensor:
-        """A_i as indices into U (the first n_i of the priority order)."""
+        """A_i as indices into U (the first n_i of the priority order); the current stage's by default."""
         k = self.stage if stage is None else stage
         return self.order[: self.schedule.stages[k].size]
 
+    @property
+    def training_set(self) -> torch.Tensor:
+        """The current training set A_i (the paper's word), as indices into U."""
+        return self.subset()
+
+    # ------------------------------------------------------------------------------------ distribution
+
+    @property
+    def num_replicas(self) -> int:
+        if self._replicas is not None:
+            return self._replicas
+        return dist.get_world_size() if dist.is_available() and dist.is_initialized() else 1
+
+    @property
+    def rank(self) -> int:
+        r = self._rank
+        if r is None:
+            r = dist.get_rank() if dist.is_available() and dist.is_initialized() else 0
+        if r >= self.num_replicas:
+            raise ValueError(f"rank={r}: expected 0 <= rank < num_replicas = {self.num_replicas}")
+        return r
+
+    def _share(self, count: int, world: int) -> int:
+        """Indices per rank of an epoch presenting ``count`` (DistributedSampler's num_samples)."""
+        return count if world == 1 else count // world if self.drop_last else -(-count // world)
+
+    @property
+    def num_samples(self) -> int:
+        """This rank's indices in the current epoch (``len(sampler)``)."""
+        return self._share(self._plan[self.epoch].presentations, self.num_replicas)
+
+    @property
+    def total_size(self) -> int:
+        """All ranks' indices in the current epoch (padded or dropped to a multiple of num_replicas)."""
+        return self.num_samples * self.num_replicas
+
+    # ------------------------------------------------------------------------------------ what is presented
+
     def epoch_indices(self) -> torch.Tensor:
-        """This epoch's presentation order as one tensor (what the engines consume)."""
+        """This epoch's presentation order for all ranks together, as one tensor (what the engines consume)."""
         return epoch_orders([self])[0]
 
+    def rank_indices(self) -> torch.Tensor:
+        """This rank's share of the epoch: ``epoch[rank:total_size:num_replicas]`` of the padded or cut order."""
+        idx, world = self.epoch_indices(), self.num_replicas
+        if world == 1:
+            return idx
+        total = self._share(idx.numel(), world) * world
+        if total > idx.numel():  # DistributedSampler's padding: the head of the order again
+            idx = idx.repeat(-(-total // idx.numel()))
+        return idx[self.rank : total : world]
+
     def __iter__(self) -> Iterator[int]:
-        return iter(self.epoch_indices().tolist())
+        if self._passes and not self._another_pass and self._handed_out() > 0:
+            self._warn(
+                "repeat",
+                f"epoch {self.epoch} is presented again: without set_epoch every pass presents the same training "
+                f"set A_{self.stage + 1} in the same order, for ever. Call sampler.set_epoch(epoch) before each "
+                "epoch: for epoch in range(sampler.num_epochs): sampler.set_epoch(epoch); ...",
+            )
+        self._another_pass = False
+        indices = self.rank_indices().tolist()
+        it = iter(indices)  # a plain list iterator: its length hint tells how far the loop got, at no cost
+        self._passes.append((it, len(indices)))
+        return it
 
     def __len__(self) -> int:
-        return self._plan[self.epoch].presentations
+        return self.num_samples
+
+    def expect_new_pass(self) -> None:
+        """The loop is about to start a fresh pass over this epoch after an abandoned one (Lightning re-creates
+        its iterator after a worker prefetch): that pass is not a repeat."""
+        self._another_pass = True
+
+    def _handed_out(self) -> int:
+        """Indices of the current epoch handed to the loop so far (by its furthest pass)."""
+        return max((size - it.__length_hint__() for it, size in self._passes), default=0)
+
+    def _check_finished(self, next_epoch: int) -> None:
+        done, size = self._handed_out(), self._passes[-1][1]
+        if 0 < done < size:
+            self._warn(
+                "cut",
+                f"epoch {self.epoch} presented {done} of its {size} patterns before set_epoch({next_epoch}): the loop "
+                "stopped early. A loop that counts an epoch's batches once (Lightning does) cuts every larger "
+                "stage: with Lightning add selpres.presentation.lightning.SelectivePresentationCallback(sampler)",
+                stacklevel=5,  # the caller of set_epoch
+            )
+
+    def _warn(self, what: str, message: str, stacklevel: int = 3) -> None:
+        if what not in self._warned:  # once per sampler and kind
+            self._warned.add(what)
+            warnings.warn(message, SelectivePresentationWarning, stacklevel=stacklevel)
+
+    # ------------------------------------------------------------------------------------ cost
+
+    def _before(self, epoch: int, world: int) -> int:
+        """One rank's presentations in the schedule's epochs before ``epoch``."""
+        total = 0
+        for st, first in zip(self.schedule.stages, _stage_firsts(self.schedule.stages)):
+            full = min(max(epoch - first, 0), st.epochs)
+            total += full * self._share(st.size, world)
+            if st.extra and epoch > first + st.epochs:
+                total += self._share(st.extra, world)
+        return total
+
+    @property
+    def rank_presentations(self) -> int:
+        """This rank's presentations so far (epochs before the current one, plus what this epoch handed out)."""
+        return self._before(self.epoch, self.num_replicas) + self._handed_out()
+
+    @property
+    def presentations(self) -> int:
+        """All ranks' presentations so far: T / t, the cost axis (ranks present equal shares, padding included)."""
+        return self.rank_presentations * self.num_replicas
+
+    def __repr__(self) -> str:
+        return (
+            f"SelectivePresentation(n={self.schedule.n}, sizes={self.schedule.sizes}, epochs={self.schedule.epochs}, "
+            f"order={self.order_kind!r}, seed={self.seed}, epoch={self.epoch}/{self.num_epochs}, stage={self.stage})"
+        )
+
+
+class SelectivePresentationSampler(SelectivePresentation):
+    """The CLI's spelling (a built priority order and schedule, positional); the same object."""
+
+    def __init__(self, order: torch.Tensor, schedule: Schedule, seed: int):
+        super().__init__(order=order, schedule=schedule, seed=seed)

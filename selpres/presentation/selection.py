@@ -40,7 +40,7 @@ import numpy as np
 import torch
 
 from selpres.presentation.orders import strata, stratified_orders
-from selpres.presentation.sampler import SelectivePresentationSampler
+from selpres.presentation.sampler import SelectivePresentation
 from selpres.presentation.schedule import EpochPlan, Schedule
 from selpres.seeding import generator
 
@@ -142,7 +142,7 @@ class StageSelection:
         X: torch.Tensor,
         Y: torch.Tensor,
         cost_fraction: float,
-        samplers: list[SelectivePresentationSampler],
+        samplers: list[SelectivePresentation],
     ):
         if kind not in STAGEWISE:
             raise ValueError(f"order {kind!r} is fixed before training; stage-wise orders: {STAGEWISE}")

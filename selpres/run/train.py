@@ -31,7 +31,7 @@ from selpres.engines.online import make_engine
 from selpres.errors import ConfigError
 from selpres.presentation.orders import priority_orders
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
-from selpres.presentation.sampler import SelectivePresentationSampler, epoch_orders, shuffle_implementation
+from selpres.presentation.sampler import SelectivePresentation, epoch_orders, shuffle_implementation
 from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
 from selpres.presentation.selection import StageSelection, initial_kind, stage_selection
 from selpres.run import results as results_json
@@ -55,7 +55,7 @@ class Problem:
     X: torch.Tensor  # exemplar inputs, scaled
     Y: torch.Tensor  # exemplar targets, scaled
     tests: dict  # name -> (X scaled, Y in Nm)
-    samplers: list[SelectivePresentationSampler]
+    samplers: list[SelectivePresentation]
     init_params: list[torch.Tensor]
     selection: StageSelection | None = None  # loss_high/loss_low/reselect: A_k chosen at each stage start
     task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
@@ -95,7 +95,7 @@ def prepare(cfg: DictConfig) -> Problem:
     kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
     gens = [generator(s, "subset") for s in seeds]
     orders = priority_orders(task.exemplar.X, initial_kind(kind), gens, bins)
-    samplers = [SelectivePresentationSampler(order, schedule, s) for order, s in zip(orders, seeds)]
+    samplers = [SelectivePresentation(order=order, schedule=schedule, seed=s) for order, s in zip(orders, seeds)]
     X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
     return Problem(
         sizes=sizes,
