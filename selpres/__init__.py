@@ -16,7 +16,11 @@ import importlib
 
 # name -> the module that owns it
 _EXPORTS = {
-    # the method: schedules of nested training sets and the priority orders whose prefixes they are
+    # the method in any PyTorch loop: the Sampler (DDP-aware) and its Lightning callback (imports lightning)
+    "SelectivePresentation": "selpres.presentation.sampler",
+    "SelectivePresentationWarning": "selpres.presentation.sampler",
+    "SelectivePresentationCallback": "selpres.presentation.lightning",
+    # schedules of nested training sets and the priority orders whose prefixes are the A_i
     "Schedule": "selpres.presentation.schedule",
     "build_schedule": "selpres.presentation.schedule",
     "priority_order": "selpres.presentation.orders",
