@@ -1,9 +1,16 @@
 """Train the paper's network: ``python train.py schedule=selective topology=6-13-2`` (see README)."""
 
-import hydra
-from omegaconf import DictConfig
+import sys
 
-import selpres.run.config  # noqa: F401  (registers the typed schema and resolvers before Hydra composes)
+try:  # a Ctrl-C while the imports load: one line, exit 130 (nothing is written before Hydra starts)
+    import hydra
+    from omegaconf import DictConfig
+
+    import selpres.run.config  # noqa: F401  (registers the typed schema and resolvers before Hydra composes)
+    from selpres.run.guard import guarded
+except KeyboardInterrupt:
+    print("interrupted", file=sys.stderr)
+    sys.exit(130)
 
 
 @hydra.main(version_base="1.3", config_path="configs", config_name="train")
@@ -14,4 +21,4 @@ def main(cfg: DictConfig) -> float:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

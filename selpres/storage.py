@@ -38,6 +38,15 @@ def atomic_write(path: Path, write: Callable[[BinaryIO], Any]) -> None:
         raise
 
 
+def remove_stale_temps(folder: Path, names=(RESULTS, WEIGHTS, CHECKPOINT, CHECKPOINT_ALT)) -> list[Path]:
+    """Remove the temp files :func:`atomic_write` left for ``names`` when a kill cut it short; call only while
+    holding the folder's lock (selpres.run.lock), when no write of this job can be under way. Returns them."""
+    stale = [p for name in names for p in Path(folder).glob(f".{name}.*.tmp")]
+    for p in stale:
+        p.unlink(missing_ok=True)
+    return stale
+
+
 def write_json(path: Path, obj: Any) -> None:
     atomic_write(path, lambda f: f.write((to_json(obj) + "\n").encode()))
 

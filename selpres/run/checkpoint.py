@@ -94,6 +94,21 @@ class Checkpoints:
         """Whether ``folder`` holds a checkpoint to resume from."""
         return any((folder / name).exists() for name in (CHECKPOINT, CHECKPOINT_ALT))
 
+    def leftover(self) -> bool:
+        """Whether the folder holds checkpoint files of this job only (every checkpoint reads with its hash;
+        a history log alone is the last file a finished job removes): what a re-run of the finished job may
+        remove."""
+        present = [p for p in self.paths if p.exists()]
+        if not present and not self.history_path.exists():
+            return False
+        for path in present:
+            try:
+                if read(path).get("config_hash") != self.hash:
+                    return False
+            except Exception:  # unreadable: not known to be this job's, left alone
+                return False
+        return True
+
     def resume(self, engine, replicas: int) -> Progress:
         """The saved progress (engine state loaded) from the newer readable checkpoint of this job here, else a
         fresh start. A file that cannot be read is set aside and the other one resumed (a crash can leave the

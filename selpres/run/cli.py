@@ -4,8 +4,15 @@ A job's folder is named by its overrides, so the same command finds the same fol
 is not redone (``overwrite=true`` forces it), a killed one resumes from its checkpoint, and re-running a
 sweep fills in only the jobs that are missing or failed.
 A config error in a single run prints one line and exits 2, and the run removes only what it created
-(:class:`OutputGuard` remembers what the folder held before Hydra wrote into it); in a sweep it fails that
-job alone (its ``results.json`` says ``"status": "failed"``) and the sweep goes on.
+(:class:`selpres.run.guard.OutputGuard` remembers what the folder held before Hydra wrote into it); in a
+sweep it fails that job alone (its ``results.json`` says ``"status": "failed"``) and the sweep goes on.
+
+One process writes a job folder at a time (:mod:`selpres.run.lock`): a single run takes the lock before Hydra
+creates or writes anything there, and a second run on a folder in use exits 2 naming the holder's PID; in a
+sweep the busy job is skipped (one line; Hydra has already rewritten its ``.hydra/`` record by then: no
+callback runs earlier for a sweep's job) and the others run. Workers of a sweep whose process is gone stop
+at the next epoch with their checkpoint kept (:mod:`selpres.run.orphan`). A write that fails (disk full, a
+read-only folder) prints one line naming the path; what was saved before stays.
 """
 
 from __future__ import annotations
@@ -14,81 +21,28 @@ import json
 import logging
 import math
 import os
-import shutil
 import sys
 import traceback
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from hydra.core.hydra_config import HydraConfig
-from hydra.experimental.callback import Callback
+from hydra.errors import CompactHydraException
 from hydra.types import RunMode
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from selpres.errors import ConfigError
+from selpres.run import guard, lock, orphan
 from selpres.run.checkpoint import Checkpoints
 from selpres.run.results import job_hash
 from selpres.run.train import Problem, train
-from selpres.storage import RESULTS, write_json
+from selpres.storage import RESULTS, remove_stale_temps, write_json
 
 log = logging.getLogger("selpres")
 
 
-# ------------------------------------------------------------------ what a run may remove on refusal
-@dataclass
-class Before:
-    """A run folder as it was before Hydra wrote into it."""
-
-    created: Path | None  # the topmost folder this run creates (None: the run folder existed)
-    entries: set[str] = field(default_factory=set)  # names in the run folder
-    hydra_files: dict[str, bytes] = field(default_factory=dict)  # .hydra/* contents Hydra will overwrite
-    log_size: int | None = None  # train.log's size (Hydra appends to it)
-
-    @classmethod
-    def look(cls, folder: Path) -> Before:
-        if not folder.exists():
-            created = folder
-            while not created.parent.exists():
-                created = created.parent
-            return cls(created)
-        hydra = folder / ".hydra"
-        files = {p.name: p.read_bytes() for p in hydra.iterdir() if p.is_file()} if hydra.is_dir() else {}
-        log_file = folder / "train.log"
-        return cls(
-            None, {p.name for p in folder.iterdir()}, files, log_file.stat().st_size if log_file.exists() else None
-        )
-
-    def undo(self, folder: Path) -> None:
-        """Remove what the run created and restore what Hydra overwrote; never touch anything else."""
-        if self.created is not None:
-            shutil.rmtree(self.created, ignore_errors=True)
-            return
-        for entry in folder.iterdir():
-            if entry.name not in self.entries:
-                shutil.rmtree(entry) if entry.is_dir() and not entry.is_symlink() else entry.unlink()
-        for name, data in self.hydra_files.items():
-            (folder / ".hydra" / name).write_bytes(data)
-        if self.log_size is not None and (folder / "train.log").exists():
-            os.truncate(folder / "train.log", self.log_size)
-
-
-_BEFORE: dict[Path, Before] = {}
-
-
-class OutputGuard(Callback):
-    """Hydra callback (configs/train.yaml): looks at the run folder before Hydra creates or writes into it."""
-
-    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
-        HydraConfig.instance().set_config(config)  # resolves ${hydra:job.override_dirname} as run_job will
-        folder = Path(str(OmegaConf.select(config, "hydra.run.dir"))).absolute()
-        _BEFORE[folder] = Before.look(folder)
-
-
-def _undo(out: Path) -> None:
-    before = _BEFORE.get(out.absolute())
-    if before is not None:  # unknown (train.py run without the callback): remove nothing
-        before.undo(out)
+class SweepJobError(CompactHydraException):
+    """A sweep's job that failed for a reason its one line says (a config error, a busy folder): Hydra prints
+    that line, not a traceback, when the sweep ends (exit 1); the other jobs ran."""
 
 
 # ---------------------------------------------------------------------------------------- the job
@@ -97,8 +51,10 @@ def _finished(out: Path, cfg: DictConfig) -> dict | None:
     if not path.exists():
         return None
     try:
-        res = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError):
+        res = json.loads(path.read_bytes())
+    except (OSError, ValueError):  # unreadable, not UTF-8, not JSON: not a finished job (it is redone)
+        return None
+    if not isinstance(res, dict):
         return None
     if res.get("status") in ("complete", "diverged") and res.get("config_hash") == job_hash(cfg):
         return res
@@ -119,30 +75,86 @@ def _failed(out: Path, cfg: DictConfig, error: str, kind: str) -> None:
         "schedule": {"name": cfg.schedule.name},
         "topology": cfg.topology.layers,
         "replicas": cfg.replicas,
-        "seeds": [cfg.seed + r for r in range(cfg.replicas)],
+        # the seeds listed only when few: a refused replicas=1000000000 must not build 10^9 of them
+        "seeds": [cfg.seed + r for r in range(cfg.replicas)] if 0 < cfg.replicas <= 10_000 else None,
+        "seed_range": [cfg.seed, cfg.seed + cfg.replicas - 1],
     }
     write_json(out / RESULTS, record)
 
 
+def _leftovers(out: Path, cfg: DictConfig) -> None:
+    """A kill during the final writes of a finished job (results.json is written before the checkpoint is
+    removed) leaves this job's checkpoint files next to its results: removed on the re-run that finds it done."""
+    chash = job_hash(cfg)
+    ckpts = Checkpoints(out, chash)
+    if ckpts.leftover():
+        ckpts.discard()
+        log.info("removed the checkpoint a kill left in the finished job %s", out)
+
+
 def run_job(cfg: DictConfig) -> float:
     """Hydra task function body; returns the mean held-out RMS (Nm) for sweepers such as Optuna."""
+    guard.job_started()
     hc = HydraConfig.get()
     out = Path(hc.runtime.output_dir)
     multirun = hc.mode == RunMode.MULTIRUN
+    if multirun and orphan.watch() is not None and orphan.gone():
+        _orphaned(out, "before it started")
     try:
-        _check_name(hc, multirun)
+        lock.hold(out)  # a single run took it in OutputGuard.on_run_start; a sweep's job takes it here
+    except lock.FolderBusy as e:  # not logged: the log file is the holder's
+        if multirun:
+            print(f"skipped (busy): {e}", file=sys.stderr)
+            raise SweepJobError(f"skipped (busy): {e}") from None
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
+    try:
+        return _run_locked(cfg, out, multirun)
+    finally:
+        lock.release(out)
+
+
+def _orphaned(out: Path, where: str) -> None:
+    """This sweep worker's sweep process is gone: stop the process here (the checkpoint, if any, kept)."""
+    log.warning(
+        "the sweep that launched this job is gone (PID %s): stopped %s; run the sweep again to resume %s",
+        os.environ.get(orphan.ENV, "?").rsplit(":", 2)[1],
+        where,
+        out,
+    )
+    logging.shutdown()
+    lock.release(out)
+    os._exit(3)
+
+
+def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
+    remove_stale_temps(out)
+    try:
+        _check_name(HydraConfig.get(), multirun)
         res = None if cfg.overwrite else _finished(out, cfg)
         if res is not None:
             log.info("already done: %s (overwrite=true to run it again)", out / RESULTS)
+            _leftovers(out, cfg)
         else:
             res = train(cfg, out, on_stage_end=print_stage if cfg.logging.progress else None)
+    except orphan.SweepGone as e:
+        _orphaned(out, str(e))
     except ConfigError as e:
         if multirun:
             log.error("config error: %s", e)
             _failed(out, cfg, str(e), "config")
-            raise
+            raise SweepJobError(f"{out}: config error: {e}") from None
         print(f"error: {e}", file=sys.stderr)
-        _undo(out)
+        guard.undo(out)
+        sys.exit(2)
+    except OSError as e:  # disk full, a read-only or immutable folder: the checkpoint already written stays
+        log.debug("%s", traceback.format_exc())
+        kept = "the last checkpoint is kept" if Checkpoints.present(out) else "no checkpoint was written yet"
+        line = f"cannot write {e.filename or out}: {e.strerror or e} (errno {e.errno}); {kept}: fix it and run again"
+        if multirun:
+            log.error("%s", line)
+            raise SweepJobError(f"{out}: {line}") from None
+        print(f"error: {line}", file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:
         if multirun:
@@ -150,7 +162,7 @@ def run_job(cfg: DictConfig) -> float:
         resumable = Checkpoints.present(out)
         print("interrupted" + ("; run the same command to resume" if resumable else ""), file=sys.stderr)
         if not resumable:  # interrupted before anything worth keeping
-            _undo(out)
+            guard.undo(out)
         sys.exit(130)
     except Exception as e:  # a crash: keep the traceback in the job's log, mark the job failed
         log.error("job failed:\n%s", traceback.format_exc())

@@ -34,6 +34,7 @@ from selpres.presentation.proportions import fit_schedule, with_fraction_form
 from selpres.presentation.sampler import SelectivePresentation, epoch_orders, shuffle_implementation
 from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
 from selpres.presentation.selection import StageSelection, initial_kind, stage_selection
+from selpres.run import lock, orphan
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
 from selpres.run.checks import batch_mode, optim_hparams, validate
@@ -350,25 +351,29 @@ def train(
     there, and resumes from a checkpoint of the same config (``overwrite=true``: starts afresh).
     ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it).
     """
-    clock = Clock()
-    with clock("prepare"):
-        job = start(cfg, out_dir, clock)
-    with clock("loop"):
-        for ep in job.prob.plan[job.progress.epoch :]:
-            rec = run_epoch(job, ep, clock)
-            if on_stage_end is not None and ep.index in job.prob.stage_ends:
-                on_stage_end(rec, job.prob)
-            if job.progress.all_diverged:  # nothing left to train: stop the job here
-                log.warning("every replica diverged by epoch %d; stopping", ep.index + 1)
-                break
-            if job.checkpoint_due(ep):
-                with clock("checkpoint"):
-                    job.progress.seconds = clock.snapshot()
-                    job.ckpts.save(job.engine, job.progress)
-                    job.tracker.flush()
-    with clock("eval"):
-        final = final_scores(job.engine, job.prob)
-    return finish(job, final, clock.snapshot())
+    with lock.holding(out_dir):  # one writer per job folder (selpres.run.lock)
+        clock = Clock()
+        with clock("prepare"):
+            job = start(cfg, out_dir, clock)
+        with clock("loop"):
+            for ep in job.prob.plan[job.progress.epoch :]:
+                rec = run_epoch(job, ep, clock)
+                if on_stage_end is not None and ep.index in job.prob.stage_ends:
+                    on_stage_end(rec, job.prob)
+                if job.progress.all_diverged:  # nothing left to train: stop the job here
+                    log.warning("every replica diverged by epoch %d; stopping", ep.index + 1)
+                    break
+                due = job.checkpoint_due(ep)
+                if due or (orphan.gone() and job.ckpts is not None and ep.index < len(job.prob.plan) - 1):
+                    with clock("checkpoint"):
+                        job.progress.seconds = clock.snapshot()
+                        job.ckpts.save(job.engine, job.progress)
+                        job.tracker.flush()
+                if orphan.gone() and ep.index < len(job.prob.plan) - 1:  # the sweep's process is gone
+                    raise orphan.SweepGone(f"after epoch {ep.index + 1} (checkpoint kept)")
+        with clock("eval"):
+            final = final_scores(job.engine, job.prob)
+        return finish(job, final, clock.snapshot())
 
 
 def finish(job: Job, final: dict, seconds: dict) -> dict:

@@ -1,0 +1,118 @@
+"""One writer per job folder: an advisory lock the operating system holds for the process.
+
+Two processes that train into one folder interleave their history and checkpoints (each "resumes" the
+other's in-flight checkpoint), so ``python train.py`` takes this lock before it reads or writes anything of
+the job, and a second process on the same folder exits naming the holder instead.
+
+The lock is ``fcntl.flock`` on ``.selpres.lock`` in the job folder (stdlib; ``filelock`` would buy the same
+``flock`` on Linux plus Windows support, which the native kernel and the rest of selpres do not have): the
+kernel drops it when its holder's last descriptor closes, so a holder killed with SIGKILL frees the folder at
+once and the same command resumes with no stale lock to clear. The holder writes its PID into the file so
+the loser can name it (/proc/locks would too, on Linux only). The file is removed by its holder at the end;
+a contender re-checks after locking that the name still points at the file it locked, so removing it cannot
+let two processes both believe they hold the folder.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+from contextlib import contextmanager
+from pathlib import Path
+
+LOCK = ".selpres.lock"
+
+
+class FolderBusy(RuntimeError):
+    """The job folder is held by another live process (named by its PID when it has written it)."""
+
+    def __init__(self, folder, pid: str):
+        self.folder, self.pid = str(folder), pid
+        holder = f"process {pid}" if pid else "another process"
+        super().__init__(f"{self.folder} is in use by {holder} (one writer per job folder); nothing was touched")
+
+    def __reduce__(self):
+        return type(self), (self.folder, self.pid)
+
+
+class FolderLock:
+    """``FolderLock.take(folder)``: the held lock (``created``: whether this call made the lock file), or
+    FolderBusy. ``release()`` removes the file and drops the lock."""
+
+    def __init__(self, folder: Path, fd: int, created: bool):
+        self.folder, self.path, self._fd, self.created = folder, folder / LOCK, fd, created
+
+    @classmethod
+    def take(cls, folder: str | Path) -> FolderLock:
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / LOCK
+        for _ in range(100):  # a holder removing the file between our open and our lock: try again
+            created = False
+            try:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
+                created = True
+            except FileExistsError:
+                try:
+                    fd = os.open(path, os.O_RDWR | os.O_CLOEXEC)
+                except FileNotFoundError:
+                    continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                pid = os.pread(fd, 32, 0).decode(errors="replace").strip()
+                os.close(fd)
+                raise FolderBusy(folder, pid) from None
+            try:
+                same = os.stat(path).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if not same:  # we locked a file its holder has just removed
+                os.close(fd)
+                continue
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            return cls(folder, fd, created)
+        raise FolderBusy(folder, "")
+
+    def release(self) -> None:
+        if self._fd < 0:
+            return
+        try:
+            if os.path.exists(self.path) and os.stat(self.path).st_ino == os.fstat(self._fd).st_ino:
+                os.unlink(self.path)
+        except OSError:  # a read-only folder: the lock file stays, the lock itself goes with the descriptor
+            pass
+        os.close(self._fd)
+        self._fd = -1
+
+
+_HELD: dict[Path, FolderLock] = {}
+
+
+def hold(folder: str | Path) -> FolderLock:
+    """Take the lock of ``folder`` for the rest of this job (again for the same folder: the one held)."""
+    key = Path(folder).absolute()
+    if key not in _HELD:
+        _HELD[key] = FolderLock.take(key)
+    return _HELD[key]
+
+
+def release(folder: str | Path) -> None:
+    lock = _HELD.pop(Path(folder).absolute(), None)
+    if lock is not None:
+        lock.release()
+
+
+@contextmanager
+def holding(folder: str | Path | None):
+    """The lock of ``folder`` for the duration (None: no folder, no lock); one already held by this process
+    (``python train.py`` takes it before Hydra writes) is kept, not released here."""
+    if folder is None or Path(folder).absolute() in _HELD:
+        yield
+        return
+    hold(folder)
+    try:
+        yield
+    finally:
+        release(folder)
