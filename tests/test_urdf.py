@@ -13,7 +13,8 @@ import test_serial as serial_tests  # tests/ is on sys.path (pytest's rootdir-re
 import torch
 from test_serial import states
 
-from selpres.arms.serial import Link, SerialArm, rot_z, rpy_matrix
+from selpres.arms.kinematics import Link, rot_z, rpy_matrix
+from selpres.arms.serial import SerialArm
 from selpres.arms.urdf import UrdfError, load_urdf, to_urdf
 from selpres.errors import ConfigError
 

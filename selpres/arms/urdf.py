@@ -23,12 +23,11 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from selpres.arms.serial import (
+from selpres.arms.kinematics import (
     IDENTITY,
     ZERO3,
     Link,
     Mat3,
-    SerialArm,
     Vec3,
     _mat_mul,
     _mat_vec,
@@ -37,6 +36,7 @@ from selpres.arms.serial import (
     matrix_rpy,
     rpy_matrix,
 )
+from selpres.arms.serial import SerialArm
 from selpres.errors import ConfigError, FileError
 from selpres.storage import atomic_write
 
