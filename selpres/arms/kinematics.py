@@ -96,6 +96,8 @@ class Link:
     rotation: Mat3 = IDENTITY
     axis: Vec3 = (0.0, 0.0, 1.0)
     limits: tuple[float, float] | None = None
+    velocity: float | None = None  # |q̇| limit (rad/s) and |τ| limit (Nm) of the joint, where a file gives them
+    effort: float | None = None
 
     @property
     def rpy(self) -> Vec3:
@@ -165,6 +167,10 @@ def check_link(link: Link, where: str) -> Link:
         and link.limits[0] < link.limits[1]
     ):
         raise ConfigError(f"{where}.joint.limits", link.limits, "[lower, upper] in rad with lower < upper")
+    for field in ("velocity", "effort"):
+        value = getattr(link, field)
+        if value is not None and not (_finite([value]) and value > 0):
+            raise ConfigError(f"{where}.joint.{field}", value, "a positive finite limit (null: not given)")
     floats = lambda v: tuple(float(x) for x in v)
     return replace(
         link,
@@ -175,6 +181,8 @@ def check_link(link: Link, where: str) -> Link:
         rotation=tuple(floats(r) for r in link.rotation),
         axis=tuple(float(a) / norm for a in link.axis),
         limits=None if link.limits is None else floats(link.limits),
+        velocity=None if link.velocity is None else float(link.velocity),
+        effort=None if link.effort is None else float(link.effort),
     )
 
 

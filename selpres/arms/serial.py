@@ -29,7 +29,8 @@ Config spec read by ``from_config`` (YAML/dict; ``kind: serial``)::
     convention: urdf                 # optional: urdf (default) or dh
     links:                           # from the base outwards
       - name: link1
-        joint: {name: joint1, xyz: [0, 0, 0], rpy: [0, 0, 0], axis: [0, 0, 1], limits: [-3.1, 3.1]}
+        joint: {name: joint1, xyz: [0, 0, 0], rpy: [0, 0, 0], axis: [0, 0, 1], limits: [-3.1, 3.1],
+                velocity: 2.0, effort: 50.0}  # optional |q̇| (rad/s), |τ| (Nm) limits: the default boxes
         mass: 0.42                   # kg
         com: [0.2, 0.0, 0.0]         # m, link frame
         inertia: {ixx: 0, iyy: 0, izz: 0, ixy: 0, ixz: 0, iyz: 0}   # kg m², about the com; or a 3x3 list;
@@ -90,6 +91,7 @@ class SerialArm:
         name: str = "arm",
         base: str = "base",
         tip: str = "tip",
+        source: dict | None = None,
     ):
         if len(links) < 1:
             raise ConfigError("links", list(links), "at least one link")
@@ -102,6 +104,7 @@ class SerialArm:
         self.gravity_vector = tuple(float(g) for g in gravity)
         self.end_point = tuple(float(e) for e in end_point)
         self.name, self.base, self.tip = name, base, tip
+        self.source = dict(source or {})  # where the arm came from (a URDF's file, modelled and held joints)
         names = [lk.name for lk in self.links] + [base]
         for kind, seq in (("link", names), ("joint", [lk.joint for lk in self.links])):
             dup = sorted({x for x in seq if seq.count(x) > 1})
@@ -151,6 +154,8 @@ class SerialArm:
                     rotation=_mat_mul(prev_rot, rot_z(float(row.get("offset", 0.0)))),
                     axis=(0.0, 0.0, 1.0),
                     limits=row.get("limits"),
+                    velocity=row.get("velocity"),
+                    effort=row.get("effort"),
                 )
             )
             prev_xyz, prev_rot = (a, 0.0, d), rx
@@ -169,6 +174,7 @@ class SerialArm:
             joint = {"name": lk.joint, "xyz": list(lk.xyz), "rpy": list(lk.rpy), "axis": list(lk.axis)}
             if lk.limits is not None:
                 joint["limits"] = list(lk.limits)
+            joint.update({k: getattr(lk, k) for k in ("velocity", "effort") if getattr(lk, k) is not None})
             links.append(
                 {
                     "name": lk.name,
@@ -201,6 +207,11 @@ class SerialArm:
         """``[N, 2]`` (lower, upper) in rad; ±inf for a joint without limits."""
         inf = math.inf
         return torch.tensor([lk.limits if lk.limits is not None else (-inf, inf) for lk in self.links], dtype=dtype)
+
+    def rate_limits(self, kind: str = "velocity", dtype: torch.dtype = torch.float64) -> torch.Tensor:
+        """``[N]`` the joints' |q̇| (``velocity``, rad/s) or |τ| (``effort``, Nm) limits; inf where not given."""
+        values = [getattr(lk, kind) for lk in self.links]
+        return torch.tensor([math.inf if v is None else v for v in values], dtype=dtype)
 
     # -- batched evaluation -------------------------------------------------------------------------------
     # Inside, a vector is a tuple of three entries and a matrix a tuple of three rows, each entry a [B]

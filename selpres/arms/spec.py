@@ -16,6 +16,7 @@ from selpres.errors import ConfigError
 
 INERTIA_KEYS = ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")
 ZERO3 = (0.0, 0.0, 0.0)
+FIELDS = ("name", "mass", "com", "inertia", "joint", "limits")
 
 
 def plain(cfg: Any) -> Any:
@@ -82,7 +83,7 @@ def parse_spec(node: Any, prefix: str, cls: type) -> Any:
     kw = {k: str(top[k]) for k in ("name", "base", "tip") if k in top}
     gravity = _vector(top["gravity"], f"{prefix}.gravity")
     end = _vector(top["end_point"], f"{prefix}.end_point") if "end_point" in top else ZERO3
-    joint_keys = ("name", "limits") if convention == "dh" else ("name", "xyz", "rpy", "axis", "limits")
+    joint_keys = ("name", "limits", "velocity", "effort") + (() if convention == "dh" else ("xyz", "rpy", "axis"))
     parsed = []
     for i, raw in enumerate(links):
         key = f"{prefix}.links[{i}]"
@@ -103,6 +104,7 @@ def parse_spec(node: Any, prefix: str, cls: type) -> Any:
             "inertia": _inertia(lk["inertia"], f"{key}.inertia") if "inertia" in lk else ZERO33,
             "joint": str(joint.get("name", f"joint{i + 1}")),
             "limits": _vector(joint["limits"], f"{key}.joint.limits", 2) if "limits" in joint else None,
+            **{k: _number(joint[k], f"{key}.joint.{k}") for k in ("velocity", "effort") if joint.get(k) is not None},
         }
         if convention == "dh":
             dh = _keys(lk["dh"], f"{key}.dh", ("a", "alpha", "d", "offset"), ("a", "alpha", "d"))
@@ -115,7 +117,7 @@ def parse_spec(node: Any, prefix: str, cls: type) -> Any:
             )
         # physical checks with this config's key names (the arm re-checks with its own)
         check = Link(
-            **{k: row[k] for k in ("name", "mass", "com", "inertia", "joint", "limits")},
+            **{k: row[k] for k in (*FIELDS, "velocity", "effort") if k in row},
             **({"xyz": row["xyz"], "rotation": row["rotation"], "axis": row["axis"]} if convention == "urdf" else {}),
         )
         check_link(check, key)
