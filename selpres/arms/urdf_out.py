@@ -54,9 +54,8 @@ def to_urdf(arm: SerialArm, path: str | Path) -> Path:
     robot.append(
         ET.Comment(
             f" written by selpres.arms.urdf.to_urdf: {arm.dof} revolute joints. Gravity {g!r} m/s^2 along -z of the "
-            f"root link (selpres: load_urdf(path, g={g!r})). The wrench of eq. (4) is expressed in link "
-            f"{arm.base!r} and acts at the origin of link {arm.tip!r}. Effort and velocity limits are not part "
-            "of selpres's model: written as 0 (= not given). "
+            f"root link (selpres: load_urdf(path, gravity=[0, 0, -g])). The wrench of eq. (4) is expressed in link "
+            f"{arm.base!r} and acts at the origin of link {arm.tip!r}. Effort and velocity limits: 0 = not given. "
         )
     )
 
@@ -78,7 +77,8 @@ def to_urdf(arm: SerialArm, path: str | Path) -> Path:
         el = joint(lk.joint, kind, parent, lk.name, lk.xyz, lk.rpy)
         ET.SubElement(el, "axis", xyz=_fmt(lk.axis))
         if lk.limits is not None:
-            ET.SubElement(el, "limit", lower=repr(lk.limits[0]), upper=repr(lk.limits[1]), effort="0", velocity="0")
+            rates = {k: repr(getattr(lk, k) or 0.0) for k in ("effort", "velocity")}  # 0: not given
+            ET.SubElement(el, "limit", lower=repr(lk.limits[0]), upper=repr(lk.limits[1]), **rates)
         inertial = ET.SubElement(ET.SubElement(robot, "link", name=lk.name), "inertial")
         ET.SubElement(inertial, "origin", xyz=_fmt(lk.com), rpy="0 0 0")
         ET.SubElement(inertial, "mass", value=repr(lk.mass))
