@@ -48,15 +48,15 @@ def task_floor(train_Y: torch.Tensor, tests: dict[str, tuple[torch.Tensor, torch
     return out
 
 
-def floor_warnings(summary: dict, floor: dict, data_info: dict | None) -> list[str]:
+def floor_warnings(summary: dict, floor: dict, data_info: dict | None, topology: str = "") -> list[str]:
     """One line per held-out joint whose mean final RMS is within MARGIN of the floor, with the likely cause."""
     held = floor.get("heldout", {}).get("nm", {})
     boxes = (data_info or {}).get("boxes") or {}
-    wide = [i + 1 for i, (lo, hi) in enumerate(boxes.get("q") or []) if hi - lo > math.pi]
+    spans = {k: max((hi - lo for lo, hi in boxes.get(k) or []), default=None) for k in ("q", "dq")}
+    ranges = ", ".join(f"data.{k} up to {v:.3g} wide" for k, v in spans.items() if v is not None) or "data.*"
     cause = (
-        f"q boxes wider than π on joints {wide} (data.q) may need more hidden units or epochs (topology)"
-        if wide
-        else "the input ranges (data.q, data.dq) or too small a topology / too few epochs"
+        f"the input ranges ({ranges}: narrow them) or the network's size and training "
+        f"(topology {topology or 'as set'}: more hidden units or epochs)"
     )
     out = []
     for joint, base in held.items():

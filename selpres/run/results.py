@@ -116,7 +116,9 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "seconds_per_presentation": seconds["train"] / max(1, training * R),
         "summary": stats,
         "floor": task_floor,  # predicting the training mean: RMS and nMSE per set and joint (selpres.run.floor)
-        "floor_warnings": floor.floor_warnings(stats, task_floor, prob.task.info if prob.task else None),
+        "floor_warnings": floor.floor_warnings(
+            stats, task_floor, prob.task.info if prob.task else None, str(cfg.topology.layers)
+        ),
         "replica_results": reps,
         "curves": progress.history,
         "config": to_container(cfg),
