@@ -456,7 +456,7 @@ def test_chain_options_and_physically_empty_arms_are_refused_naming_them(tmp_pat
 
 
 def test_size_guard_refuses_before_reading(tmp_path, monkeypatch):
-    import selpres.arms.urdf as U
+    import selpres.arms.urdf_read as U
 
     path = _hand(tmp_path)
     monkeypatch.setattr(U, "MAX_BYTES", 1000)
