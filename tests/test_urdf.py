@@ -488,3 +488,21 @@ def test_zero_width_limits_mean_none_and_velocity_effort_give_the_default_boxes(
     )
     assert S.boxes(both, cfg).tau.tolist() == [[-5.0, 5.0], [-3.0, 3.0]]
     assert S.boxes(both, {**cfg, "dq": [-2.0, 2.0]}).dq.tolist() == [[-2.0, 2.0]] * 2  # an explicit box wins
+
+
+def test_a_job_parses_its_urdf_once(tmp_path, monkeypatch):
+    """Checks, data hash and data share one parse (issue 18: a 150 MB file was parsed 3 times per job)."""
+    import selpres.arms.urdf_read as U
+    from selpres.run.train import train
+
+    from conftest import compose
+
+    path, parses = _hand(tmp_path), []
+    original = U._Reader.__init__
+    monkeypatch.setattr(U._Reader, "__init__", lambda self, p: (parses.append(p), original(self, p))[1])
+    cfg = compose(
+        "robot=urdf", f"robot.path={path}", "topology.layers=6-3-2", "data.n=200", "data.heldout=50",
+        "schedule=conventional", "schedule.epochs=[2]",
+    )  # fmt: skip
+    res = train(cfg, None)
+    assert parses == [path] and res["data"]["urdf"]["modelled"] == ["j1", "j2"]
