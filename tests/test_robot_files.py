@@ -1,22 +1,21 @@
 """Real robot files as they come (issue 21): published URDFs from ``example-robot-data`` load, chains cut from
 trees and held joints included, and give Pinocchio's torques to <= 1e-9 Nm on drawn states.
 
-The independent side: Pinocchio (``pin``) builds the whole file's model and ``pin.buildReducedModel`` locks
-every joint selpres holds at the value selpres held it at (Pinocchio merges the bodies itself), then its RNEA
-is compared with ``SerialArm.inverse_dynamics``. Both packages are the ``robots`` extra (pyproject.toml);
-without them these tests skip, saying so.
+The independent side (``selpres.arms.check.pinocchio_torques``): Pinocchio (``pin``) builds the whole file's
+model and ``pin.buildReducedModel`` locks every joint selpres holds at the value selpres held it at (Pinocchio
+merges the bodies itself), then its RNEA is compared with ``SerialArm.inverse_dynamics``. Both packages are
+the ``robots`` extra (pyproject.toml); without them these tests skip, saying so.
 """
 
 from __future__ import annotations
 
 import importlib.metadata
-import math
 from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 
+from selpres.arms.check import drawn_states, pinocchio_torques
 from selpres.arms.urdf import load_urdf
 
 pin = pytest.importorskip("pinocchio", reason="Pinocchio (`pin`, the robots extra) is not installed")
@@ -34,32 +33,6 @@ def _robots() -> Path | None:
 ROBOTS = _robots()
 if ROBOTS is None:
     pytest.skip("example-robot-data (the robots extra) is not installed", allow_module_level=True)
-
-
-def pinocchio_torques(path: Path, arm, q, qd, qdd) -> np.ndarray:
-    """Pinocchio's τ for the arm's modelled joints, every other joint locked where selpres held it."""
-    model = pin.buildModelFromUrdf(str(path))
-    q0, lock = pin.neutral(model), []
-    for jid in range(1, model.njoints):
-        name, j = model.names[jid], model.joints[jid]
-        if name in arm.source["modelled"]:
-            continue
-        lock.append(jid)
-        v = arm.source["held"].get(name, 0.0)
-        if j.nq == 2:  # continuous: (cos, sin)
-            q0[j.idx_q : j.idx_q + 2] = [math.cos(v), math.sin(v)]
-        elif j.nq == 1:
-            q0[j.idx_q] = v
-    red = pin.buildReducedModel(model, lock, q0)
-    assert [red.names[i] for i in range(1, red.njoints)] == arm.source["modelled"]
-    data = red.createData()
-    out = []
-    for x, v, a in zip(q.numpy(), qd.numpy(), qdd.numpy()):
-        qp = np.concatenate(
-            [[math.cos(x[k]), math.sin(x[k])] if red.joints[k + 1].nq == 2 else [x[k]] for k in range(arm.dof)]
-        )
-        out.append(pin.rnea(red, data, qp, v, a).copy())
-    return np.array(out)
 
 
 CASES = {
@@ -94,9 +67,7 @@ def test_real_files_give_pinocchios_torques(case):
     path = ROBOTS / rel
     arm = load_urdf(path, **kw)
     assert (arm.dof, len(arm.source["held"])) == (dof, held)
-    g = torch.Generator().manual_seed(7)
-    q = (torch.rand(60, dof, generator=g, dtype=torch.float64) * 2 - 1) * math.pi
-    qd, qdd = (torch.randn(60, dof, generator=g, dtype=torch.float64) for _ in range(2))
+    q, qd, qdd = drawn_states(dof, 60, 7)
     ours = arm.inverse_dynamics(q, qd, qdd).numpy()
     theirs = pinocchio_torques(path, arm, q, qd, qdd)
     assert np.abs(ours - theirs).max() <= 1e-9
