@@ -506,3 +506,12 @@ def test_a_job_parses_its_urdf_once(tmp_path, monkeypatch):
     )  # fmt: skip
     res = train(cfg, None)
     assert parses == [path] and res["data"]["urdf"]["modelled"] == ["j1", "j2"]
+
+
+def test_a_gravity_vector_is_exported_faithfully(tmp_path):
+    """robot.gravity pointing anywhere: to_urdf turns a world root so that it is -z there, and the file reads
+    back (gravity's magnitude along -z of that root) as the same dynamics."""
+    arm = load_urdf(_hand(tmp_path), gravity=(1.0, -2.0, 3.0))
+    back = load_urdf(to_urdf(arm, tmp_path / "out.urdf"), g=math.sqrt(14.0))
+    same_dynamics(arm, back, 1e-11)
+    assert back.base == arm.base and back.source["modelled"] == ["j1", "j2"]
