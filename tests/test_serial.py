@@ -15,8 +15,10 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-import selpres.arms.serial as serial
-from selpres.arms.serial import Link, SerialArm
+import selpres.arms.kinematics as serial
+import selpres.arms.serial as serial_arm
+from selpres.arms.kinematics import Link
+from selpres.arms.serial import SerialArm
 from selpres.arms.two_link import TwoLinkArm
 from selpres.errors import ConfigError
 
@@ -374,7 +376,7 @@ def test_any_leading_shape_and_chunks(monkeypatch):
     arm = load("puma560")
     q, qd, qdd, k = states(300, 6, seed=13)
     whole = arm.inverse_dynamics(q, qd, qdd, k)
-    monkeypatch.setattr(serial, "CHUNK", 7)
+    monkeypatch.setattr(serial_arm, "CHUNK", 7)
     assert torch.equal(arm.inverse_dynamics(q, qd, qdd, k), whole)
     assert torch.equal(
         arm.inverse_dynamics(

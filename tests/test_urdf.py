@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import os
 import pickle
 
 import pytest
@@ -13,7 +14,8 @@ import test_serial as serial_tests  # tests/ is on sys.path (pytest's rootdir-re
 import torch
 from test_serial import states
 
-from selpres.arms.serial import Link, SerialArm, rot_z, rpy_matrix
+from selpres.arms.kinematics import Link, rot_z, rpy_matrix
+from selpres.arms.serial import SerialArm
 from selpres.arms.urdf import UrdfError, load_urdf, to_urdf
 from selpres.errors import ConfigError
 
@@ -211,8 +213,11 @@ def test_tip_can_be_named(tmp_path):
     path = tmp_path / "hand.urdf"
     path.write_text(HAND)
     assert load_urdf(path, tip="b").end_point == (0.0, 0.0, 0.0)
-    with pytest.raises(UrdfError, match=r'tip="camera": is not a link fixed to the last moving link \'b\''):
-        load_urdf(path, tip="camera")
+    one = load_urdf(path, tip="camera")  # the tip chooses the chain: base -> a -> camera models j1 only
+    assert [lk.joint for lk in one.links] == ["j1"] and one.tip == "camera"
+    assert one.source["held"] == {"j2": 0.0} and one.source["modelled"] == ["j1"]
+    with pytest.raises(UrdfError, match=r'tip="stand": is not a link below the base link \'a\''):
+        load_urdf(path, base="a", tip="stand")
 
 
 def test_axis_defaults_to_x_and_damping_is_reported(tmp_path, caplog):
@@ -223,25 +228,21 @@ def test_axis_defaults_to_x_and_damping_is_reported(tmp_path, caplog):
     with caplog.at_level(logging.WARNING, logger="selpres.arms.urdf"):
         arm = load_urdf(path)
     assert arm.links[1].axis == (1.0, 0.0, 0.0)
-    assert any(
-        '<joint name="j1"> <dynamics damping="0.5"' in r.getMessage() and "ignored" in r.getMessage()
-        for r in caplog.records
-    )
+    assert any("<dynamics> ignored" in r.getMessage() and "j1 (damping=0.5)" in r.getMessage() for r in caplog.records)
+    assert sum("<dynamics>" in r.getMessage() for r in caplog.records) == 1  # once per file, listing the joints
 
 
 # ------------------------------------------------------------------------------------------------ errors
 @pytest.mark.parametrize(
     "edit, element, problem",
     [
-        (
-            ('type="continuous"', 'type="prismatic"'),
-            '<joint name="j2">',
-            "type 'prismatic' (a sliding joint) is not supported",
-        ),
-        (('type="continuous"', 'type="floating"'), '<joint name="j2">', "type 'floating'"),
-        (('type="continuous"', 'type="planar"'), '<joint name="j2">', "type 'planar'"),
         (('type="continuous"', 'type="ball"'), '<joint name="j2">', "unknown type 'ball'"),
-        (('<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><mimic joint="j1"/>'), '<joint name="j2">', "<mimic>"),
+        (
+            ('<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><mimic joint="j1"/>'),
+            '<joint name="j2"> <mimic joint="j1">',
+            "couples a modelled joint",
+        ),
+        (('damping="0"', 'damping="abc"'), '<joint name="j1"> <dynamics damping>', "'abc' is not a finite number"),
         (
             ('<child link="flange"/>', '<child link="flang"/>'),
             '<joint name="tool_joint">',
@@ -260,7 +261,7 @@ def test_axis_defaults_to_x_and_damping_is_reported(tmp_path, caplog):
                 'iyy="1" iyz="0" izz="1"/></inertial></link>',
             ),
             '<link name="a">',
-            "branches into joints",
+            "branches into joints ['a_fixed', 'j3'], each leading to revolute joints: choose one chain",
         ),
         (
             (
@@ -340,3 +341,177 @@ def test_export_refuses_a_tip_named_like_a_link(tmp_path):
     clash = SerialArm(arm.links, arm.gravity_vector, arm.end_point, tip="link1")
     with pytest.raises(ValueError, match="tip name 'link1' is already a link"):
         to_urdf(clash, tmp_path / "x.urdf")
+
+
+# ------------------------------------------------------------------------- chains, held joints, guards
+def _hand(tmp_path, *edits, name="hand.urdf"):
+    text = HAND
+    for old, new in edits:
+        assert old in text
+        text = text.replace(old, new)
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_a_held_joint_is_the_full_arm_frozen_there(tmp_path):
+    """Holding j2 at 0.7 merges b into a turned by 0.7 rad: joint 1's torque equals the two-joint arm's at
+    q2 = 0.7 with q2 not moving (an independent derivation: the full model's own equations)."""
+    path = _hand(tmp_path)
+    full, held = load_urdf(path), load_urdf(path, joints=["j1"], hold={"j2": 0.7})
+    assert held.source == {"file": str(path), "modelled": ["j1"], "held": {"j2": 0.7}, "notes": []}
+    q, qd, qdd, _ = states(40, 1, seed=5)
+    pad = lambda x, v: torch.cat((x, torch.full_like(x, v)), 1)
+    want = full.inverse_dynamics(pad(q, 0.7), pad(qd, 0.0), pad(qdd, 0.0))[:, :1]
+    assert (held.inverse_dynamics(q, qd, qdd) - want).abs().max() <= 1e-12
+    assert (
+        held.inverse_dynamics(q, qd, qdd) - full.inverse_dynamics(pad(q, 0.0), pad(qd, 0), pad(qdd, 0))[:, :1]
+    ).abs().max() > 1e-3
+
+
+def test_gravity_is_a_vector_in_the_root_frame(tmp_path):
+    path = _hand(tmp_path)
+    assert load_urdf(path).gravity_vector == (0.0, 0.0, -9.81)
+    assert load_urdf(path, gravity=(1.0, -2.0, 3.0)).gravity_vector == (1.0, -2.0, 3.0)  # base = root here
+    assert load_urdf(path, g=3.0).gravity_vector == (0.0, 0.0, -3.0)
+    with pytest.raises(ConfigError, match="robot.g=3.0 is not allowed: expected unset when robot.gravity is given"):
+        load_urdf(path, g=3.0, gravity=(0.0, 0.0, -9.81))
+
+
+def test_one_parse_per_file_version(tmp_path):
+    path = _hand(tmp_path)
+    assert load_urdf(path) is load_urdf(str(path))  # a job's checks, hash and data share one parse
+    os.utime(path, ns=(1, 1))
+    assert load_urdf(path) is not load_urdf(path, tip="b") and load_urdf(path).source["file"] == str(path)
+
+
+@pytest.mark.parametrize(
+    "edits, kw, element, problem",
+    [
+        ((), {"joints": ["j1", "jx"]}, "robot.joints=['j1', 'jx']", "names ['jx']: give distinct revolute joints"),
+        ((), {"hold": {"nope": 1.0}}, "robot.hold.nope", "names no <joint> of the file"),
+        ((), {"hold": {"j1": 1.0}}, "robot.hold.j1", "is a modelled joint"),
+        ((), {"tip": "nowhere"}, "robot.tip='nowhere'", "names no <link> of the file"),
+        (
+            [('<mass value="1.0"/>', '<mass value="0"/>'), ('<mass value="0.5"/>', '<mass value="0"/>')]
+            + [('<mass value="0.2"/>', '<mass value="0"/>'), ('<mass value="2"/>', '<mass value="0"/>')]
+            + [
+                (
+                    'ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.03"',
+                    'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"',
+                )
+            ]
+            + [
+                (
+                    'ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.003"',
+                    'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"',
+                )
+            ]
+            + [
+                (
+                    'ixx="0.05" ixy="0" ixz="0" iyy="0.05" iyz="0" izz="0.01"',
+                    'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"',
+                )
+            ],
+            {},
+            "<inertial>",
+            "every body the joints ['j1', 'j2'] move has mass 0 and inertia 0: every torque would be 0",
+        ),
+        (
+            [
+                ('<mass value="2"/>', '<mass value="0"/>'),
+                (
+                    'ixx="0.05" ixy="0" ixz="0" iyy="0.05" iyz="0" izz="0.01"',
+                    'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"',
+                ),
+            ],
+            {},
+            '<joint name="j2">',
+            "joints ['j2'] move no mass and no inertia, so their torques are always 0",
+        ),
+        (
+            [('<robot name="hand">', '<robot name="hand"><!DOCTYPE x [<!ENTITY a "aaaa">]>')],
+            {},
+            "<!ENTITY>",
+            "XML bomb guard",
+        ),
+        (
+            [
+                (
+                    '<link name="flange"/>',
+                    '<link name="flange"/><xacro:macro xmlns:xacro="http://wiki.ros.org/xacro" name="m"/>',
+                )
+            ],
+            {},
+            "xacro",
+            "this is a xacro macro file: run `xacro hand.urdf > robot.urdf` first",
+        ),
+    ],
+)
+def test_chain_options_and_physically_empty_arms_are_refused_naming_them(tmp_path, edits, kw, element, problem):
+    path = _hand(tmp_path, *edits)
+    with pytest.raises(UrdfError) as err:
+        load_urdf(path, **kw)
+    assert str(err.value).startswith(f"{path}: {element}: ") and problem in str(err.value), str(err.value)
+
+
+def test_size_guard_refuses_before_reading(tmp_path, monkeypatch):
+    import selpres.arms.urdf_read as U
+
+    path = _hand(tmp_path)
+    monkeypatch.setattr(U, "MAX_BYTES", 1000)
+    with pytest.raises(UrdfError, match=r"hand.urdf: file: 0 MiB, more than the 0 MiB"):
+        U._Reader(path)
+    empty = tmp_path / "empty.urdf"
+    empty.write_text("<robot name='e'/>")
+    with pytest.raises(UrdfError, match="<robot>: has no <link>: an empty robot description"):
+        load_urdf(empty)
+
+
+def test_zero_width_limits_mean_none_and_velocity_effort_give_the_default_boxes(tmp_path):
+    from selpres.data import sampled as S
+
+    path = _hand(tmp_path, ('lower="-1" upper="2"', 'lower="0" upper="0"'))
+    arm = load_urdf(path)
+    assert arm.links[0].limits is None and "no position limits" in arm.source["notes"][0]
+    wide = load_urdf(_hand(tmp_path, ('lower="-1" upper="2"', 'lower="-6.3" upper="6.2"'), name="wide.urdf"))
+    cfg = {"route": "forward", "q": None, "dq": None, "tau": None, "accel_limit": 2.0, "wrench": None}
+    with pytest.raises(ConfigError, match="data.tau"):  # j2 has no effort limit: forward needs a box
+        S.boxes(wide, cfg)
+    box = S.boxes(wide, {**cfg, "route": "inverse"})
+    assert torch.allclose(box.q, torch.tensor([[-0.05 - math.pi, -0.05 + math.pi], [-math.pi, math.pi]], dtype=D))
+    assert box.dq.tolist() == [[-0.5, 0.5], [-1.0, 1.0]]  # half of j1's velocity limit 1 rad/s; j2: none
+    both = load_urdf(
+        _hand(
+            tmp_path, ('<axis xyz="0 1 0"/></joint>', '<axis xyz="0 1 0"/><limit effort="3"/></joint>'), name="eff.urdf"
+        )
+    )
+    assert S.boxes(both, cfg).tau.tolist() == [[-5.0, 5.0], [-3.0, 3.0]]
+    assert S.boxes(both, {**cfg, "dq": [-2.0, 2.0]}).dq.tolist() == [[-2.0, 2.0]] * 2  # an explicit box wins
+
+
+def test_a_job_parses_its_urdf_once(tmp_path, monkeypatch):
+    """Checks, data hash and data share one parse (issue 18: a 150 MB file was parsed 3 times per job)."""
+    import selpres.arms.urdf_read as U
+    from selpres.run.train import train
+
+    from conftest import compose
+
+    path, parses = _hand(tmp_path), []
+    original = U._Reader.__init__
+    monkeypatch.setattr(U._Reader, "__init__", lambda self, p: (parses.append(p), original(self, p))[1])
+    cfg = compose(
+        "robot=urdf", f"robot.path={path}", "topology.layers=6-3-2", "data.n=200", "data.heldout=50",
+        "schedule=conventional", "schedule.epochs=[2]",
+    )  # fmt: skip
+    res = train(cfg, None)
+    assert parses == [path] and res["data"]["urdf"]["modelled"] == ["j1", "j2"]
+
+
+def test_a_gravity_vector_is_exported_faithfully(tmp_path):
+    """robot.gravity pointing anywhere: to_urdf turns a world root so that it is -z there, and the file reads
+    back (gravity's magnitude along -z of that root) as the same dynamics."""
+    arm = load_urdf(_hand(tmp_path), gravity=(1.0, -2.0, 3.0))
+    back = load_urdf(to_urdf(arm, tmp_path / "out.urdf"), g=math.sqrt(14.0))
+    same_dynamics(arm, back, 1e-11)
+    assert back.base == arm.base and back.source["modelled"] == ["j1", "j2"]

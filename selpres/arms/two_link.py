@@ -31,7 +31,7 @@ ROBOT_KEYS = ("m1", "m2", "l1", "l2", "g")
 KIND_KEYS = {
     "two_link": ROBOT_KEYS,
     "serial": ("name", "convention", "gravity", "end_point", "base", "tip", "links"),
-    "urdf": ("path", "g", "tip"),
+    "urdf": ("path", "g", "gravity", "base", "tip", "joints", "hold"),
 }
 
 
@@ -74,6 +74,10 @@ class TwoLinkArm:
     def joint_limits(self, dtype: torch.dtype = torch.float64) -> torch.Tensor:
         """``[2, 2]``: the paper's joints have no limits (±inf)."""
         return torch.tensor([[-math.inf, math.inf]] * 2, dtype=dtype)
+
+    def rate_limits(self, kind: str = "velocity", dtype: torch.dtype = torch.float64) -> torch.Tensor:
+        """``[2]``: no velocity or effort limits (inf)."""
+        return torch.full((2,), math.inf, dtype=dtype)
 
     def _terms(self, q: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """The entries of H(q) that eq. 6 shares between H, C and the solve."""
@@ -170,6 +174,26 @@ def make_arm(robot_cfg: Any) -> Arm:
     path, g = c.get("path"), c.get("g")
     if not isinstance(path, str) or not path or path == "???":
         raise ConfigError("robot.path", path, "the URDF file to load (robot=urdf robot.path=my_arm.urdf)")
-    if isinstance(g, bool) or not isinstance(g, (int, float)) or not (math.isfinite(g) and g >= 0):
+    if g is not None and (isinstance(g, bool) or not isinstance(g, (int, float)) or not (math.isfinite(g) and g >= 0)):
         raise ConfigError("robot.g", g, "gravity's magnitude in m/s² (>= 0), along -z of the URDF's root")
-    return load_urdf(Path(path).expanduser(), g=float(g), tip=c.get("tip"))
+    gravity = c.get("gravity")
+    if gravity is not None and not (
+        isinstance(gravity, (list, tuple))
+        and len(gravity) == 3
+        and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in gravity)
+    ):
+        raise ConfigError("robot.gravity", gravity, "[gx, gy, gz]: three finite numbers (m/s², the root link's frame)")
+    joints, hold = c.get("joints"), c.get("hold") or {}
+    if joints is not None and not (isinstance(joints, list) and joints and all(isinstance(j, str) for j in joints)):
+        raise ConfigError("robot.joints", joints, "a list of joint names to model (null: every revolute joint)")
+    if not isinstance(hold, Mapping):
+        raise ConfigError("robot.hold", hold, "{joint name: position (rad or m)} for held joints")
+    return load_urdf(
+        Path(path).expanduser(),
+        g=g,
+        gravity=gravity,
+        base=c.get("base"),
+        tip=c.get("tip"),
+        joints=joints,
+        hold=dict(hold),
+    )

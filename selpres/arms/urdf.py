@@ -1,215 +1,149 @@
-"""URDF in and out for ``selpres.arms.serial.SerialArm``: any serial chain of revolute joints, 1:1.
+"""URDF in for ``selpres.arms.serial.SerialArm``: one serial chain of revolute joints cut from any robot tree.
 
-``load_urdf`` reads a chain of ``revolute``/``continuous`` joints; ``fixed`` joints are merged into the
-body they hang from (masses, centres of mass and inertias combined by the parallel-axis rule, as Pinocchio
-and MuJoCo do), so sensor or flange frames cost nothing. Anything else is refused with an error naming the
-file and the element: prismatic/floating/planar or mimic joints, branches that lead to two moving joints,
-closed loops, joints naming missing links, moving bodies without an <inertial>, bad numbers.
+``load_urdf`` reads the file once (cached by path, size and mtime, so a job's checks, hash and data share one
+parse) and picks the chain from link ``base`` to link ``tip`` (defaults: the root, and the one path that leads
+to revolute/continuous joints, refused with the branch named when there are several). The chain's revolute and
+continuous joints are *modelled* (``joints`` may name a subset); every other joint of the file is *held*: fixed
+joints as always, prismatic joints, off-chain and unlisted joints at ``hold[name]`` (default 0, or the nearest
+limit when 0 lies outside), a ``<mimic>`` joint at its master's held value times multiplier plus offset. Held
+bodies merge rigidly into the body they hang from (masses, centres of mass and inertias by the parallel-axis
+rule, as Pinocchio's ``buildReducedModel`` does), so hands, fingers and sensor frames cost nothing; bodies
+above ``base`` never move and drop out. Prismatic joints are held, not modelled: the network's inputs stay
+angles, and a Panda file loads with its fingers held. A ``<mimic>`` on a fixed joint does nothing and is
+ignored; one that couples a modelled joint is refused with both names. ``arm.source`` records the file, the
+modelled and the held joints (with their values), for the log and results.json.
 
-Frames: the wrench k of eq. (4) is expressed in the frame of the link the first moving joint hangs from
-(the arm's ``base``); its end point is the origin of the ``tip`` link (default: follow the fixed joints
-after the last moving joint while there is exactly one). URDF stores no gravity; tools assume g along −z of
-the root link, and so does ``load_urdf`` (magnitude ``g``). ``to_urdf`` therefore writes a root link
-``world`` turned so that the arm's gravity points along its −z whenever it does not already (the paper's
-arm has gravity along −y), and the magnitude in a comment: Pinocchio, MuJoCo or ``load_urdf`` then load
-exactly the dynamics selpres simulates.
+Limits: ``<limit lower upper>`` with lower = upper (the common ``0 0``) means "not given", as Pinocchio reads
+it (noted once); ``velocity`` and ``effort`` are kept (0 = not given) for the default boxes of
+``selpres.data.sampled``. ``<dynamics>`` damping/friction are not simulated (eq. 4 is rigid-body): one
+warning per file lists the joints.
+
+Frames: the wrench k of eq. (4) is expressed in the frame of the link the first modelled joint hangs from
+(the arm's ``base``; an explicit ``base`` link when given); its end point is the origin of the ``tip`` link
+(default: follow the fixed joints after the last modelled joint while there is exactly one). URDF stores no
+gravity: ``gravity`` is a vector in the root link's frame (default 9.81 m/s² along −z, what URDF tools assume).
+
+Guards: files over ``MAX_BYTES`` are refused before reading (real descriptions are under 1 MB; meshes live in
+their own files), and so is any ``<!ENTITY`` declaration (URDF uses none; entity expansion is how XML bombs
+work). Errors are one line naming the file, the element and the attribute (``UrdfError``).
+
+Why hand-written (issue 21, item 9, tried in a throwaway venv): ``yourdfpy`` 0.0.60 pulls lxml, numpy and
+trimesh[easy] (379 MB installed), answers ``damping="abc"`` with a bare ``ValueError: could not convert string
+to float: 'abc'`` (no element named) and loads ``<mass value="-2">`` silently; ``urdf-parser-py`` 0.0.4 (lxml,
+PyYAML) names the XPath as clearly as this module does but also accepts the negative mass. Neither picks a
+chain, holds joints, merges bodies or checks physics, which is most of this module; the element reading they
+would replace is ~150 lines of ``xml.etree`` (stdlib) here, so a dependency would leave more code, not less.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
-import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import replace
 from pathlib import Path
 
-from selpres.arms.serial import (
-    IDENTITY,
-    ZERO3,
-    Link,
-    Mat3,
-    SerialArm,
-    Vec3,
-    _mat_mul,
-    _mat_vec,
-    _transpose,
-    check_link,
-    matrix_rpy,
-    rpy_matrix,
-)
-from selpres.errors import ConfigError, FileError
-from selpres.storage import atomic_write
+from selpres.arms.kinematics import Link, Mat3, Vec3, _mat_mul, _mat_vec, _transpose, check_link
+from selpres.arms.serial import SerialArm
+from selpres.arms.urdf_out import to_urdf  # noqa: F401  (URDF in and out from one module)
+from selpres.arms.urdf_read import MAX_BYTES, MODELLED, ONE_DOF, UrdfError, _add, _Joint, _Pose, _Reader  # noqa: F401
+from selpres.errors import ConfigError
 
 log = logging.getLogger(__name__)
-MOVING = ("revolute", "continuous")
-REFUSED = {"prismatic": "a sliding joint", "floating": "a free-floating base", "planar": "a planar joint"}
 
 
-class UrdfError(FileError):
-    """A URDF that selpres cannot simulate: one line naming the file, the element and the problem."""
+# ------------------------------------------------------------------------------------------------- the chain
+def _chain_path(reader: _Reader, base: str, tip: str | None) -> list[str]:
+    """The joints from ``base`` to ``tip``, or (no tip) along the one path that leads to modellable joints."""
+    if tip is not None:
+        path = reader.path_up(tip, base)
+        if path is None:
+            raise UrdfError(reader.path, f'tip="{tip}"', f"is not a link below the base link {base!r}")
+        return path
+    leads: dict[str, bool] = {}  # link -> a modellable joint lies below it (one pass, deepest first)
 
+    def below(link: str) -> bool:
+        stack, order = [link], []
+        while stack:
+            x = stack.pop()
+            order.append(x)
+            stack.extend(reader.child(j) for j in reader.children[x] if reader.child(j) not in leads)
+        for x in reversed(order):
+            js = reader.children[x]
+            leads[x] = any(_modellable(reader.joints[j]) or leads[reader.child(j)] for j in js)
+        return leads[link]
 
-@dataclass(frozen=True)
-class _Pose:
-    """A rigid transform: rotation ``rot`` then translation ``xyz`` (x' = rot x + xyz)."""
-
-    rot: Mat3 = IDENTITY
-    xyz: Vec3 = ZERO3
-
-    def then(self, inner: _Pose) -> _Pose:
-        """self ∘ inner: ``inner`` expressed in self's parent frame."""
-        return _Pose(_mat_mul(self.rot, inner.rot), _add(_mat_vec(self.rot, inner.xyz), self.xyz))
-
-
-def _add(a, b) -> Vec3:
-    return tuple(x + y for x, y in zip(a, b))
-
-
-# ------------------------------------------------------------------------------------------------- reading
-class _Reader:
-    """One URDF file's links and joints, with errors that name the file and the element."""
-
-    def __init__(self, path: Path):
-        self.path = path
-        if not path.is_file():
-            raise UrdfError(path, "file", "not found (robot.path must name a URDF file)")
-        try:
-            root = ET.parse(path).getroot()
-        except ET.ParseError as e:
-            raise UrdfError(path, "XML", f"not well-formed ({e})") from None
-        if root.tag != "robot":
-            raise UrdfError(path, f"<{root.tag}>", "the root element must be <robot>")
-        self.name = root.get("name", path.stem)
-        self.links: dict[str, ET.Element] = {}
-        for el in root.findall("link"):
-            name = self.attr(el, "name", "<link>")
-            if name in self.links:
-                raise UrdfError(path, f'<link name="{name}">', "defined twice")
-            self.links[name] = el
-        self.joints: dict[str, ET.Element] = {}
-        self.parent_of: dict[str, str] = {}  # child link -> joint
-        self.children: dict[str, list[str]] = {n: [] for n in self.links}  # link -> joints, document order
-        for el in root.findall("joint"):
-            name = self.attr(el, "name", "<joint>")
-            where = f'<joint name="{name}">'
-            if name in self.joints:
-                raise UrdfError(path, where, "defined twice")
-            kind = self.attr(el, "type", where)
-            if kind in REFUSED:
-                raise UrdfError(
-                    path,
-                    where,
-                    f"type {kind!r} ({REFUSED[kind]}) is not supported: selpres "
-                    "simulates chains of revolute joints (revolute, continuous; fixed joints are "
-                    "merged)",
-                )
-            if kind not in (*MOVING, "fixed"):
-                raise UrdfError(path, where, f"unknown type {kind!r}: expected revolute, continuous or fixed")
-            if el.find("mimic") is not None:
-                raise UrdfError(path, where, "<mimic> couples joints; selpres needs independent joints")
-            parent, child = (
-                self.attr(self.one(el, tag, where), "link", f"{where} <{tag}>") for tag in ("parent", "child")
-            )
-            for tag, link in (("parent", parent), ("child", child)):
-                if link not in self.links:
-                    raise UrdfError(path, where, f"<{tag} link={link!r}> names a link that no <link> defines")
-            if child in self.parent_of:
-                raise UrdfError(
-                    path,
-                    f'<link name="{child}">',
-                    f"is the child of joints "
-                    f"{self.parent_of[child]!r} and {name!r}: a closed loop (selpres takes "
-                    "serial chains)",
-                )
-            self.joints[name] = el
-            self.parent_of[child] = name
-            self.children[parent].append(name)
-
-    # -- small parsers ---------------------------------------------------------------------------------------
-    def attr(self, el: ET.Element, key: str, where: str) -> str:
-        value = el.get(key)
-        if value is None:
-            raise UrdfError(self.path, where, f"missing attribute {key!r}")
-        return value
-
-    def one(self, el: ET.Element, tag: str, where: str) -> ET.Element:
-        found = el.find(tag)
-        if found is None:
-            raise UrdfError(self.path, where, f"missing <{tag}>")
-        return found
-
-    def numbers(self, text: str | None, n: int, where: str, default: tuple[float, ...]) -> tuple[float, ...]:
-        if text is None:
-            return default
-        try:
-            values = tuple(float(x) for x in text.split())
-        except ValueError:
-            values = ()
-        if len(values) != n or not all(math.isfinite(v) for v in values):
+    below(base)
+    path, link = [], base
+    while True:
+        onward = [j for j in reader.children[link] if _modellable(reader.joints[j]) or leads[reader.child(j)]]
+        if len(onward) > 1:
             raise UrdfError(
-                self.path, where, f"{text!r} is not " + ("a finite number" if n == 1 else f"{n} finite numbers")
+                reader.path,
+                f'<link name="{link}">',
+                f"branches into joints {onward[:4]}, each leading to revolute joints: choose one chain with "
+                "robot.tip=<link> (and robot.base=<link>)",
             )
-        return values
-
-    def origin(self, el: ET.Element, where: str) -> _Pose:
-        """An element's <origin xyz rpy> (identity when absent, as the URDF spec says)."""
-        o = el.find("origin")
-        if o is None:
-            return _Pose()
-        xyz = self.numbers(o.get("xyz"), 3, f"{where} <origin xyz>", ZERO3)
-        rpy = self.numbers(o.get("rpy"), 3, f"{where} <origin rpy>", ZERO3)
-        return _Pose(rpy_matrix(rpy), xyz)
-
-    def inertial(self, link: str) -> tuple[float, Vec3, Mat3] | None:
-        """(mass, com, inertia about the com) of a link in its own frame; None without <inertial>."""
-        el = self.links[link].find("inertial")
-        if el is None:
-            return None
-        where = f'<link name="{link}"> <inertial>'
-        pose = self.origin(el, where)
-        mass_el = self.one(el, "mass", where)
-        (mass,) = self.numbers(self.attr(mass_el, "value", f"{where} <mass>"), 1, f"{where} <mass value>", ())
-        inertia_el = self.one(el, "inertia", where)
-        v = {
-            k: self.numbers(self.attr(inertia_el, k, f"{where} <inertia>"), 1, f"{where} <inertia {k}>", ())[0]
-            for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
-        }
-        tensor = ((v["ixx"], v["ixy"], v["ixz"]), (v["ixy"], v["iyy"], v["iyz"]), (v["ixz"], v["iyz"], v["izz"]))
-        try:
-            check_link(Link(link, mass, pose.xyz, tensor), "inertial")
-        except ConfigError as e:
-            raise UrdfError(self.path, f'<link name="{link}">', str(e)) from None
-        return mass, pose.xyz, _mat_mul(pose.rot, _mat_mul(tensor, _transpose(pose.rot)))
+        if not onward:
+            return path
+        path.append(onward[0])
+        link = reader.child(onward[0])
 
 
-def _moving_below(reader: _Reader, joint: str) -> list[str]:
-    """The moving joints in the subtree that starts with ``joint`` (itself included)."""
-    out, stack = [], [joint]
-    while stack:
-        j = stack.pop()
-        el = reader.joints[j]
-        if el.get("type") in MOVING:
-            out.append(j)
-        stack.extend(reader.children[el.find("child").get("link")])
-    return out
+def _modellable(j: _Joint) -> bool:
+    return j.kind in MODELLED and j.mimic is None
 
 
-def _body(reader: _Reader, top: str) -> list[tuple[str, _Pose]]:
-    """Links rigidly attached to ``top`` through fixed joints (``top`` first; the chain's fixed links and
-    fixed side branches alike), with their poses in top's frame. Moving joints end a body."""
-    out, stack = [], [(top, _Pose())]
+def _held_values(reader: _Reader, modelled: set[str], hold: dict[str, float]) -> dict[str, float]:
+    """Every held one-dof joint's value: ``hold``, a mimic's master's value, else 0 (or its nearest limit)."""
+    for name, value in hold.items():
+        if name not in reader.joints:
+            raise UrdfError(reader.path, f"robot.hold.{name}", "names no <joint> of the file")
+        if name in modelled:
+            raise UrdfError(reader.path, f"robot.hold.{name}", "is a modelled joint: hold it or model it, not both")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise UrdfError(reader.path, f"robot.hold.{name}", f"{value!r}: a finite position (rad or m)")
+    values: dict[str, float] = {}
+    for name, j in reader.joints.items():
+        if j.mimic is not None and j.kind != "fixed":
+            master = j.mimic[0]
+            if master not in reader.joints:
+                raise UrdfError(reader.path, f'<joint name="{name}"> <mimic>', f"joint={master!r} names no <joint>")
+            if name in modelled or master in modelled:
+                raise UrdfError(
+                    reader.path,
+                    f'<joint name="{name}"> <mimic joint="{master}">',
+                    "couples a modelled joint: selpres needs independent joints; list only independent ones in "
+                    "robot.joints (the others are held)",
+                )
+        if j.kind not in ONE_DOF or name in modelled:
+            continue
+        lo, hi = j.limits or (-math.inf, math.inf)
+        values[name] = float(hold.get(name, min(max(0.0, lo), hi)))
+    for name, j in reader.joints.items():  # mimics follow their (held) masters unless held explicitly
+        if j.mimic is not None and name in values and name not in hold:
+            master, mult, off = j.mimic
+            values[name] = mult * values.get(master, 0.0) + off
+    return values
+
+
+def _body(reader: _Reader, top: str, stop: set[str], held: dict[str, float]) -> tuple[list, dict[str, _Pose]]:
+    """Links rigidly attached to ``top`` (through fixed and held joints, never a modelled one: ``stop``) with
+    their poses in top's frame, and the poses of the ``stop`` joints' origins met on the way."""
+    out, ends, stack = [], {}, [(top, _Pose())]
     while stack:
         link, pose = stack.pop()
         out.append((link, pose))
-        for j in reader.children[link]:
-            el = reader.joints[j]
-            if el.get("type") == "fixed":
-                child = el.find("child").get("link")
-                stack.append((child, pose.then(reader.origin(el, f'<joint name="{j}">'))))
-    return out
+        for name in reader.children[link]:
+            j = reader.joints[name]
+            if name in stop:
+                ends[name] = pose.then(j.origin)
+            else:
+                stack.append((j.child, pose.then(j.at(held.get(name, 0.0)))))
+    return out, ends
 
 
-def _merge(reader: _Reader, parts: list[tuple[str, _Pose]], moved_by: str) -> tuple[float, Vec3, Mat3]:
+def _merge(reader: _Reader, parts: list, moved_by: str) -> tuple[float, Vec3, Mat3]:
     """Mass, centre of mass and inertia about it of rigidly joined links, in the first one's frame."""
     items = []
     for link, pose in parts:
@@ -223,9 +157,8 @@ def _merge(reader: _Reader, parts: list[tuple[str, _Pose]], moved_by: str) -> tu
         raise UrdfError(
             reader.path,
             f'<link name="{parts[0][0]}">',
-            f"has no <inertial> but joint "
-            f"{moved_by!r} moves it, so its mass matters: add <inertial> (mass 0 to declare it "
-            "massless)",
+            f"has no <inertial> but joint {moved_by!r} moves it, so its mass matters: add <inertial> (mass 0 to "
+            "declare it massless)",
         )
     mass = sum(m for m, _, _ in items)
     com = tuple(sum(m * c[i] for m, c, _ in items) / mass for i in range(3)) if mass > 0 else items[0][1]
@@ -239,10 +172,32 @@ def _merge(reader: _Reader, parts: list[tuple[str, _Pose]], moved_by: str) -> tu
     return mass, com, tuple(tuple(row) for row in total)
 
 
-def load_urdf(path: str | Path, *, g: float = 9.81, tip: str | None = None) -> SerialArm:
-    """The serial arm of a URDF file; gravity ``g`` (m/s²) along −z of the root link, as URDF tools assume.
-    ``tip`` names the link whose origin is the wrench's end point (see the module docstring)."""
-    reader = _Reader(Path(path))
+def load_urdf(
+    path: str | Path,
+    *,
+    g: float | None = None,
+    gravity: tuple[float, float, float] | None = None,
+    base: str | None = None,
+    tip: str | None = None,
+    joints: list[str] | None = None,
+    hold: dict[str, float] | None = None,
+) -> SerialArm:
+    """The serial arm of a URDF file's chain (see the module docstring). ``gravity`` (m/s², root frame;
+    default [0, 0, -9.81]) or its magnitude ``g`` along −z; ``base``/``tip`` link names choose the chain,
+    ``joints`` restricts it, ``hold`` sets held joints' positions."""
+    if g is not None and gravity is not None:
+        raise ConfigError("robot.g", g, "unset when robot.gravity is given (gravity is the vector [gx, gy, gz])")
+    grav = tuple(float(x) for x in gravity) if gravity is not None else (0.0, 0.0, -(9.81 if g is None else g))
+    path = Path(path)
+    stat = path.stat() if path.is_file() else None
+    key = (str(path.resolve()), stat and (stat.st_size, stat.st_mtime_ns))
+    opts = (grav, base, tip, tuple(joints) if joints is not None else None, tuple(sorted((hold or {}).items())))
+    return _load(key, path, *opts)
+
+
+@functools.lru_cache(maxsize=8)
+def _load(key, path: Path, gravity, base, tip, joints, hold) -> SerialArm:
+    reader = _Reader(path)
     roots = [n for n in reader.links if n not in reader.parent_of]
     if len(roots) != 1:
         problem = (
@@ -251,188 +206,118 @@ def load_urdf(path: str | Path, *, g: float = 9.81, tip: str | None = None) -> S
             else f"links {roots[:3]} have no parent joint: the file holds more than one tree"
         )
         raise UrdfError(reader.path, "<robot>", problem)
-    # walk down the one path that leads to moving joints
-    chain: list[str] = []  # moving joints, base to tip
-    poses: list[_Pose] = []  # each moving joint's origin in the previous body's frame
-    link, pose_in_body = roots[0], _Pose()
-    root_to_base = _Pose()
-    while True:
-        onward = [j for j in reader.children[link] if _moving_below(reader, j)]
-        if len(onward) > 1:
+    if not reader.joints:
+        raise UrdfError(reader.path, "<robot>", "has no <joint>: nothing moves")
+    for name, value in (("robot.base", base), ("robot.tip", tip)):
+        if value is not None and value not in reader.links:
+            raise UrdfError(reader.path, f"{name}={value!r}", "names no <link> of the file")
+    top = base if base is not None else roots[0]
+    path_joints = _chain_path(reader, top, tip)
+    on_path = [j for j in path_joints if reader.joints[j].kind in MODELLED]
+    if joints is not None:
+        bad = [j for j in joints if j not in on_path]
+        if bad or len(set(joints)) != len(joints):
             raise UrdfError(
                 reader.path,
-                f'<link name="{link}">',
-                f"branches into joints {onward[:3]}, each leading to moving joints: selpres takes serial chains",
+                f"robot.joints={list(joints)}",
+                f"names {bad or 'a joint twice'}: give distinct revolute joints of the chain {on_path}",
             )
-        if not onward:
-            break
-        j = onward[0]
-        el = reader.joints[j]
-        step = reader.origin(el, f'<joint name="{j}">')
-        if el.get("type") == "fixed":
-            pose_in_body = pose_in_body.then(step)
-        else:
-            if not chain:  # the base frame: the link joint 1 hangs from
-                root_to_base, pose_in_body = pose_in_body, _Pose()
-                base = link
-            chain.append(j)
-            poses.append(pose_in_body.then(step))
-            pose_in_body = _Pose()
-        link = el.find("child").get("link")
+    chain = [j for j in on_path if (joints is None or j in joints)]
     if not chain:
-        raise UrdfError(reader.path, "<robot>", "has no revolute or continuous joint")
-    bodies = [reader.joints[j].find("child").get("link") for j in chain]
-    links = []
-    for i, (j, body) in enumerate(zip(chain, bodies)):
-        el = reader.joints[j]
-        where = f'<joint name="{j}">'
-        axis = reader.numbers(
-            (el.find("axis").get("xyz") if el.find("axis") is not None else None),
-            3,
-            f"{where} <axis xyz>",
-            (1.0, 0.0, 0.0),
-        )
-        limits = None
-        limit_el = el.find("limit")
-        if el.get("type") == "revolute" and limit_el is not None and "lower" in limit_el.attrib:
-            lower = reader.numbers(limit_el.get("lower"), 1, f"{where} <limit lower>", ())[0]
-            upper = reader.numbers(limit_el.get("upper"), 1, f"{where} <limit upper>", (0.0,))[0]
-            if not lower < upper:
-                raise UrdfError(reader.path, where, f"<limit lower={lower} upper={upper}>: need lower < upper")
-            limits = (lower, upper)
-        dyn = el.find("dynamics")
-        if dyn is not None and any(float(dyn.get(k, "0") or 0) != 0.0 for k in ("damping", "friction")):
-            log.warning(
-                "%s: %s <dynamics %s> ignored: selpres simulates the rigid-body eq. (4) only",
-                reader.path,
-                where,
-                " ".join(f'{k}="{v}"' for k, v in dyn.attrib.items()),
-            )
-        mass, com, inertia = _merge(reader, _body(reader, body), j)
+        held = [n for n, j in reader.joints.items() if j.kind != "fixed"][:4]
+        why = f" (joints {held} would be held: selpres models revolute joints)" if held else ""
+        raise UrdfError(reader.path, "<robot>", f"has no revolute or continuous joint on the chain from {top!r}{why}")
+    modelled = set(chain)
+    held = _held_values(reader, modelled, dict(hold))
+    # the base frame: the link joint 1 hangs from (or the base named), and the root's frame in it
+    arm_base = base if base is not None else reader.joints[chain[0]].parent
+    root_to_base = _Pose()
+    for j in reader.path_up(arm_base, roots[0]):
+        root_to_base = root_to_base.then(reader.joints[j].at(held.get(j, 0.0)))
+    _, ends = _body(reader, arm_base, {chain[0]}, held)
+    if chain[0] not in ends:  # a base below joint 1's parent: the first joint's origin is not rigid to it
+        raise UrdfError(reader.path, f"robot.base={arm_base!r}", f"is not rigidly attached to joint {chain[0]!r}")
+    origins, links = [ends[chain[0]]], []
+    for i, name in enumerate(chain):
+        j = reader.joints[name]
+        parts, ends = _body(reader, j.child, set(chain[i + 1 : i + 2]), held)
+        if i + 1 < len(chain):
+            origins.append(ends[chain[i + 1]])
+        mass, com, inertia = _merge(reader, parts, name)
         try:
-            links.append(
-                check_link(
-                    Link(
-                        body,
-                        mass,
-                        com,
-                        inertia,
-                        joint=j,
-                        xyz=poses[i].xyz,
-                        rotation=poses[i].rot,
-                        axis=axis,
-                        limits=limits,
-                    ),
-                    "link",
-                )
-            )
+            link = Link(j.child, mass, com, inertia, name, origins[i].xyz, origins[i].rot, j.axis, j.limits)
+            links.append(check_link(replace(link, velocity=j.velocity, effort=j.effort), "link"))
         except ConfigError as e:
-            raise UrdfError(reader.path, where, str(e)) from None
-    end, tip_name = _tip(reader, bodies[-1], tip)
-    gravity = _mat_vec(_transpose(root_to_base.rot), (0.0, 0.0, -g))
-    return SerialArm(links, gravity, end, name=reader.name, base=base, tip=tip_name)
+            raise UrdfError(reader.path, f'<joint name="{name}">', str(e)) from None
+    _check_not_empty(reader, links)
+    end, tip_name = _tip(reader, parts, tip)
+    gravity_base = _mat_vec(_transpose(root_to_base.rot), gravity)
+    notes = _notes(reader, chain, held)
+    source = {"file": str(path), "modelled": chain, "held": held, "notes": notes}
+    arm = SerialArm(links, gravity_base, end, name=reader.name, base=arm_base, tip=tip_name, source=source)
+    log.info("%s: modelled joints %s; held %s", path, chain, {k: round(v, 6) for k, v in held.items()} or "none")
+    for note in notes:
+        log.info("%s: %s", path, note)
+    if any(reader.joints[j].dynamics for j in reader.joints):
+        listed = ", ".join(f"{j} ({reader.joints[j].dynamics})" for j in reader.joints if reader.joints[j].dynamics)
+        log.warning("%s: <dynamics> ignored (selpres simulates the rigid-body eq. (4) only): %s", path, listed)
+    return arm
 
 
-def _tip(reader: _Reader, last: str, tip: str | None) -> tuple[Vec3, str]:
+def _check_not_empty(reader: _Reader, links: list[Link]) -> None:
+    """Refuse joints whose torque is identically 0: they move no mass and no inertia (nothing to learn)."""
+    empty, mass, inertia = [], 0.0, 0.0
+    for lk in reversed(links):
+        mass += lk.mass
+        inertia += sum(abs(x) for row in lk.inertia for x in row)
+        if mass == 0.0 and inertia == 0.0:
+            empty.append(lk.joint)
+    if len(empty) == len(links):
+        raise UrdfError(
+            reader.path,
+            "<inertial>",
+            f"every body the joints {[lk.joint for lk in links]} move has mass 0 and inertia 0: every torque "
+            "would be 0 (give the links their <inertial> mass and inertia)",
+        )
+    if empty:
+        raise UrdfError(
+            reader.path,
+            f'<joint name="{empty[-1]}">',
+            f"joints {empty[::-1]} move no mass and no inertia, so their torques are always 0: leave them out of "
+            "robot.joints (held) or give their links an <inertial>",
+        )
+
+
+def _notes(reader: _Reader, chain: list[str], held: dict[str, float]) -> list[str]:
+    """What the file says that selpres reads its own way (logged once per load, recorded in arm.source)."""
+    notes = []
+    zero = [n for n, j in reader.joints.items() if j.kind == "revolute" and j.limits is None and n in chain]
+    if zero:
+        notes.append(f"joints {zero} have <limit lower = upper> (or none): read as 'no position limits'")
+    fixed_mimic = [n for n, j in reader.joints.items() if j.kind == "fixed" and j.mimic is not None]
+    if fixed_mimic:
+        notes.append(f"<mimic> on fixed joints {fixed_mimic} ignored (a fixed joint does not move)")
+    prismatic = [n for n in held if reader.joints[n].kind == "prismatic"]
+    if prismatic:
+        notes.append(f"prismatic joints {prismatic} held (selpres models revolute joints)")
+    return notes
+
+
+def _tip(reader: _Reader, attached_parts: list, tip: str | None) -> tuple[Vec3, str]:
     """(end point in the last body's frame, tip link name)."""
-    attached = dict(_body(reader, last))
+    attached = dict(attached_parts)
+    last = attached_parts[0][0]
     if tip is not None:
         if tip not in attached:
             raise UrdfError(
                 reader.path,
                 f'tip="{tip}"',
-                f"is not a link fixed to the last moving link {last!r} (those are {sorted(attached)})",
+                f"is not a link rigidly attached to the last modelled link {last!r} (those are {sorted(attached)[:8]})",
             )
         return attached[tip].xyz, tip
     link, pose = last, _Pose()
-    while len(reader.children[link]) == 1 and reader.joints[reader.children[link][0]].get("type") == "fixed":
-        j = reader.children[link][0]
-        pose = pose.then(reader.origin(reader.joints[j], f'<joint name="{j}">'))
-        link = reader.joints[j].find("child").get("link")
+    while len(reader.children[link]) == 1 and reader.joints[reader.children[link][0]].kind == "fixed":
+        j = reader.joints[reader.children[link][0]]
+        pose = pose.then(j.origin)
+        link = j.child
     return pose.xyz, link
-
-
-# ------------------------------------------------------------------------------------------------- writing
-def _fmt(values) -> str:
-    return " ".join(repr(float(v) + 0.0) for v in values)
-
-
-def _gravity_turn(gravity: Vec3) -> Mat3:
-    """A rotation taking the direction of ``gravity`` onto −z (identity for zero gravity)."""
-    norm = math.sqrt(sum(x * x for x in gravity))
-    if norm == 0.0:
-        return IDENTITY
-    u = tuple(x / norm for x in gravity)
-    down = (0.0, 0.0, -1.0)
-    axis = (u[1] * down[2] - u[2] * down[1], u[2] * down[0] - u[0] * down[2], u[0] * down[1] - u[1] * down[0])
-    s, c = math.sqrt(sum(x * x for x in axis)), -u[2]
-    if s < 1e-15:
-        return IDENTITY if c > 0 else ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))  # π about x
-    k = tuple(x / s for x in axis)
-    skew = ((0.0, -k[2], k[1]), (k[2], 0.0, -k[0]), (-k[1], k[0], 0.0))
-    sq = _mat_mul(skew, skew)
-    return tuple(tuple(IDENTITY[r][j] + s * skew[r][j] + (1 - c) * sq[r][j] for j in range(3)) for r in range(3))
-
-
-def to_urdf(arm: SerialArm, path: str | Path) -> Path:
-    """Write ``arm`` as a URDF that ``load_urdf`` (with g = |gravity|), Pinocchio or MuJoCo read back as the
-    same dynamics. Returns the path."""
-    path = Path(path)
-    names = {lk.name for lk in arm.links} | {arm.base}
-    write_tip = arm.tip != arm.links[-1].name
-    if write_tip and arm.tip in names:
-        raise ValueError(f"tip name {arm.tip!r} is already a link or the base of {arm.name!r}: rename the tip")
-    if not write_tip and any(x != 0.0 for x in arm.end_point):
-        raise ValueError(f"tip {arm.tip!r} is the last link but the end point {arm.end_point} is not its origin")
-    g = math.sqrt(sum(x * x for x in arm.gravity_vector))
-    turn = _gravity_turn(arm.gravity_vector)
-    robot = ET.Element("robot", name=arm.name)
-    robot.append(
-        ET.Comment(
-            f" written by selpres.arms.urdf.to_urdf: {arm.dof} revolute joints. Gravity {g!r} m/s^2 along -z of the "
-            f"root link (selpres: load_urdf(path, g={g!r})). The wrench of eq. (4) is expressed in link "
-            f"{arm.base!r} and acts at the origin of link {arm.tip!r}. Effort and velocity limits are not part "
-            "of selpres's model: written as 0 (= not given). "
-        )
-    )
-
-    def joint(name: str, kind: str, parent: str, child: str, xyz, rpy) -> ET.Element:
-        el = ET.SubElement(robot, "joint", name=name, type=kind)
-        ET.SubElement(el, "parent", link=parent)
-        ET.SubElement(el, "child", link=child)
-        ET.SubElement(el, "origin", xyz=_fmt(xyz), rpy=_fmt(rpy))
-        return el
-
-    if turn != IDENTITY:  # a root whose -z is the arm's gravity
-        world = next(n for n in ("world", "world_", "world__") if n not in names | {arm.tip})
-        ET.SubElement(robot, "link", name=world)
-        joint(f"{world}_to_{arm.base}", "fixed", world, arm.base, ZERO3, matrix_rpy(turn))
-    ET.SubElement(robot, "link", name=arm.base)
-    parent = arm.base
-    for lk in arm.links:
-        kind = "continuous" if lk.limits is None else "revolute"
-        el = joint(lk.joint, kind, parent, lk.name, lk.xyz, lk.rpy)
-        ET.SubElement(el, "axis", xyz=_fmt(lk.axis))
-        if lk.limits is not None:
-            ET.SubElement(el, "limit", lower=repr(lk.limits[0]), upper=repr(lk.limits[1]), effort="0", velocity="0")
-        inertial = ET.SubElement(ET.SubElement(robot, "link", name=lk.name), "inertial")
-        ET.SubElement(inertial, "origin", xyz=_fmt(lk.com), rpy="0 0 0")
-        ET.SubElement(inertial, "mass", value=repr(lk.mass))
-        i = lk.inertia
-        ET.SubElement(
-            inertial,
-            "inertia",
-            ixx=repr(i[0][0]),
-            ixy=repr(i[0][1]),
-            ixz=repr(i[0][2]),
-            iyy=repr(i[1][1]),
-            iyz=repr(i[1][2]),
-            izz=repr(i[2][2]),
-        )
-        parent = lk.name
-    if write_tip:
-        joint(f"{parent}_to_{arm.tip}", "fixed", parent, arm.tip, arm.end_point, ZERO3)
-        ET.SubElement(robot, "link", name=arm.tip)
-    ET.indent(robot)
-    atomic_write(path, lambda f: ET.ElementTree(robot).write(f, encoding="utf-8", xml_declaration=True))
-    return path

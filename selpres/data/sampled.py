@@ -20,7 +20,10 @@ the sequence but keeps the points it keeps where they were). A pattern's coordin
 test sets from ``derive_seed(data.test_seed, "tests")``: independent streams even when the seeds are equal.
 
 Boxes: ``data.q``, ``data.dq``, ``data.tau`` are ``[lo, hi]`` for every joint or one ``[lo, hi]`` per
-joint; ``data.q: null`` takes each joint's limits, [-π, π] for a joint without (a full turn, logged).
+joint. Defaults from the arm (a URDF's limits): ``data.q: null`` takes each joint's position limits but no
+wider than a full turn ([-π, π] for a joint without), ``data.dq: null`` ±``DQ_FRACTION`` of its velocity limit
+(±1 rad/s without), ``data.tau: null`` on the forward route ±its effort limit (when every joint has one). An
+explicit box always wins; the job logs the boxes it drew from.
 Inputs are laid out by quantity, ``q1..qN, dq1..dqN, ddq1..ddqN`` (targets ``tau1..tauN``).
 """
 
@@ -45,6 +48,7 @@ MAX_N = 1_000_000  # exemplar patterns (and held-out patterns) a sampled set may
 MAX_DRAWS = 50_000_000  # a filtered route needing more draws than this is refused (minutes of simulation)
 FIRST_BATCH = 1 << 16  # draws before the acceptance rate is known
 MAX_BATCH = 1 << 20  # draws simulated at once (~0.2 GB of work arrays for six joints)
+DQ_FRACTION = 0.5  # data.dq: null draws |q̇_i| within this share of joint i's velocity limit (±1 rad/s without)
 
 
 def input_names(dof: int) -> tuple[str, ...]:
@@ -103,20 +107,22 @@ def boxes(arm: Arm, data_cfg: Any) -> Boxes:
     dof, route = arm.dof, _value(cfg_get(data_cfg, "route"))
     q = cfg_get(data_cfg, "q")
     if q is None:
-        limits = arm.joint_limits()
-        free = [i + 1 for i in range(dof) if not torch.isfinite(limits[i]).all()]
-        if free:
-            log.info("data.q=null: joints %s have no limits; drawing them in [-pi, pi]", free)
-        qbox = torch.where(torch.isfinite(limits), limits, torch.tensor([-math.pi, math.pi], dtype=DTYPE))
+        qbox = default_q_box(arm)
     else:
         qbox = _box(list(q), "data.q", dof)
     dq = cfg_get(data_cfg, "dq")
     if dq is None:
-        raise ConfigError("data.dq", None, "[lo, hi] joint rates (rad/s) for every joint, or one pair per joint")
+        rate = arm.rate_limits("velocity")
+        dqbox = torch.stack((-rate, rate), 1).mul(DQ_FRACTION).nan_to_num(posinf=1.0, neginf=-1.0)
+    else:
+        dqbox = _box(list(dq), "data.dq", dof)
     accel = cfg_get(data_cfg, "accel_limit")
     if isinstance(accel, bool) or not isinstance(accel, (int, float)) or not (math.isfinite(accel) and accel > 0):
         raise ConfigError("data.accel_limit", accel, "a positive acceleration bound in rad/s²")
     tau = cfg_get(data_cfg, "tau")
+    effort = arm.rate_limits("effort")
+    if tau is None and route == "forward" and bool(torch.isfinite(effort).all()):
+        tau = torch.stack((-effort, effort), 1).tolist()  # the file's effort limits
     if tau is None and route == "forward":
         raise ConfigError(
             "data.tau",
@@ -139,11 +145,27 @@ def boxes(arm: Arm, data_cfg: Any) -> Boxes:
             k = torch.tensor([float(v) for v in wrench], dtype=DTYPE)
     return Boxes(
         qbox,
-        _box(list(dq), "data.dq", dof),
+        dqbox,
         float(accel),
         None if tau is None else _box(list(tau), "data.tau", dof),
         k,
     )
+
+
+def default_q_box(arm: Arm) -> torch.Tensor:
+    """``data.q: null``: each joint's position limits, but no wider than a full turn (a 2π window about the
+    limits' middle: wider boxes repeat the same poses under other input values), [-π, π] for a joint without."""
+    limits = arm.joint_limits()
+    mid = torch.where(torch.isfinite(limits).all(1), limits.mean(1), torch.zeros(arm.dof, dtype=DTYPE))
+    turn = torch.stack((mid - math.pi, mid + math.pi), 1)
+    return torch.stack((torch.maximum(limits[:, 0], turn[:, 0]), torch.minimum(limits[:, 1], turn[:, 1])), 1)
+
+
+def describe(box: Boxes, route: str) -> str:
+    """The boxes a job draws from, one line (the log; results.json records them in full)."""
+    fmt = lambda t: "[" + ", ".join(f"[{lo:.4g}, {hi:.4g}]" for lo, hi in t.tolist()) + "]"
+    tau = "" if box.tau is None else f", tau {fmt(box.tau)} Nm"
+    return f"boxes: q {fmt(box.q)} rad, dq {fmt(box.dq)} rad/s, |ddq| <= {box.accel:g} rad/s^2{tau} (route {route})"
 
 
 def _value(v: Any) -> Any:

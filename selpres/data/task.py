@@ -210,6 +210,7 @@ def _sampled(robot_cfg, data_cfg) -> Task:
     arm = make_arm(robot_cfg)
     box = S.boxes(arm, data_cfg)
     route, draw, n = data_cfg.route, data_cfg.draw, int(data_cfg.n)
+    log.info("%s", S.describe(box, route))
     drawn = S.sample(arm, box, route, S.stream(data_cfg, arm.dof, "exemplar"), n)
     exemplar = D.ExemplarSet(drawn.X, drawn.tau, n_candidates=drawn.candidates)
     n_test, n_ex = _check_test_split(data_cfg, n)
@@ -231,6 +232,8 @@ def _sampled(robot_cfg, data_cfg) -> Task:
         "heldout_candidates": heldout.candidates,
         "arm": arm.to_config(),
         "wrench": None if box.wrench is None else box.wrench.tolist(),
+        "boxes": {k: None if v is None else v.tolist() for k, v in (("q", box.q), ("dq", box.dq), ("tau", box.tau))},
+        **({"urdf": arm.source} if getattr(arm, "source", None) else {}),
     }
     task = Task(
         exemplar,

@@ -104,7 +104,7 @@ def check_task(cfg: DictConfig) -> Shape:
         for k in other:
             if k not in reads and d[k] is not None:
                 raise ConfigError(f"data.{k}", d[k], f"unset (null) for data.kind={kind}, which reads {list(reads)}")
-    optional = ("q", "tau", "wrench")  # sampled: null = the joint limits, no torque box, no wrench
+    optional = ("q", "dq", "tau", "wrench")  # sampled: null = from the joint limits, no torque box, no wrench
     for k in reads:
         if d[k] is None and k not in optional:
             raise ConfigError(f"data.{k}", None, f"a value: data.kind={kind} reads it")

@@ -239,5 +239,8 @@ def summary_table(results: dict) -> str:
         ("test-10 RMS", f"{fmt('test10_rms_nm_overall')} Nm   {fmt('test10_rms_scaled_overall')} scaled"),
         ("held-out RMS", f"{fmt('heldout_rms_nm_overall')} Nm   {fmt('heldout_rms_scaled_overall')} scaled"),
     ]
+    if "heldout_rms_nmse_overall" in s and results.get("floor"):  # selpres.run.floor
+        base = results["floor"]["heldout"]["nm"]["overall"]
+        rows.append(("held-out nMSE", f"{fmt('heldout_rms_nmse_overall')}   (predicting the mean: {base:.4f} Nm)"))
     w = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)

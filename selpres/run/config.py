@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Any, List, Optional
+from typing import Any, Dict, List, Optional
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, OmegaConf
@@ -57,7 +57,7 @@ class ScalingMode(Enum):
 class RobotKind(Enum):
     two_link = "two_link"  # the paper's arm, closed form of eq. (6) (selpres.arms.two_link.TwoLinkArm)
     serial = "serial"  # N revolute joints from links or DH rows in the YAML (selpres.arms.serial.SerialArm)
-    urdf = "urdf"  # a serial chain of revolute joints read from robot.path (selpres.arms.urdf.load_urdf)
+    urdf = "urdf"  # one chain of a URDF tree (robot.path, base, tip, joints, hold: selpres.arms.urdf.load_urdf)
 
 
 @dataclass
@@ -70,7 +70,7 @@ class RobotConfig:
     m2: Optional[float] = None
     l1: Optional[float] = None
     l2: Optional[float] = None
-    g: Optional[float] = None  # two_link, urdf: gravity's magnitude (m/s²)
+    g: Optional[float] = None  # two_link, urdf: gravity's magnitude (m/s²); urdf: or the vector gravity
     name: Optional[str] = None  # serial: the spec of selpres.arms.serial (links from the base outwards)
     convention: Optional[str] = None
     gravity: Optional[List[float]] = None
@@ -79,6 +79,8 @@ class RobotConfig:
     tip: Optional[str] = None  # serial, urdf: the link whose origin is the wrench's end point
     links: Optional[List[Any]] = None
     path: Optional[str] = None  # urdf: the file
+    joints: Optional[List[str]] = None  # urdf: the modelled joints (null: the chain's revolute joints)
+    hold: Optional[Dict[str, float]] = None  # urdf: held joints' positions
 
 
 @dataclass

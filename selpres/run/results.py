@@ -7,6 +7,7 @@ the same finished job.
 
 from __future__ import annotations
 
+import math
 import subprocess
 import time
 from pathlib import Path
@@ -15,12 +16,13 @@ from omegaconf import DictConfig
 
 from selpres.data.file import file_digest
 from selpres.presentation.sampler import shuffle_implementation
+from selpres.run import floor
 from selpres.run.stats import summarize
 from selpres.storage import stable_hash, to_container
 
 NOT_IDENTITY = ("logging", "overwrite", "threads", "checkpoint", "name")
 SETS = ("test10", "heldout")
-UNITS = ("nm", "scaled")
+UNITS = ("nm", "scaled", "nmse")  # nmse: MSE ÷ the set's target variance (selpres.run.floor)
 
 
 def job_hash(cfg: DictConfig) -> str:
@@ -40,7 +42,7 @@ def replica_results(seeds: list[int], final: dict, diverged_at: list, last_train
     for r, seed in enumerate(seeds):
         ok = diverged_at[r] is None
         metrics = {
-            name: {unit: {k: (v[r].item() if ok else None) for k, v in ev[unit].items()} for unit in UNITS}
+            name: {unit: {k: _value(v[r]) if ok else None for k, v in ev[unit].items()} for unit in UNITS if unit in ev}
             for name, ev in final.items()
         }
         out.append(
@@ -55,6 +57,11 @@ def replica_results(seeds: list[int], final: dict, diverged_at: list, last_train
     return out
 
 
+def _value(t) -> float | None:
+    v = t.item()
+    return v if math.isfinite(v) else None  # an nMSE of a target that does not vary
+
+
 def summary(replicas: list[dict]) -> dict:
     """mean / std / 95 % interval over complete replicas of every final metric (overall, tau1..tauK)."""
     joints = list(replicas[0]["final"]["heldout"]["nm"]) if replicas else []
@@ -63,6 +70,7 @@ def summary(replicas: list[dict]) -> dict:
         for name in SETS
         for unit in UNITS
         for joint in joints
+        if unit in replicas[0]["final"][name]
     }
 
 
@@ -73,6 +81,9 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
     n_div = sum(d is not None for d in progress.diverged_at)
     heldout_n = int(prob.tests["heldout"][0].shape[0])
     training = sum(ep.presentations for ep in prob.plan[: progress.epoch])
+    train_Y = prob.task.exemplar.Y if prob.task is not None else prob.scaler.inverse_y(prob.Y)
+    task_floor = floor.task_floor(train_Y, prob.tests)
+    stats = summary(reps)
     return {
         "status": "diverged" if n_div == R else "complete",
         "diverged_replicas": n_div,
@@ -103,7 +114,11 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "git_commit": _git_commit(),
         "wall_seconds": seconds,
         "seconds_per_presentation": seconds["train"] / max(1, training * R),
-        "summary": summary(reps),
+        "summary": stats,
+        "floor": task_floor,  # predicting the training mean: RMS and nMSE per set and joint (selpres.run.floor)
+        "floor_warnings": floor.floor_warnings(
+            stats, task_floor, prob.task.info if prob.task else None, str(cfg.topology.layers)
+        ),
         "replica_results": reps,
         "curves": progress.history,
         "config": to_container(cfg),

@@ -34,7 +34,7 @@ from selpres.presentation.proportions import fit_schedule, with_fraction_form
 from selpres.presentation.sampler import SelectivePresentation, epoch_orders, shuffle_implementation
 from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
 from selpres.presentation.selection import StageSelection, initial_kind, stage_selection
-from selpres.run import lock, orphan
+from selpres.run import floor, lock, orphan
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
 from selpres.run.checks import batch_mode, optim_hparams, validate
@@ -245,7 +245,7 @@ def mark_diverged(progress: Progress, engine, loss: torch.Tensor, epoch: int) ->
 
 
 def final_scores(engine, prob: Problem) -> dict:
-    """RMS of every replica on each test set, per joint and overall, in Nm and scaled units."""
+    """RMS of every replica on each test set, per joint and overall, in Nm and scaled units, and its nMSE."""
     out = {}
     for name, (X, Y) in prob.scored.items():
         sums, n = engine.squared_errors(X, Y), X.shape[0]  # [R, out] in scaled units
@@ -256,6 +256,7 @@ def final_scores(engine, prob: Problem) -> dict:
                 "overall": _rms(unit_sums, n),
                 **{joint: per_joint[:, k] for k, joint in enumerate(D.metric_names(sums.shape[1])[1:])},
             }
+        scores["nmse"] = floor.nmse(sums * prob.nm2_per_scaled2, n, prob.tests[name][1])  # selpres.run.floor
         out[name] = scores
     return out
 
@@ -381,6 +382,8 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
     + the scaler) and the TensorBoard hparams; the checkpoint is no longer needed."""
     cfg, prob = job.cfg, job.prob
     results = results_json.build(cfg, job.chash, prob, job.engine, final, job.progress, seconds)
+    for line in results["floor_warnings"]:
+        log.warning("%s", line)
     if job.out is None:
         return results
     trained = {
@@ -407,7 +410,8 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
         "engine": results["engine"],
         "engine_requested": results["engine_requested"],
     }
-    job.tracker.close(hp, {f"final/{k}": v["mean"] for k, v in results["summary"].items()})
+    floor_nm = {f"final/floor_{k}_nm_overall": v["nm"]["overall"] for k, v in results["floor"].items()}
+    job.tracker.close(hp, {**{f"final/{k}": v["mean"] for k, v in results["summary"].items()}, **floor_nm})
     if job.ckpts:
         job.ckpts.discard()
     return results
