@@ -8,13 +8,13 @@ Every engine does the same thing, defined by :class:`ReferenceEngine` (plain PyT
   hand-written sigmoid/MSE backward). Pure torch; the fallback when no native kernel can be built.
 * ``"native"``    -- :class:`NativeEngine`: an AVX2 C kernel (4 float64 replicas per vector, inline
   vector ``exp``, topology compiled in; ``selpres/native/kernels/sgd.c``), built with the system C compiler at
-  first use and cached (see :mod:`selpres.native.build`). Its ``predict`` runs the kernel's forward pass on
+  first use and cached (see :mod:`selpres.native`). Its ``predict`` runs the kernel's forward pass on
   the packed weights; its ``squared_errors`` sums inside that pass, writing no outputs; its ``finite``
   reads the packed weights once, without unpacking them.
 * ``"fast"``      -- ``native`` if the kernel can be had here, else ``torch``. Not a class: the returned
   engine's ``name`` says which one runs, and its ``fallback_reason`` why it is not native (the
   compiler's message, "no AVX2/FMA ...", "disabled by SELPRES_NO_NATIVE"); one warning line goes to the
-  ``selpres`` logger. ``make_engine("native")`` raises :class:`selpres.native.build.KernelUnavailable` instead.
+  ``selpres`` logger. ``make_engine("native")`` raises :class:`selpres.native.KernelUnavailable` instead.
 
 Interface (all engines)::
 
@@ -37,7 +37,7 @@ Momentum buffers persist across ``train_epoch`` calls and are part of ``state_di
 
 Threads: ``native`` splits replicas (in groups of 4; in ``predict`` and ``squared_errors``, patterns when
 there are fewer groups than threads) over up to ``threads`` OS threads, and runs small calls (a few
-replicas, a few patterns) in the calling thread (see :data:`selpres.native.build.MIN_THREAD_WORK`); the
+replicas, a few patterns) in the calling thread (see :data:`selpres.native.library.MIN_THREAD_WORK`); the
 default is
 ``torch.get_num_threads()`` (set it, or pass ``threads=1`` to ``make_engine``, e.g. when a joblib
 sweep already runs one process per core). Environment variable ``SELPRES_THREADS`` overrides the default.
@@ -275,9 +275,9 @@ class NativeEngine:
     LANES = 4
 
     def __init__(self, sizes, params, lr, momentum, batch_size, threads: int | None = None):
-        from selpres.native import build as _kernels
+        from selpres.native import load
 
-        self._k = _kernels.load(sizes)  # raises _kernels.KernelUnavailable when it cannot be built
+        self._k = load(sizes)  # raises KernelUnavailable when it cannot be built
         self.sizes = tuple(sizes)
         self.lr, self.mom, self.batch_size = float(lr), float(momentum), int(batch_size)
         self.threads = _default_threads(threads)
@@ -377,11 +377,11 @@ def make_engine(
     if name == "native":
         return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
     if name == "fast":
-        from selpres.native import build as _kernels
+        from selpres.native import KernelUnavailable
 
         try:
             return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
-        except _kernels.KernelUnavailable as exc:
+        except KernelUnavailable as exc:
             engine = TorchEngine(sizes, params, lr, momentum, batch_size)
             engine.fallback_reason = str(exc)
             line = " ".join(str(exc).split())  # one line, however long the compiler's message

@@ -4,7 +4,8 @@
  * (selpres_finite: the divergence check). The evaluation code is in eval.h, built here at 4 lanes and,
  * where the compiler targets AVX-512F, at 8 (selpres_eval_lanes says which).
  *
- * Built and loaded by selpres/_kernels.py, which compiles this file once per topology with
+ * Built by selpres/native/build.py (bound by selpres/native/sgd.py), which compiles this file once per
+ * topology with
  *   cc -O3 -march=native -fPIC -shared -std=c11 \
  *      -DNL=.. -DSIZES=.. -DP_TOTAL=.. -DTOT_UNITS=.. -DMAXW=.. -DNI=..
  *   NL         number of weight layers (6-13-2: 2)
