@@ -54,6 +54,7 @@ import torch
 import torch.nn.functional as F
 
 from selpres.engines.model import BPN, forward_replicas, load_into, replicas_finite, squared_errors_of
+from selpres.native.staging import stage
 
 ENGINE_NAMES = ("reference", "torch", "native", "fast")
 
@@ -287,6 +288,7 @@ class NativeEngine:
         self.P = sum(int(torch.Size(s).numel()) for s in self.shapes)
         self.w = self._pack(params)
         self.buf = torch.zeros_like(self.w)
+        self._staged = None  # a large set's rows for the kernel (selpres.native.staging), kept between epochs
 
     # [W1, b1, ...] with leading R  <->  [G, P, 4] (per group: parameters in list order, 4 lanes innermost)
     def _pack(self, tensors):
@@ -325,6 +327,9 @@ class NativeEngine:
             padded[self.R :] = o[:1]  # the padding lanes shadow replica 0 (see _pack)
             padded_order = torch.from_numpy(padded)
         loss = torch.zeros(self.G * self.LANES, dtype=torch.float64)
+        self._staged = stage(self._staged, X, Y)  # None for a set that stays in the caches
+        if self._staged is not None:
+            X, Y = self._staged.X, self._staged.Y  # the same numbers, one row of whole cache lines per pattern
         self._k.train(
             self.sizes, self.w, self.buf, X, Y, padded_order, self.batch_size, self.lr, self.mom, loss, self.threads
         )

@@ -60,6 +60,8 @@ class Kernel(Library):
             ctypes.c_double,
             ctypes.c_double,
             dp,
+            i64,
+            i64,
         ]
         self._train.restype = c_int
         self._forward = self.lib.selpres_forward
@@ -106,10 +108,12 @@ class Kernel(Library):
         threads: int,
     ) -> None:
         """One epoch for all groups of ``w``/``buf`` ([G, P, 4], updated in place); ``loss`` [G*4] gets
-        per-lane sums. Threads take contiguous chunks of groups."""
+        per-lane sums. ``X``, ``Y``: one pattern per row, each row contiguous (contiguous arrays, or the
+        strided views of :class:`selpres.native.staging.Staged`). Threads take contiguous chunks of groups."""
         G, P, lanes = w.shape
         assert lanes == LANES and buf.shape == w.shape and w.is_contiguous() and buf.is_contiguous()
         assert w.dtype == buf.dtype == X.dtype == Y.dtype == loss.dtype == torch.float64
+        assert X.stride(1) == 1 and Y.stride(1) == 1 and X.shape[0] == Y.shape[0]
         order = order.contiguous()
         assert order.dtype == torch.int64 and order.shape[0] == G * LANES
         m = order.shape[1]
@@ -126,6 +130,8 @@ class Kernel(Library):
             float(lr),
             float(mom),
             loss.data_ptr(),
+            X.stride(0) if X.shape[0] > 1 else X.shape[1],  # a single row's stride may be anything
+            Y.stride(0) if Y.shape[0] > 1 else Y.shape[1],
         )
         head = self._sizes_arg(sizes)
         self._run(self._train, [(*head, g0, g1, *rest) for g0, g1 in self._bounds(G, threads)])
