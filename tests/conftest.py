@@ -56,12 +56,12 @@ def numbers(res: dict) -> dict:
 
 def _native_reason() -> str | None:
     """Why the native kernel cannot run here (None when it can): native-only tests skip with this reason."""
-    from selpres.native import build as _kernels
+    from selpres.native import KernelUnavailable, load
 
     try:
-        _kernels.load((6, 13, 2))
+        load((6, 13, 2))
         return None
-    except _kernels.KernelUnavailable as exc:
+    except KernelUnavailable as exc:
         return str(exc).splitlines()[0]
 
 

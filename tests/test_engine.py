@@ -10,7 +10,7 @@ import torch
 
 from selpres.engines.model import forward_replicas, init_replica_params
 from selpres.engines.online import make_engine
-from selpres.native import build as _kernels
+from selpres.native import KernelUnavailable, build, library, sgd
 
 from conftest import requires_native
 
@@ -197,7 +197,7 @@ def test_fast_engine_is_native_where_the_kernel_runs(caplog):
     with caplog.at_level(logging.WARNING, logger="selpres"):
         eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
     assert eng.name == "native" and eng.fallback_reason is None and not _fallback_warnings(caplog)
-    from selpres.native.build import cpu_flags
+    from selpres.native import cpu_flags
 
     # -march=native: the evaluation runs at 8 lanes exactly where the CPU has AVX-512F, and says so
     avx512 = "avx512f" in cpu_flags()
@@ -212,7 +212,7 @@ def test_fast_engine_falls_back_to_torch_and_says_why(monkeypatch, caplog):
     assert eng.name == "torch" and eng.fallback_reason == "disabled by SELPRES_NO_NATIVE"
     (warning,) = _fallback_warnings(caplog)
     assert "\n" not in warning.getMessage() and warning.getMessage().endswith("disabled by SELPRES_NO_NATIVE")
-    with pytest.raises(_kernels.KernelUnavailable, match="disabled by SELPRES_NO_NATIVE"):
+    with pytest.raises(KernelUnavailable, match="disabled by SELPRES_NO_NATIVE"):
         make_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
 
 
@@ -227,8 +227,8 @@ def test_fast_engine_reports_the_compilers_message(tmp_path, monkeypatch, caplog
     monkeypatch.setenv("CC", str(cc))
     monkeypatch.delenv("SELPRES_NO_NATIVE", raising=False)
     monkeypatch.setenv("SELPRES_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(_kernels, "_loaded", {})
-    monkeypatch.setattr(_kernels, "cpu_flags", lambda: frozenset({"avx2", "fma"}))  # reach the compiler
+    monkeypatch.setattr(build, "_loaded", {})
+    monkeypatch.setattr(build, "cpu_flags", lambda: frozenset({"avx2", "fma"}))  # reach the compiler
     sizes = (6, 3, 2)
     with caplog.at_level(logging.WARNING, logger="selpres"):
         eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
@@ -237,7 +237,7 @@ def test_fast_engine_reports_the_compilers_message(tmp_path, monkeypatch, caplog
     assert "sgd.c:1: error: boom\nsecond line" in eng.fallback_reason
     (warning,) = _fallback_warnings(caplog)
     assert "\n" not in warning.getMessage() and "sgd.c:1: error: boom second line" in warning.getMessage()
-    with pytest.raises(_kernels.KernelUnavailable, match="boom"):
+    with pytest.raises(KernelUnavailable, match="boom"):
         make_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
 
 
@@ -415,7 +415,7 @@ def _fsum_squared_errors(outputs, Y):
 
 
 # three of the kernel's blocks of patterns, the last partly full, ending 5 patterns past a multiple of 8
-SCORE_N = 2 * _kernels.SCORE_BLOCK + 45
+SCORE_N = 2 * sgd.SCORE_BLOCK + 45
 
 
 @pytest.mark.parametrize("name", ["reference", NATIVE])  # the torch engines score through predict (ScoredByPredict)
@@ -429,7 +429,7 @@ def test_squared_errors_match_predict(monkeypatch, name, sizes, R):
     Y = 0.1 + 0.8 * torch.rand(SCORE_N, sizes[-1], generator=g, dtype=torch.float64)
     params = init_replica_params(sizes, list(range(R)))
     params[0][0, 0, 0] = 7.0  # a saturated unit somewhere
-    monkeypatch.setattr(_kernels, "MIN_THREAD_WORK", 1)
+    monkeypatch.setattr(library, "MIN_THREAD_WORK", 1)
     got = []
     for threads in (1, 2):
         eng = _engine(name, sizes, params, threads)
@@ -451,7 +451,7 @@ def test_native_squared_errors_do_not_depend_on_threads_or_pool(monkeypatch):
         params = init_replica_params(sizes, list(range(R)))
         outs = []
         for threads, min_work in ((1, 1 << 60), (2, 1), (3, 1)):
-            monkeypatch.setattr(_kernels, "MIN_THREAD_WORK", min_work)
+            monkeypatch.setattr(library, "MIN_THREAD_WORK", min_work)
             eng = make_engine("native", sizes, params, LR, MOM, 1, threads=threads)
             outs.append(eng.squared_errors(X, Y))
         assert all(torch.equal(outs[0], o) for o in outs[1:])

@@ -14,7 +14,7 @@ import textwrap
 import pytest
 import torch
 
-from selpres.native import build as _kernels
+from selpres.native import KernelUnavailable, build, cpu_flags, library, load, sgd
 
 from conftest import REPO, requires_native
 
@@ -25,36 +25,34 @@ SIZES = (5, 3, 2)  # a topology no other test loads: its library is mapped only 
 def fresh_cache(tmp_path, monkeypatch):
     """An empty kernel cache and an empty in-process memo, so each test builds and loads for itself."""
     monkeypatch.setenv("SELPRES_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(_kernels, "_loaded", {})
+    monkeypatch.setattr(build, "_loaded", {})
     return tmp_path / "cache"
 
 
 def test_kernel_source_is_a_c_file_shipped_with_the_package():
-    assert _kernels.SOURCE.name == "sgd.c" and _kernels.SOURCE.parent.name == "kernels"
-    text = _kernels.SOURCE.read_text()
+    assert sgd.SOURCE.name == "sgd.c" and sgd.SOURCE.parent.name == "kernels"
+    text = sgd.SOURCE.read_text()
     assert "int selpres_train(" in text and "@" not in text  # no text-substitution placeholders left
     # P = (13*6 + 13) + (2*13 + 2), units 6 + 13 + 2
-    assert _kernels.macros((6, 13, 2)) == [
+    assert sgd.macros((6, 13, 2)) == [
         "-DNL=2",
         "-DSIZES=6,13,2",
         "-DP_TOTAL=119",
         "-DTOT_UNITS=21",
         "-DMAXW=13",
-        f"-DNI={_kernels.INTERLEAVE}",
+        f"-DNI={sgd.INTERLEAVE}",
     ]
 
 
 @requires_native
 def test_compiler_errors_point_at_real_lines_of_the_source(fresh_cache, monkeypatch):
     """Without its macros the file stops at its own #error; the message names sgd.c and that line."""
-    monkeypatch.setattr(_kernels, "macros", lambda sizes: ["-DNL=1"])
+    monkeypatch.setattr(sgd, "macros", lambda sizes: ["-DNL=1"])
     line = next(
-        i
-        for i, ln in enumerate(_kernels.SOURCE.read_text().splitlines(), 1)
-        if ln.startswith("#error") and "-DNL" in ln
+        i for i, ln in enumerate(sgd.SOURCE.read_text().splitlines(), 1) if ln.startswith("#error") and "-DNL" in ln
     )
-    with pytest.raises(_kernels.KernelUnavailable) as info:
-        _kernels.build(SIZES)
+    with pytest.raises(KernelUnavailable) as info:
+        sgd.build(SIZES)
     assert re.search(rf"sgd\.c:{line}:", str(info.value)), str(info.value)
 
 
@@ -63,7 +61,7 @@ def test_compiler_errors_point_at_real_lines_of_the_source(fresh_cache, monkeypa
 @pytest.mark.slow  # builds the kernel afresh
 @pytest.mark.parametrize("damage", ["truncate", "flip"])
 def test_damaged_cached_library_is_rebuilt_not_loaded(fresh_cache, damage, caplog):
-    path = _kernels.build(SIZES)
+    path = sgd.build(SIZES)
     good = path.read_bytes()
     if damage == "truncate":  # e.g. a full disk, or a copy killed half way
         path.write_bytes(good[: len(good) // 2])
@@ -72,7 +70,7 @@ def test_damaged_cached_library_is_rebuilt_not_loaded(fresh_cache, damage, caplo
         bad[len(bad) // 2] ^= 0xFF
         path.write_bytes(bytes(bad))
     with caplog.at_level(logging.WARNING, logger="selpres"):
-        kernel = _kernels.load(SIZES)
+        kernel = load(SIZES)
     assert kernel.path == path and path.read_bytes() == good
     assert any("fails its checksum" in r.getMessage() for r in caplog.records)
 
@@ -81,30 +79,30 @@ def test_damaged_cached_library_is_rebuilt_not_loaded(fresh_cache, damage, caplo
 @pytest.mark.slow  # builds the kernel afresh
 def test_library_without_checksum_is_rebuilt(fresh_cache):
     """A library whose sidecar is missing was not finished (or predates the checksum): rebuilt."""
-    path = _kernels.build(SIZES)
-    assert _kernels._sidecar(path).read_text().strip() == hashlib.sha256(path.read_bytes()).hexdigest()
-    _kernels._sidecar(path).unlink()
+    path = sgd.build(SIZES)
+    assert build._sidecar(path).read_text().strip() == hashlib.sha256(path.read_bytes()).hexdigest()
+    build._sidecar(path).unlink()
     path.write_bytes(b"\x7fELF not a library")
-    assert _kernels.load(SIZES).path == path and _kernels._sidecar(path).exists()
+    assert load(SIZES).path == path and build._sidecar(path).exists()
 
 
 @requires_native
 def test_cpu_without_avx2_never_opens_a_cached_library(fresh_cache, monkeypatch):
-    _kernels.build(SIZES)  # a library is in the cache (as if built by another machine of a cluster)
+    sgd.build(SIZES)  # a library is in the cache (as if built by another machine of a cluster)
     opened = []
-    monkeypatch.setattr(_kernels.ctypes, "CDLL", lambda *a, **k: opened.append(a) or pytest.fail("opened"))
-    monkeypatch.setattr(_kernels, "cpu_flags", lambda: frozenset({"sse2", "avx", "fma"}))
-    with pytest.raises(_kernels.KernelUnavailable, match="no AVX2/FMA: this CPU lacks avx2"):
-        _kernels.load(SIZES)
+    monkeypatch.setattr(library.ctypes, "CDLL", lambda *a, **k: opened.append(a) or pytest.fail("opened"))
+    monkeypatch.setattr(build, "cpu_flags", lambda: frozenset({"sse2", "avx", "fma"}))
+    with pytest.raises(KernelUnavailable, match="no AVX2/FMA: this CPU lacks avx2"):
+        load(SIZES)
     assert opened == []
 
 
 def test_cpu_check_names_what_is_missing():
-    _kernels.check_cpu(frozenset({"avx2", "fma", "sse2"}))  # passes
-    with pytest.raises(_kernels.KernelUnavailable, match=r"lacks avx2, fma \(no CPU flags readable"):
-        _kernels.check_cpu(frozenset())
-    with pytest.raises(_kernels.KernelUnavailable, match=r"lacks fma$"):
-        _kernels.check_cpu(frozenset({"avx2"}))
+    build.check_cpu(frozenset({"avx2", "fma", "sse2"}))  # passes
+    with pytest.raises(KernelUnavailable, match=r"lacks avx2, fma \(no CPU flags readable"):
+        build.check_cpu(frozenset())
+    with pytest.raises(KernelUnavailable, match=r"lacks fma$"):
+        build.check_cpu(frozenset({"avx2"}))
 
 
 def test_cpu_flags_are_those_every_core_lists(monkeypatch, tmp_path):
@@ -116,7 +114,7 @@ def test_cpu_flags_are_those_every_core_lists(monkeypatch, tmp_path):
         return real_open(cpuinfo if f == "/proc/cpuinfo" else f, *a, **k)
 
     monkeypatch.setattr("builtins.open", fake_open)
-    assert _kernels.cpu_flags() == frozenset({"fpu", "sse2", "fma"})
+    assert cpu_flags() == frozenset({"fpu", "sse2", "fma"})
 
 
 @requires_native
@@ -125,15 +123,15 @@ def test_failed_build_is_reported_then_retried(fresh_cache, monkeypatch):
     """A compiler failure or a time-out is not remembered for the process: the next load() builds."""
     cc = os.environ.get("CC")
     monkeypatch.setenv("CC", "false")
-    with pytest.raises(_kernels.KernelUnavailable, match="'false' does not run|false exited with 1"):
-        _kernels.load(SIZES)
+    with pytest.raises(KernelUnavailable, match="'false' does not run|false exited with 1"):
+        load(SIZES)
     monkeypatch.setenv("CC", cc) if cc else monkeypatch.delenv("CC")
-    monkeypatch.setattr(_kernels, "COMPILE_TIMEOUT", 1e-4)
-    with pytest.raises(_kernels.KernelUnavailable, match="timed out after 0.0001 s"):
-        _kernels.load(SIZES)
+    monkeypatch.setattr(build, "COMPILE_TIMEOUT", 1e-4)
+    with pytest.raises(KernelUnavailable, match="timed out after 0.0001 s"):
+        load(SIZES)
     assert not list(fresh_cache.glob("*.so"))  # nothing half-built left behind
-    monkeypatch.setattr(_kernels, "COMPILE_TIMEOUT", 300)
-    assert _kernels.load(SIZES).path.exists()
+    monkeypatch.setattr(build, "COMPILE_TIMEOUT", 300)
+    assert load(SIZES).path.exists()
 
 
 # ---------------------------------------------------------------- large topologies
@@ -177,7 +175,7 @@ def test_wide_layer_does_not_overflow_the_stack(tmp_path):
 
 # ---------------------------------------------------------------- small work stays in the calling thread
 def test_threads_for_gives_a_thread_only_work_worth_one():
-    M, threads_for = _kernels.MIN_THREAD_WORK, _kernels.Kernel.threads_for
+    M, threads_for = library.MIN_THREAD_WORK, sgd.Kernel.threads_for
     assert [threads_for(w, 2) for w in (0, 1, M, 2 * M - 1)] == [1, 1, 1, 1]
     assert [threads_for(w, 2) for w in (2 * M, 10**12)] == [2, 2]
     assert threads_for(10**12, 1) == 1 and threads_for(3 * M, 8) == 3 and threads_for(10**12, 8) == 8
@@ -197,12 +195,12 @@ def test_small_calls_never_touch_the_pool_and_large_ones_do(monkeypatch):
     X = torch.rand(50, 6, generator=g, dtype=torch.float64)
     Y = torch.rand(50, 2, generator=g, dtype=torch.float64)
     order = torch.stack([torch.randperm(50, generator=g) for _ in range(5)])
-    real = _kernels.Kernel._executor
+    real = sgd.Kernel._executor
     pooled = []
-    monkeypatch.setattr(_kernels.Kernel, "_executor", lambda self, n: pooled.append(n) or real(self, n))
+    monkeypatch.setattr(sgd.Kernel, "_executor", lambda self, n: pooled.append(n) or real(self, n))
     results = []
-    for min_work in (_kernels.MIN_THREAD_WORK, 1):
-        monkeypatch.setattr(_kernels, "MIN_THREAD_WORK", min_work)
+    for min_work in (library.MIN_THREAD_WORK, 1):
+        monkeypatch.setattr(library, "MIN_THREAD_WORK", min_work)
         one, five = (
             make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1, threads=2)
             for R in (1, 5)
@@ -218,7 +216,7 @@ def test_small_calls_never_touch_the_pool_and_large_ones_do(monkeypatch):
 # -------------------------------------------------------- evaluation at 8 lanes (AVX-512) = at 4 lanes (AVX2)
 AVX2_ONLY = ("-mno-avx512f",)  # after -march=native: the same source, evaluated at 4 lanes only
 requires_avx512 = pytest.mark.skipif(
-    "avx512f" not in _kernels.cpu_flags(), reason="this CPU lacks avx512f: evaluation runs at 4 lanes only"
+    "avx512f" not in cpu_flags(), reason="this CPU lacks avx512f: evaluation runs at 4 lanes only"
 )
 
 
@@ -250,11 +248,11 @@ def test_avx512_evaluation_is_bitwise_the_avx2_one(monkeypatch, sizes):
     that start at an odd group, N = 1037 (two score blocks, the second 13 patterns: one batch of NPAT = 8
     and 5 leftovers), a NaN replica, saturated sigmoids. 1 and 2 threads (MIN_THREAD_WORK = 1, so even
     these small calls are split: groups, or patterns/blocks when there is one group)."""
-    wide, narrow = _kernels.load(sizes), _kernels.load(sizes, AVX2_ONLY)
+    wide, narrow = load(sizes), load(sizes, AVX2_ONLY)
     assert (wide.eval_lanes, narrow.eval_lanes) == (8, 4)
-    monkeypatch.setattr(_kernels, "MIN_THREAD_WORK", 1)
+    monkeypatch.setattr(library, "MIN_THREAD_WORK", 1)
     g = torch.Generator().manual_seed(len(sizes))
-    N = _kernels.SCORE_BLOCK + 13
+    N = sgd.SCORE_BLOCK + 13
     X = torch.rand(N, sizes[0], generator=g, dtype=torch.float64)
     Y = 0.1 + 0.8 * torch.rand(N, sizes[-1], generator=g, dtype=torch.float64)
     for R in (4, 8, 12, 20):
@@ -275,29 +273,29 @@ def test_eval_lanes_say_what_the_build_runs():
     """8 where the compiler targets AVX-512F (-march=native on a CPU that has it), else 4; the AVX2-only
     variant is a second library beside the usual one, never a replacement."""
     try:
-        usual, avx2 = _kernels.load(SIZES), _kernels.load(SIZES, AVX2_ONLY)
-    except _kernels.KernelUnavailable as exc:
+        usual, avx2 = load(SIZES), load(SIZES, AVX2_ONLY)
+    except KernelUnavailable as exc:
         pytest.skip(f"native kernel unavailable: {exc}")
-    assert usual.eval_lanes == (8 if "avx512f" in _kernels.cpu_flags() else 4)
-    assert avx2.eval_lanes == 4 and avx2.path != usual.path and _kernels.load(SIZES) is usual
+    assert usual.eval_lanes == (8 if "avx512f" in cpu_flags() else 4)
+    assert avx2.eval_lanes == 4 and avx2.path != usual.path and load(SIZES) is usual
 
 
 def test_extra_flags_and_included_headers_key_the_cache(tmp_path):
     """A library is keyed by its extra flags and by the headers its source includes (eval.h): an edited
     header must never reuse a library built from the old one."""
     src = tmp_path / "sgd.c"
-    src.write_text(_kernels.SOURCE.read_text())
+    src.write_text(sgd.SOURCE.read_text())
     header = tmp_path / "eval.h"
-    header.write_text(_kernels.SOURCE.with_name("eval.h").read_text())
+    header.write_text(sgd.SOURCE.with_name("eval.h").read_text())
     assert '#include "eval.h"' in src.read_text()
-    flags = _kernels.macros(SIZES)
-    usual = _kernels._library_path("s", src, flags)
-    assert _kernels._library_path("s", src, [*flags, *AVX2_ONLY]) != usual
+    flags = sgd.macros(SIZES)
+    usual = build._library_path("s", src, flags)
+    assert build._library_path("s", src, [*flags, *AVX2_ONLY]) != usual
     header.write_text(header.read_text() + "\n/* edited */\n")
-    assert _kernels._library_path("s", src, flags) != usual
+    assert build._library_path("s", src, flags) != usual
 
 
 def test_extra_flags_must_be_compiler_options():
     for bad in ("-mno-avx512f", ["mno-avx512f"], [3]):
         with pytest.raises(ValueError, match="extra_flags: a sequence of options like '-mno-avx512f', not "):
-            _kernels.load(SIZES, bad)
+            load(SIZES, bad)

@@ -16,8 +16,8 @@ from selpres.bench.common import PACKAGE_PARENT, median_seconds
 def bench_compile() -> None:
     """First-use build time of the native kernel: cold (empty cache) and cached (a new process's load)."""
     code = (
-        "import time,torch;from selpres.native import build as _kernels;t=time.perf_counter();"
-        "_kernels.load((6,13,2));print(time.perf_counter()-t)"
+        "import time,torch;from selpres.native import load;t=time.perf_counter();"
+        "load((6,13,2));print(time.perf_counter()-t)"
     )
     env = dict(os.environ, PYTHONPATH=str(PACKAGE_PARENT))
     with tempfile.TemporaryDirectory() as tmp:

@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.configs / "train.yaml").is_file():
         ap.error(f"--configs={args.configs}: no train.yaml there; expected the repository's configs/ directory")
     q = args.quick
-    from selpres.native import build as _kernels
+    from selpres.native import KernelUnavailable, load
 
     print(
         f"python {platform.python_version()}, torch {torch.__version__}, numpy {np.__version__}, "
@@ -78,9 +78,9 @@ def main(argv: list[str] | None = None) -> int:
         f"replica-run = {EPOCHS} epochs x {N} patterns, 6-13-2, batch 1; times are medians; ratio = idiomatic / this\n"
     )
     try:
-        _kernels.load(SIZES)
+        load(SIZES)
         native = True
-    except _kernels.KernelUnavailable as exc:
+    except KernelUnavailable as exc:
         print(f"native kernel unavailable: {exc} (native rows skipped; the fast engine is torch)")
         native = False
 

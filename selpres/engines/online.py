@@ -8,13 +8,13 @@ Every engine does the same thing, defined by :class:`ReferenceEngine` (plain PyT
   hand-written sigmoid/MSE backward). Pure torch; the fallback when no native kernel can be built.
 * ``"native"``    -- :class:`NativeEngine`: an AVX2 C kernel (4 float64 replicas per vector, inline
   vector ``exp``, topology compiled in; ``selpres/native/kernels/sgd.c``), built with the system C compiler at
-  first use and cached (see :mod:`selpres.native.build`). Its ``predict`` runs the kernel's forward pass on
+  first use and cached (see :mod:`selpres.native`). Its ``predict`` runs the kernel's forward pass on
   the packed weights; its ``squared_errors`` sums inside that pass, writing no outputs; its ``finite``
   reads the packed weights once, without unpacking them.
 * ``"fast"``      -- ``native`` if the kernel can be had here, else ``torch``. Not a class: the returned
   engine's ``name`` says which one runs, and its ``fallback_reason`` why it is not native (the
   compiler's message, "no AVX2/FMA ...", "disabled by SELPRES_NO_NATIVE"); one warning line goes to the
-  ``selpres`` logger. ``make_engine("native")`` raises :class:`selpres.native.build.KernelUnavailable` instead.
+  ``selpres`` logger. ``make_engine("native")`` raises :class:`selpres.native.KernelUnavailable` instead.
 
 Interface (all engines)::
 
@@ -37,7 +37,7 @@ Momentum buffers persist across ``train_epoch`` calls and are part of ``state_di
 
 Threads: ``native`` splits replicas (in groups of 4; in ``predict`` and ``squared_errors``, patterns when
 there are fewer groups than threads) over up to ``threads`` OS threads, and runs small calls (a few
-replicas, a few patterns) in the calling thread (see :data:`selpres.native.build.MIN_THREAD_WORK`); the
+replicas, a few patterns) in the calling thread (see :data:`selpres.native.library.MIN_THREAD_WORK`); the
 default is
 ``torch.get_num_threads()`` (set it, or pass ``threads=1`` to ``make_engine``, e.g. when a joblib
 sweep already runs one process per core). Environment variable ``SELPRES_THREADS`` overrides the default.
@@ -54,6 +54,7 @@ import torch
 import torch.nn.functional as F
 
 from selpres.engines.model import BPN, forward_replicas, load_into, replicas_finite, squared_errors_of
+from selpres.native.staging import stage
 
 ENGINE_NAMES = ("reference", "torch", "native", "fast")
 
@@ -275,9 +276,9 @@ class NativeEngine:
     LANES = 4
 
     def __init__(self, sizes, params, lr, momentum, batch_size, threads: int | None = None):
-        from selpres.native import build as _kernels
+        from selpres.native import load
 
-        self._k = _kernels.load(sizes)  # raises _kernels.KernelUnavailable when it cannot be built
+        self._k = load(sizes)  # raises KernelUnavailable when it cannot be built
         self.sizes = tuple(sizes)
         self.lr, self.mom, self.batch_size = float(lr), float(momentum), int(batch_size)
         self.threads = _default_threads(threads)
@@ -287,6 +288,7 @@ class NativeEngine:
         self.P = sum(int(torch.Size(s).numel()) for s in self.shapes)
         self.w = self._pack(params)
         self.buf = torch.zeros_like(self.w)
+        self._staged = None  # a large set's rows for the kernel (selpres.native.staging), kept between epochs
 
     # [W1, b1, ...] with leading R  <->  [G, P, 4] (per group: parameters in list order, 4 lanes innermost)
     def _pack(self, tensors):
@@ -325,6 +327,9 @@ class NativeEngine:
             padded[self.R :] = o[:1]  # the padding lanes shadow replica 0 (see _pack)
             padded_order = torch.from_numpy(padded)
         loss = torch.zeros(self.G * self.LANES, dtype=torch.float64)
+        self._staged = stage(self._staged, X, Y)  # None for a set that stays in the caches
+        if self._staged is not None:
+            X, Y = self._staged.X, self._staged.Y  # the same numbers, one row of whole cache lines per pattern
         self._k.train(
             self.sizes, self.w, self.buf, X, Y, padded_order, self.batch_size, self.lr, self.mom, loss, self.threads
         )
@@ -377,11 +382,11 @@ def make_engine(
     if name == "native":
         return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
     if name == "fast":
-        from selpres.native import build as _kernels
+        from selpres.native import KernelUnavailable
 
         try:
             return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
-        except _kernels.KernelUnavailable as exc:
+        except KernelUnavailable as exc:
             engine = TorchEngine(sizes, params, lr, momentum, batch_size)
             engine.fallback_reason = str(exc)
             line = " ".join(str(exc).split())  # one line, however long the compiler's message

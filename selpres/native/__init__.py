@@ -5,5 +5,27 @@ and ``kernels/shuffle.c`` (the per-epoch shuffles of ``selpres.presentation.samp
 its users, so neither has to import the other; without a compiler or AVX2/FMA, ``KernelUnavailable`` says why
 and the callers fall back to torch.
 
+What callers use, all from here: ``from selpres.native import KernelUnavailable, cpu_flags, load, load_shuffle``.
+The modules: ``build.py`` (compile, cache, load once per process), ``library.py`` (a loaded library and the
+thread pool its calls' chunks run on), ``sgd.py`` (the SGD kernel's binding, ``load``), ``shuffle.py`` (the
+shuffles' binding, ``load_shuffle``). ``load`` and ``load_shuffle`` are imported on first use, so importing
+``KernelUnavailable`` does not import torch.
+
 May import: ``selpres.errors`` only (and numpy, torch, ctypes).
 """
+
+from selpres.native.build import KernelUnavailable, cpu_flags
+
+__all__ = ["KernelUnavailable", "cpu_flags", "load", "load_shuffle"]
+
+
+def __getattr__(name: str):
+    if name == "load":
+        from selpres.native.sgd import load
+
+        return load
+    if name == "load_shuffle":
+        from selpres.native.shuffle import load_shuffle
+
+        return load_shuffle
+    raise AttributeError(f"module 'selpres.native' has no attribute {name!r}")

@@ -71,7 +71,7 @@ def _row_hashes(base: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> np.ndarra
 def native_shuffles():
     """``(shuffler, None)`` when the native shuffles (``kernels/shuffle.c``) load here, else ``(None, why)``;
     decided once per process, so a missing compiler is not retried every epoch."""
-    from selpres.native.build import KernelUnavailable, load_shuffle
+    from selpres.native import KernelUnavailable, load_shuffle
 
     try:
         return load_shuffle(), None

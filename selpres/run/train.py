@@ -142,7 +142,7 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
 def job_engine(cfg: DictConfig, prob: Problem):
     """The engine the config asks for; ``engine=native`` where the kernel cannot run is a user error.
     Batch methods (QuickProp, Delta-Bar-Delta, Rprop, Adam, batch SGD) step once per epoch in torch."""
-    from selpres.native.build import KernelUnavailable
+    from selpres.native import KernelUnavailable
 
     o = cfg.optim
     if batch_mode(o):

@@ -4,7 +4,8 @@
  * (selpres_finite: the divergence check). The evaluation code is in eval.h, built here at 4 lanes and,
  * where the compiler targets AVX-512F, at 8 (selpres_eval_lanes says which).
  *
- * Built and loaded by selpres/_kernels.py, which compiles this file once per topology with
+ * Built by selpres/native/build.py (bound by selpres/native/sgd.py), which compiles this file once per
+ * topology with
  *   cc -O3 -march=native -fPIC -shared -std=c11 \
  *      -DNL=.. -DSIZES=.. -DP_TOTAL=.. -DTOT_UNITS=.. -DMAXW=.. -DNI=..
  *   NL         number of weight layers (6-13-2: 2)
@@ -101,7 +102,7 @@ static inline void layer_offsets(int64_t *woff, int64_t *boff, int64_t *aoff)
 static inline __attribute__((always_inline)) void
 train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *work,
              const double *X, const double *Y, const int64_t *order, int64_t m, int64_t B,
-             double lr, double mom, double *loss)
+             double lr, double mom, double *loss, int64_t ldx, int64_t ldy)
 {
     const int64_t nin = S[0], nout = S[NL];
     int64_t woff[NL], boff[NL], aoff[NL + 1];
@@ -132,23 +133,25 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *
         if (B > 1) memset(Gb, 0, (size_t)ni * P_TOTAL * 32);
         for (int64_t k = 0; k < bs; k++) {
             const int64_t j = s + k;
-            /* prefetch the rows presented PF steps ahead: on sets larger than the caches every row is a
-               random fetch from memory, which would otherwise stall each step (issue 11, item 9) */
+            /* prefetch the rows presented PF steps ahead, every cache line of them: on sets larger than
+               the caches every row is a random fetch from memory, which would otherwise stall each step
+               (issue 11, item 9; 18 inputs span 3 lines, of which first and last alone missed one) */
             if (j + PF < m) {
 #pragma GCC unroll 4
                 EACH for (int q = 0; q < 4; q++) {
                     const int64_t r = ord[u][q][j + PF];
-                    __builtin_prefetch(X + r * nin);
-                    __builtin_prefetch(X + r * nin + nin - 1);
-                    __builtin_prefetch(Y + r * nout);
-                    __builtin_prefetch(Y + r * nout + nout - 1);
+                    const char *xr = (const char *)(X + r * ldx), *yr = (const char *)(Y + r * ldy);
+                    for (int64_t b = 0; b < nin * 8; b += 64) __builtin_prefetch(xr + b);
+                    __builtin_prefetch(xr + nin * 8 - 1);
+                    for (int64_t b = 0; b < nout * 8; b += 64) __builtin_prefetch(yr + b);
+                    __builtin_prefetch(yr + nout * 8 - 1);
                 }
             }
             /* forward: inputs of the 4 lanes' patterns, then each layer's sigmoid units */
 #pragma GCC unroll 4
             EACH {
-                const double *x0 = X + ord[u][0][j] * nin, *x1 = X + ord[u][1][j] * nin;
-                const double *x2 = X + ord[u][2][j] * nin, *x3 = X + ord[u][3][j] * nin;
+                const double *x0 = X + ord[u][0][j] * ldx, *x1 = X + ord[u][1][j] * ldx;
+                const double *x2 = X + ord[u][2][j] * ldx, *x3 = X + ord[u][3][j] * ldx;
 #pragma GCC unroll 4
                 for (int64_t i = 0; i < nin; i++)
                     ST(act[u] + i * 4, _mm256_set_pd(x3[i], x2[i], x1[i], x0[i]));
@@ -176,8 +179,8 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *
 #pragma GCC unroll 4
             EACH {
                 const double *y = act[u] + aoff[NL] * 4;
-                const double *t0 = Y + ord[u][0][j] * nout, *t1 = Y + ord[u][1][j] * nout;
-                const double *t2 = Y + ord[u][2][j] * nout, *t3 = Y + ord[u][3][j] * nout;
+                const double *t0 = Y + ord[u][0][j] * ldy, *t1 = Y + ord[u][1][j] * ldy;
+                const double *t2 = Y + ord[u][2][j] * ldy, *t3 = Y + ord[u][3][j] * ldy;
 #pragma GCC unroll 4
                 for (int64_t o = 0; o < nout; o++) {
                     __m256d yv = LD(y + o * 4);
@@ -263,14 +266,18 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *
 }
 
 /* One epoch for groups [g0, g1): W, M [G][P_TOTAL][4] updated in place; order [G*4][m] pattern indices;
-   loss[g*4 + k] gets lane k's summed per-pattern loss. Returns 0, -1 (out of memory) or -3 (the caller's
+   loss[g*4 + k] gets lane k's summed per-pattern loss. Pattern r's inputs are X[r * ldx ..], its targets
+   Y[r * ldy ..]: ldx = S[0], ldy = S[NL] for separate arrays, or both the row length of one array holding
+   each pattern's inputs and targets side by side (selpres/native/staging.py). Returns 0, -1 (out of memory) or -3 (the caller's
    topology is not the one compiled in). */
 int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t P,
                   double *W, double *M, const double *X, const double *Y,
-                  const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss)
+                  const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss,
+                  int64_t ldx, int64_t ldy)
 {
     if (nl != NL || P != P_TOTAL) return -3;
     for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
+    if (ldx < S[0] || ldy < S[NL]) return -3;
     double *work = (double *)aligned_alloc(32, (size_t)NI * WORK_DOUBLES * 8);
     double *Gb = B > 1 ? (double *)aligned_alloc(32, (size_t)NI * P_TOTAL * 32) : NULL;
     if (!work || (B > 1 && !Gb)) {
@@ -279,8 +286,8 @@ int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t 
         return -1;
     }
     int64_t g = g0;
-    for (; g + NI <= g1; g += NI) train_groups(NI, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss);
-    for (; g < g1; g++) train_groups(1, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss);
+    for (; g + NI <= g1; g += NI) train_groups(NI, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss, ldx, ldy);
+    for (; g < g1; g++) train_groups(1, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss, ldx, ldy);
     free(work);
     free(Gb);
     return 0;

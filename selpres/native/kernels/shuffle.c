@@ -1,7 +1,7 @@
 /* selpres native shuffles: the per-epoch presentation orders of many replicas (selpres_shuffle), the same
  * permutations as selpres.sampler.epoch_orders computes in numpy, without a comparison sort.
  *
- * Built and loaded by selpres/_kernels.py (load_shuffle) with the kernel's flags, no macros.
+ * Built by selpres/native/build.py and bound by selpres/native/shuffle.py (load_shuffle) with the kernel's flags, no macros.
  *
  * Replica r's shuffle of its current set (the first `size` entries of its priority order) is the argsort
  * of h_i = mix(base_r + i * golden), i < size, base_r = mix(key_r ^ mix(epoch + golden)), where mix is splitmix64's finaliser: a bijection, so the

@@ -1,0 +1,93 @@
+"""Large exemplar sets staged for the SGD kernel: each pattern's inputs and targets side by side in one row.
+
+An online epoch presents rows in random order, so on a set larger than the caches every presentation is
+a random fetch from memory, and its address translation a random one too: with 4 KB pages a set of 10^6
+patterns spans 16,000-48,000 pages, far more than the TLB holds, so most presentations also walk the page
+tables (in a VM, the guest's and the host's). Prefetching the rows (``kernels/sgd.c``) hides the fetch
+but not the walks. Staging copies the set once per job into rows of whole 64-byte cache lines
+(``nin + nout`` doubles rounded up to 8: 6-13-2 needs exactly one line and one page a presentation, where
+separate X and Y arrays need two or three lines on two pages) in memory mapped with transparent 2 MB pages
+(``madvise(MADV_HUGEPAGE)``; where the kernel grants none, the rows still save the second page and line).
+The kernel reads the same numbers with a row stride, so results are bitwise those of the unstaged path
+(tests/test_kernels.py checks it against the unstaged path and the reference engine).
+
+Measured (``python -m selpres.bench.scale``, engine rows, staged and unstaged side by side in one run):
+see that module's docstring for the figures. The cost: a second copy of the set (64 MB for 6-13-2 at
+n = 10^6, 192 MB for the PUMA's 18-40-6) for as long as the engine lives, and one copy pass per job.
+Sets under :data:`STAGE_BYTES` (Table 1's 1002 patterns and any set that stays in the caches) are never
+staged.
+"""
+
+from __future__ import annotations
+
+import mmap
+
+import numpy as np
+import torch
+
+STAGE_BYTES = 1 << 22  # inputs + targets of at least 4 MB (beyond a core's L2 here) are staged
+LINE_DOUBLES = 8  # 64-byte cache lines
+HUGE_PAGE = 2 << 20
+CHECK_ROWS = 64  # rows compared with the source at every reuse (a change outside torch's version counter)
+
+
+def _rows(n: int, width: int) -> tuple[np.ndarray, mmap.mmap | None]:
+    """A zeroed float64 [n, width] array on 2 MB boundaries in a mapping advised to use huge pages (Linux),
+    or a plain numpy array where the platform has no such advice."""
+    nbytes = n * width * 8
+    advice = getattr(mmap, "MADV_HUGEPAGE", None)
+    if advice is None or nbytes == 0:
+        return np.zeros((n, width)), None
+    size = -(-nbytes // HUGE_PAGE) * HUGE_PAGE + HUGE_PAGE  # room to start on a 2 MB boundary
+    mm = mmap.mmap(-1, size, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    try:
+        mm.madvise(advice)  # before the first touch: pages are then faulted in 2 MB at a time
+    except OSError:
+        pass  # transparent huge pages disabled: 4 KB pages, the rows still pack inputs and targets
+    flat = np.frombuffer(mm, dtype=np.float64)
+    start = (-flat.ctypes.data % HUGE_PAGE) // 8
+    return flat[start : start + n * width].reshape(n, width), mm
+
+
+class Staged:
+    """One set's rows ``[inputs, targets, padding]`` and the views the kernel reads (``X``, ``Y``: strided
+    views of the rows), with what identifies the source: the float64 tensors it was copied from (held, so
+    their memory cannot be reused for another set) and their version counters (bumped by any in-place
+    torch operation on them or a view of them)."""
+
+    def __init__(self, X: torch.Tensor, Y: torch.Tensor):
+        n, nin = X.shape
+        nout = Y.shape[1]
+        width = -(-(nin + nout) // LINE_DOUBLES) * LINE_DOUBLES
+        rows, self._map = _rows(n, width)
+        rows[:, :nin] = X.numpy()
+        rows[:, nin : nin + nout] = Y.numpy()
+        self.rows = torch.from_numpy(rows)
+        self.X, self.Y = self.rows[:, :nin], self.rows[:, nin : nin + nout]
+        self._source = (X, Y, X._version, Y._version)
+        self._check = np.unique(np.linspace(0, n - 1, min(n, CHECK_ROWS)).astype(np.int64))
+
+    def holds(self, X: torch.Tensor, Y: torch.Tensor) -> bool:
+        """Whether these are the tensors staged, unchanged: the same memory, shape and strides, the same
+        versions, and a sample of rows still bitwise equal (a write through numpy bumps no version)."""
+        sx, sy, vx, vy = self._source
+        same = all(
+            a.data_ptr() == b.data_ptr() and a.shape == b.shape and a.stride() == b.stride()
+            for a, b in ((X, sx), (Y, sy))
+        )
+        if not (same and X._version == vx and Y._version == vy):
+            return False
+        idx = self._check
+        return np.array_equal(X.numpy()[idx], self.X.numpy()[idx]) and np.array_equal(
+            Y.numpy()[idx], self.Y.numpy()[idx]
+        )
+
+
+def stage(previous: Staged | None, X: torch.Tensor, Y: torch.Tensor) -> Staged | None:
+    """The staged set for float64 contiguous ``X``, ``Y``: ``previous`` while it still holds them, a new
+    one when they changed, None below :data:`STAGE_BYTES` (the kernel then reads ``X`` and ``Y`` as they are)."""
+    if (X.numel() + Y.numel()) * 8 < STAGE_BYTES:
+        return None
+    if previous is not None and previous.holds(X, Y):
+        return previous
+    return Staged(X, Y)
