@@ -248,9 +248,10 @@ class SelectivePresentation(DistributedSampler):
                 " stop after sampler.num_epochs epochs (Lightning: SelectivePresentationCallback sets max_epochs)"
             )
         if epoch != self.epoch:
-            if self._passes:
+            if self._passes:  # (a loop that never iterates, as the CLI's, allocates nothing here)
                 self._check_finished(epoch)
-            self._passes, self._another_pass = [], False
+                self._passes = []
+            self._another_pass = False
         self.epoch = epoch
 
     @property
