@@ -1,4 +1,6 @@
-"""Selective presentation as a ``torch.utils.data.Sampler``: the single source of presentation order.
+"""Selective presentation as a ``torch.utils.data.Sampler``: the single source of presentation order, one object
+(``SelectivePresentation``) for the CLI's loop and for any PyTorch loop, plain, DistributedDataParallel or Lightning
+(``selpres.presentation.lightning``); its arguments are read by ``selpres.presentation.arguments``.
 
 The nested training sets A1 ⊂ A2 ⊂ … ⊂ A_{p+1} = U are the prefixes of one *priority order* of the
 exemplar set (``selpres.presentation.orders``: stratified, random, coverage), so nesting holds by construction. The
