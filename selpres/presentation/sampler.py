@@ -25,6 +25,7 @@ import torch
 import torch.distributed as dist
 from torch.utils.data.distributed import DistributedSampler
 
+from selpres.presentation import arguments as A
 from selpres.presentation.schedule import Schedule
 from selpres.seeding import derive_seed
 
@@ -201,8 +202,6 @@ class SelectivePresentation(DistributedSampler):
     ):
         # DistributedSampler.__init__ is not called: it needs a dataset and an initialised process group, and
         # every attribute it would set is a property or set here.
-        from selpres.presentation import arguments as A
-
         X = None if X is None else A.inputs_of(X)
         n = A.size_of(X, n, order)
         sched, named_order, note = A.schedule_of(n, sizes, epochs, budget, schedule)
