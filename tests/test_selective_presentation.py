@@ -9,6 +9,7 @@ import pickle
 import shutil
 import warnings
 
+import numpy as np
 import pytest
 import torch
 from hypothesis import event, given, settings
@@ -314,6 +315,10 @@ def test_set_epoch_past_the_schedule_says_what_to_do(X):
     s = SelectivePresentation(X, sizes=FRACTIONS, epochs=EPOCHS)
     with pytest.raises(IndexError, match=r"epoch=7 is outside the schedule's 7 epochs.*num_epochs"):
         s.set_epoch(7)
+    with pytest.raises(TypeError, match="epoch=1.0: expected a whole number"):
+        s.set_epoch(1.0)
+    s.set_epoch(np.int64(2))
+    assert s.stage == 1
 
 
 # ------------------------------------------------------------------------------------------ a real process group

@@ -243,6 +243,8 @@ class SelectivePresentation(DistributedSampler):
 
     def set_epoch(self, epoch: int) -> None:
         """Choose the epoch (and so the stage): call it before each epoch, as for DistributedSampler."""
+        if isinstance(epoch, bool) or not isinstance(epoch, int):
+            epoch = A._whole("epoch", epoch, 0)  # numpy ints pass; floats and bools raise TypeError
         if not 0 <= epoch < len(self._plan):
             raise IndexError(
                 f"epoch={epoch} is outside the schedule's {len(self._plan)} epochs (0 .. {len(self._plan) - 1}):"
