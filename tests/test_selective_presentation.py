@@ -5,11 +5,15 @@ from __future__ import annotations
 
 import json
 import math
+import pickle
 import shutil
 import warnings
 
+import numpy as np
 import pytest
 import torch
+from hypothesis import event, given, settings
+from hypothesis import strategies as st
 from omegaconf import OmegaConf
 from torch.utils.data import DataLoader, DistributedSampler, TensorDataset
 
@@ -118,6 +122,59 @@ def test_library_errors_name_the_argument(X, kw, error, words):
     msg = str(e.value)
     assert all(w in msg for w in words), msg
     assert "schedule." not in msg and "null" not in msg and "\n" not in msg
+
+
+_ANY = st.one_of(
+    st.none(),
+    st.sampled_from([[1.0], [10, 40], [0.25, 1.0], [0.1, 0.5, 40], [1, 2], [2], 100]),  # some that build
+    st.integers(-3, 60),
+    st.floats(-0.5, 1.5),
+    st.booleans(),
+    st.text(max_size=3),
+    st.lists(st.one_of(st.integers(-3, 60), st.floats(-0.5, 1.5), st.just(float("nan")), st.booleans()), max_size=5),
+)
+
+
+_BUILDS = st.one_of(  # (sizes, epochs, budget) that build
+    st.tuples(st.sampled_from([[10, 40], [0.25, 1.0], [0.1, 0.5, 40]]), st.just(None), st.just(None)).map(
+        lambda t: (t[0], [2] * len(t[0]), None)
+    ),
+    st.tuples(st.just([1.0]), st.just(None), st.integers(1, 150)),
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(args=st.one_of(_BUILDS, st.tuples(_ANY, _ANY, _ANY)), seed=st.one_of(st.integers(0, 9), _ANY))
+def test_any_arguments_build_or_raise_a_plain_error_naming_one(args, seed):
+    """Whatever a caller passes: a sampler whose epochs present exactly its plan, or a one-line ValueError /
+    TypeError (never the CLI's ConfigError, never another exception) that starts with an argument's name."""
+    sizes, epochs, budget = args
+    try:
+        s = SelectivePresentation(n=40, order="random", sizes=sizes, epochs=epochs, budget=budget, seed=seed)
+    except (ValueError, TypeError) as e:
+        assert not isinstance(e, ConfigError)
+        assert str(e).split("=")[0].split(":")[0] in ("sizes", "epochs", "budget", "seed"), str(e)
+        assert "\n" not in str(e) and "schedule." not in str(e)
+        return
+    event("built")
+    total = 0
+    for epoch in range(s.num_epochs):
+        s.set_epoch(epoch)
+        got = list(s)
+        assert len(got) == len(s) and set(got) <= set(s.training_set.tolist())
+        total += len(got)
+    assert total == s.presentations == s.schedule.presentations
+
+
+def test_a_sampler_pickles_midway(X):
+    """Spawned workers and launchers pickle what they are given: the copy continues the same epoch."""
+    s = SelectivePresentation(X, sizes=FRACTIONS, epochs=EPOCHS, seed=2)
+    s.set_epoch(3)
+    it = iter(s)
+    [next(it) for _ in range(5)]
+    copy = pickle.loads(pickle.dumps(s))
+    assert copy.epoch == 3 and copy.presentations == s.presentations
+    assert torch.equal(copy.epoch_indices(), s.epoch_indices())
 
 
 def test_errors_about_the_data():
@@ -258,6 +315,10 @@ def test_set_epoch_past_the_schedule_says_what_to_do(X):
     s = SelectivePresentation(X, sizes=FRACTIONS, epochs=EPOCHS)
     with pytest.raises(IndexError, match=r"epoch=7 is outside the schedule's 7 epochs.*num_epochs"):
         s.set_epoch(7)
+    with pytest.raises(TypeError, match="epoch=1.0: expected a whole number"):
+        s.set_epoch(1.0)
+    s.set_epoch(np.int64(2))
+    assert s.stage == 1
 
 
 # ------------------------------------------------------------------------------------------ a real process group

@@ -1,4 +1,6 @@
-"""Selective presentation as a ``torch.utils.data.Sampler``: the single source of presentation order.
+"""Selective presentation as a ``torch.utils.data.Sampler``: the single source of presentation order, one object
+(``SelectivePresentation``) for the CLI's loop and for any PyTorch loop, plain, DistributedDataParallel or Lightning
+(``selpres.presentation.lightning``); its arguments are read by ``selpres.presentation.arguments``.
 
 The nested training sets A1 ⊂ A2 ⊂ … ⊂ A_{p+1} = U are the prefixes of one *priority order* of the
 exemplar set (``selpres.presentation.orders``: stratified, random, coverage), so nesting holds by construction. The
@@ -23,6 +25,7 @@ import torch
 import torch.distributed as dist
 from torch.utils.data.distributed import DistributedSampler
 
+from selpres.presentation import arguments as A
 from selpres.presentation.schedule import Schedule
 from selpres.seeding import derive_seed
 
@@ -199,8 +202,6 @@ class SelectivePresentation(DistributedSampler):
     ):
         # DistributedSampler.__init__ is not called: it needs a dataset and an initialised process group, and
         # every attribute it would set is a property or set here.
-        from selpres.presentation import arguments as A
-
         X = None if X is None else A.inputs_of(X)
         n = A.size_of(X, n, order)
         sched, named_order, note = A.schedule_of(n, sizes, epochs, budget, schedule)
@@ -242,15 +243,18 @@ class SelectivePresentation(DistributedSampler):
 
     def set_epoch(self, epoch: int) -> None:
         """Choose the epoch (and so the stage): call it before each epoch, as for DistributedSampler."""
+        if isinstance(epoch, bool) or not isinstance(epoch, int):
+            epoch = A._whole("epoch", epoch, 0)  # numpy ints pass; floats and bools raise TypeError
         if not 0 <= epoch < len(self._plan):
             raise IndexError(
                 f"epoch={epoch} is outside the schedule's {len(self._plan)} epochs (0 .. {len(self._plan) - 1}):"
                 " stop after sampler.num_epochs epochs (Lightning: SelectivePresentationCallback sets max_epochs)"
             )
         if epoch != self.epoch:
-            if self._passes:
+            if self._passes:  # (a loop that never iterates, as the CLI's, allocates nothing here)
                 self._check_finished(epoch)
-            self._passes, self._another_pass = [], False
+                self._passes = []
+            self._another_pass = False
         self.epoch = epoch
 
     @property
