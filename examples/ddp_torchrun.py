@@ -13,7 +13,7 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader
 from twolink import heldout_rms_nm, load, mlp
 
-from selpres.presentation.sampler import SelectivePresentation
+from selpres import SelectivePresentation
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 ap.add_argument("--data", default="twolink.npz")

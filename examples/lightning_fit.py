@@ -12,8 +12,7 @@ import torch
 from torch.utils.data import DataLoader
 from twolink import heldout_rms_nm, load, mlp
 
-from selpres.presentation.lightning import SelectivePresentationCallback
-from selpres.presentation.sampler import SelectivePresentation
+from selpres import SelectivePresentation, SelectivePresentationCallback
 
 
 class Net(pl.LightningModule):

@@ -12,7 +12,7 @@ import torch
 from torch.utils.data import DataLoader
 from twolink import heldout_rms_nm, load, mlp
 
-from selpres.presentation.sampler import SelectivePresentation
+from selpres import SelectivePresentation
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 ap.add_argument("--data", default="twolink.npz")

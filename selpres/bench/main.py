@@ -35,6 +35,7 @@ from selpres.bench.common import EPOCHS, SIZES, EngineTable, N
 from selpres.bench.engines import bench_batch_engines, bench_engines
 from selpres.bench.jobs import bench_jobs
 from selpres.bench.presentation import bench_orders, bench_selection, bench_shuffles
+from selpres.bench.sampler import bench_sampler
 from selpres.bench.startup import rows as startup_rows
 from selpres.bench.tracking import rows as tracking_rows
 from selpres.run.config import CONFIG_DIR
@@ -96,6 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     bench_batch_engines(table, q, args.configs.resolve())
     jobs_ok = bench_jobs(table, q, args.configs.resolve(), args.job_repeats)
     bench_shuffles(q)
+    bench_sampler(q)  # the Sampler in a DataLoader loop against RandomSampler (a row, not a pass or fail)
     bench_orders(q)
     jobs_ok = bench_selection(q, args.configs.resolve()) and jobs_ok
     if native:
