@@ -8,6 +8,7 @@ import math
 import os
 import tempfile
 from collections.abc import Callable
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -32,9 +33,11 @@ def atomic_write(path: Path, write: Callable[[BinaryIO], Any]) -> None:
             write(f)
         os.chmod(tmp, 0o644)  # mkstemp creates 0600; outputs are meant to be shared
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(e, OSError) and e.filename is None:  # a failed write() names no file: name the target
+            raise OSError(e.errno, e.strerror, str(path)) from e
         raise
 
 
@@ -45,6 +48,17 @@ def remove_stale_temps(folder: Path, names=(RESULTS, WEIGHTS, CHECKPOINT, CHECKP
     for p in stale:
         p.unlink(missing_ok=True)
     return stale
+
+
+@contextmanager
+def naming(path: Path):
+    """An OSError of a write() inside names ``path`` (write errors carry no file name of their own)."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is None:
+            raise OSError(e.errno, e.strerror, str(path)) from e
+        raise
 
 
 def write_json(path: Path, obj: Any) -> None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import csv
 import functools
 import hashlib
+import io
 import math
 from pathlib import Path
 
@@ -62,10 +63,40 @@ def _digest(path: str, mtime_ns: int, size: int) -> str:
 
 
 # ------------------------------------------------------------------------------------------------- CSV
+def _not_text(path: Path, data: bytes, e: UnicodeDecodeError, first_line: int = 1) -> DataFileError:
+    """A file that is not UTF-8 text, named by the line and byte (never by its contents)."""
+    line = first_line + data.count(b"\n", 0, e.start)
+    return DataFileError(
+        path,
+        f"line {line}",
+        f"byte 0x{data[e.start]:02x} is not UTF-8 text: a CSV must be UTF-8 (a binary file is not a CSV; "
+        "re-save it as UTF-8 or use a .npz)",
+    )
+
+
+def _csv_text(path: Path) -> str:
+    """The whole file as text (newlines kept as they are); DataFileError if it is not UTF-8 or holds NUL bytes."""
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise _not_text(path, data, e) from None
+    if "\0" in text:
+        line = 1 + text.count("\n", 0, text.index("\0"))
+        raise DataFileError(path, f"line {line}", "holds a NUL byte: a binary file, not a CSV")
+    return text
+
+
 def _csv_header(path: Path) -> tuple[int, list[str]]:
-    """(1-based line number of the header, its names)."""
-    with open(path, newline="") as f:
-        for number, line in enumerate(f, 1):
+    """(1-based line number of the header, its names); reads the file only up to the header."""
+    with open(path, "rb") as f:
+        for number, raw in enumerate(f, 1):
+            try:
+                line = raw.decode("utf-8")
+            except UnicodeDecodeError as e:
+                raise _not_text(path, raw, e, number) from None
+            if "\0" in line:
+                raise DataFileError(path, f"line {number}", "holds a NUL byte: a binary file, not a CSV")
             if line.strip() and not line.lstrip().startswith("#"):
                 return number, [c.strip() for c in next(csv.reader([line]))]
     raise DataFileError(path, "header", "no header row (the first line that is not a '#' comment names the columns)")
@@ -148,8 +179,8 @@ def _parse_csv(path: Path, wanted: list[str]) -> np.ndarray:
     """The wanted columns as float64 ``[rows, len(wanted)]``; errors name the column and the line."""
     header_line, names = _csv_header(path)
     index = [names.index(n) for n in wanted]
-    with open(path, newline="") as f:
-        body = [line for line in f.read().splitlines()[header_line:] if line.strip()]
+    text = _csv_text(path)
+    body = [line for line in text.splitlines()[header_line:] if line.strip()]
     if not body:
         return np.empty((0, len(wanted)))
     commas = len(names) - 1
@@ -162,28 +193,41 @@ def _parse_csv(path: Path, wanted: list[str]) -> np.ndarray:
             pass
     out = np.empty((0, len(wanted)))
     values: list[list[float]] = []
-    with open(path, newline="") as f:
-        for number, row in enumerate(csv.reader(f), 1):
-            if number <= header_line or not any(cell.strip() for cell in row):
-                continue
-            if len(row) != len(names):
-                raise DataFileError(path, f"line {number}", f"has {len(row)} cells, the header names {len(names)}")
-            parsed = []
-            for col, i in zip(wanted, index):
-                cell = row[i].strip()
-                try:
-                    v = float(cell)
-                except ValueError:
-                    raise DataFileError(path, f"column {col!r}, line {number}", f"{cell!r} is not a number") from None
-                if not math.isfinite(v):
-                    raise DataFileError(
-                        path,
-                        f"column {col!r}, line {number}",
-                        f"{cell!r}: NaN and inf are not allowed (drop or repair the row)",
-                    )
-                parsed.append(v)
-            values.append(parsed)
+    rows = csv.reader(io.StringIO(text, newline=""))
+    number = 0
+    while True:
+        try:
+            row = next(rows)
+        except StopIteration:
+            break
+        except csv.Error as e:
+            raise DataFileError(path, f"line {rows.line_num}", f"cannot be read as CSV ({e})") from None
+        number = rows.line_num
+        if number <= header_line or not any(cell.strip() for cell in row):
+            continue
+        if len(row) != len(names):
+            raise DataFileError(path, f"line {number}", f"has {len(row)} cells, the header names {len(names)}")
+        parsed = []
+        for col, i in zip(wanted, index):
+            cell = row[i].strip()
+            try:
+                v = float(cell)
+            except ValueError:
+                raise DataFileError(path, f"column {col!r}, line {number}", f"{_shown(cell)} is not a number") from None
+            if not math.isfinite(v):
+                raise DataFileError(
+                    path,
+                    f"column {col!r}, line {number}",
+                    f"{_shown(cell)}: NaN and inf are not allowed (drop or repair the row)",
+                )
+            parsed.append(v)
+        values.append(parsed)
     return np.array(values, dtype=np.float64).reshape(-1, len(wanted)) if values else out
+
+
+def _shown(cell: str, limit: int = 40) -> str:
+    """A cell as a message quotes it: at most ``limit`` characters (a garbage file's cell can be kilobytes)."""
+    return repr(cell) if len(cell) <= limit else repr(cell[:limit]) + f"… ({len(cell):,} characters)"
 
 
 def _parse_npz(path: Path, wanted: list[str]) -> np.ndarray:
@@ -215,3 +259,70 @@ def load_columns(path: str | Path, wanted: list[str]) -> torch.Tensor:
     if table.shape[0] == 0:
         raise DataFileError(p, "rows", "none: the file has a header but no patterns")
     return torch.from_numpy(np.ascontiguousarray(table))
+
+
+# ------------------------------------------------------------------------------------------ ranges
+COLLAPSE_SHARE = 0.99  # a column "collapsed by an outlier": this share of its rows ...
+COLLAPSE_WIDTH = 0.01  # ... lies in this fraction of its scaled range
+
+
+def row_label(path: str | Path, row: int) -> str:
+    """Where data row ``row`` (0-based, in file order) is: its line in a CSV (as an editor counts), else
+    its index in the .npz arrays."""
+    p = Path(path)
+    if p.suffix.lower() == ".npz":
+        return f"row {row} (0-based)"
+    header_line, _ = _csv_header(p)
+    seen = -1
+    for number, line in enumerate(_csv_text(p).splitlines(), 1):
+        if number > header_line and line.strip():
+            seen += 1
+            if seen == row:
+                return f"line {number}"
+    return f"data row {row + 1}"
+
+
+def check_ranges(
+    path: str | Path, names: list[str], table: torch.Tensor, n_outputs: int, margin: float, lo: float, hi: float
+) -> list[str]:
+    """Refuse a column whose range cannot be scaled in float64; return warnings for columns an outlier
+    collapses. ``table``: every row of the file (held-out rows too: they are scored), inputs then the
+    ``n_outputs`` targets.
+
+    Each column is mapped from [min − margin·range, max + margin·range] onto [lo, hi] (selpres.data.paper.
+    Scaler): the widened range must be finite. A target's errors are reported in its own unit, as sums of
+    squared errors over the rows: (range / (hi − lo))² · rows must be finite too (a 1e308 target made every
+    Nm metric infinite). The row named is the one farthest from the column's median: the outlier."""
+    warnings = []
+    big = math.sqrt(np.finfo(np.float64).max / max(1, table.shape[0] * max(1, n_outputs)))
+    for k, name in enumerate(names):
+        col = table[:, k]
+        v0, v1 = float(col.min()), float(col.max())
+        target = k >= len(names) - n_outputs
+        with np.errstate(over="ignore"):
+            widened = (np.float64(v1) - np.float64(v0)) * np.float64(1 + 2 * margin)
+        limit = big * (hi - lo) if target else np.finfo(np.float64).max
+        if not (math.isfinite(widened) and widened <= limit):
+            med = float(col.median())
+            far = int(torch.argmax((col - med).abs())) if math.isfinite(med) else int(torch.argmax(col.abs()))
+            what = "a target" if target else "an input"
+            bound = f"at most {limit:.3g} for {what} column of {table.shape[0]:,} rows"
+            raise DataFileError(
+                path,
+                f"column {name!r}, {row_label(path, far)}",
+                f"{float(col[far])!r}: the column spans [{v0:.6g}, {v1:.6g}], a range that cannot be scaled in "
+                f"float64 ({bound} with data.scaling.margin={margin:g}); drop or repair the row",
+            )
+        span = v1 - v0
+        if span > 0 and table.shape[0] >= 100:
+            q = torch.quantile(col, torch.tensor([(1 - COLLAPSE_SHARE) / 2, (1 + COLLAPSE_SHARE) / 2], dtype=col.dtype))
+            width = float(q[1] - q[0]) / span
+            if width < COLLAPSE_WIDTH:
+                med = float(col.median())
+                far = int(torch.argmax((col - med).abs()))
+                warnings.append(
+                    f"{path}: column {name!r}: {COLLAPSE_SHARE:.0%} of its rows lie in {width:.2g} of its range "
+                    f"[{v0:.6g}, {v1:.6g}] (an outlier: {float(col[far])!r} at {row_label(path, far)}); the scaling "
+                    "squeezes them into a sliver of the sigmoid's range"
+                )
+    return warnings

@@ -254,6 +254,10 @@ def _file(robot_cfg, data_cfg) -> Task:
     path = data_cfg.path
     ins, outs = F.check_columns(path, data_cfg.inputs, data_cfg.outputs)
     table = F.load_columns(path, [*ins, *outs])
+    sc = data_cfg.scaling
+    squeezed = F.check_ranges(path, [*ins, *outs], table, len(outs), float(sc.margin), float(sc.lo), float(sc.hi))
+    for w in squeezed:
+        log.warning("%s", w)
     rows = table.shape[0]
     held_n = D.heldout_count(data_cfg.heldout, rows, f"the {rows} rows of {path}")
     n_test, n_ex = int(data_cfg.test_patterns), int(data_cfg.test_from_exemplar)
@@ -285,6 +289,7 @@ def _file(robot_cfg, data_cfg) -> Task:
         "n": n,
         "inputs": list(ins),
         "outputs": list(outs),
+        "warnings": squeezed,  # columns an outlier collapses (selpres.data.file.check_ranges)
     }
     task = Task(exemplar, tests, None, ins, outs, info)
     return replace(task, scaler=task.fit_scaler(data_cfg))

@@ -9,7 +9,9 @@ that epoch's shuffled order, so the total equals the budget exactly.
 
 from __future__ import annotations
 
+import bisect
 import functools
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -75,8 +77,8 @@ class Schedule:
         (a one-stage schedule's partial epoch counts as the fraction of an epoch it is)."""
         return self.n * sum(s.epochs for s in self.stages) + sum(s.extra for s in self.stages)
 
-    def plan(self) -> tuple[EpochPlan, ...]:
-        """Every epoch in order (computed once per schedule: every replica's sampler shares it)."""
+    def plan(self) -> Plan:
+        """Every epoch in order (a lazy sequence, one per schedule: every replica's sampler shares it)."""
         return _plan(self.stages)
 
     def stage_ends(self) -> list[int]:
@@ -100,13 +102,52 @@ class Schedule:
         }
 
 
+class Plan(Sequence):
+    """Every epoch of a schedule, in order, made on demand: ``plan[i]``, ``len(plan)``, ``plan[a:b]`` and
+    iteration cost O(stages) memory, so a plan of 10^12 epochs (``schedule.budget=1e15``) is never built
+    whole (selpres.run.estimate refuses the job before it would run)."""
+
+    def __init__(self, stages: tuple[Stage, ...], start: int = 0, stop: int | None = None):
+        self._stages = stages
+        self._ends = list(itertools.accumulate(st.epochs + (1 if st.extra else 0) for st in stages))
+        total = self._ends[-1] if self._ends else 0
+        self._start, self._stop = start, total if stop is None else stop
+
+    def __len__(self) -> int:
+        return max(0, self._stop - self._start)
+
+    def _at(self, i: int) -> EpochPlan:
+        k = bisect.bisect_right(self._ends, i)
+        st = self._stages[k]
+        partial = st.extra and i == self._ends[k] - 1
+        return EpochPlan(i, k, st.size, st.extra if partial else st.size)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            start, stop, step = i.indices(len(self))
+            if step != 1:
+                return tuple(self[j] for j in range(start, stop, step))
+            return Plan(self._stages, self._start + start, self._start + max(start, stop))
+        if i < 0:
+            i += len(self)
+        if not 0 <= i < len(self):
+            raise IndexError(f"epoch {i} outside the plan's {len(self)} epochs")
+        return self._at(self._start + i)
+
+    def __iter__(self):
+        for i in range(self._start, self._stop):
+            yield self._at(i)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Sequence) and len(self) == len(other) and all(a == b for a, b in zip(self, other))
+
+    def __repr__(self) -> str:
+        return f"Plan({len(self)} epochs of {len(self._stages)} stages)"
+
+
 @functools.lru_cache(maxsize=64)
-def _plan(stages: tuple[Stage, ...]) -> tuple[EpochPlan, ...]:
-    out: list[EpochPlan] = []
-    for k, st in enumerate(stages):
-        counts = [st.size] * st.epochs + ([st.extra] if st.extra else [])
-        out += [EpochPlan(len(out) + j, k, st.size, c) for j, c in enumerate(counts)]
-    return tuple(out)
+def _plan(stages: tuple[Stage, ...]) -> Plan:
+    return Plan(stages)
 
 
 def _is_fraction(v) -> bool:

@@ -73,10 +73,15 @@ def load_job(folder: Path) -> Job:
         s, t = _hydra_identity(folder)
         return Job(folder, "missing", s, t, error="no results.json (killed, or still running)")
     try:
-        res = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as e:
+        res = json.loads(path.read_bytes())
+    except (OSError, ValueError) as e:  # truncated, random bytes, not UTF-8 (UnicodeDecodeError is a ValueError)
         s, t = _hydra_identity(folder)
-        return Job(folder, "unreadable", s, t, error=f"results.json unreadable: {e}")
+        why = f"not UTF-8 text (byte {e.start})" if isinstance(e, UnicodeDecodeError) else str(e)
+        return Job(folder, "unreadable", s, t, error=f"results.json unreadable: {why}")
+    problem = _not_results(res)
+    if problem:
+        s, t = _hydra_identity(folder)
+        return Job(folder, "unreadable", s, t, error=f"results.json unreadable: {problem}")
     status = res.get("status")
     if status in ("complete", "diverged"):
         return Job(folder, status, res["schedule"]["name"], res["topology"], results=res)
@@ -85,6 +90,24 @@ def load_job(folder: Path) -> Job:
     if res.get("kind"):
         err = f"{res['kind']}: {err}"
     return Job(folder, "failed" if status == "failed" else f"unknown status {status!r}", s, t, error=err)
+
+
+# what the report reads of a finished job's results.json (selpres.run.results.build writes them all)
+FINISHED_KEYS = {"schedule": dict, "topology": str, "summary": dict, "replica_results": list, "curves": list}
+
+
+def _not_results(res) -> str | None:
+    """Why a parsed results.json is not one selpres wrote (None: it is), so the report lists it and goes on."""
+    if not isinstance(res, dict):
+        return f"a JSON {type(res).__name__}, not an object"
+    if res.get("status") not in ("complete", "diverged"):
+        return None  # failed / unknown: listed by status, nothing more is read
+    for key, kind in FINISHED_KEYS.items():
+        if not isinstance(res.get(key), kind):
+            return f"status {res['status']!r} but no {key!r} ({kind.__name__})"
+    if not isinstance(res["schedule"].get("name"), str):
+        return "no schedule name"
+    return None
 
 
 def load_jobs(sweep: Path) -> list[Job]:

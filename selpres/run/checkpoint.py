@@ -28,7 +28,7 @@ from pathlib import Path
 
 import torch
 
-from selpres.storage import CHECKPOINT, CHECKPOINT_ALT, HISTORY, atomic_write
+from selpres.storage import CHECKPOINT, CHECKPOINT_ALT, HISTORY, atomic_write, naming
 
 log = logging.getLogger("selpres")
 HISTORY_FORMAT = "pickle"  # of history.pkl; a checkpoint without it (an older selpres) is set aside, not resumed
@@ -169,7 +169,7 @@ class Checkpoints:
     def save(self, engine, progress: Progress) -> None:
         """Append the new history records, then write the checkpoint atomically (write, then rename) in place
         of the older one."""
-        with open(self.history_path, "ab" if self._saved else "wb") as f:
+        with naming(self.history_path), open(self.history_path, "ab" if self._saved else "wb") as f:
             f.writelines(pickle.dumps(rec, protocol=pickle.HIGHEST_PROTOCOL) for rec in progress.history[self._saved :])
             size = f.tell()
         self._saved = len(progress.history)

@@ -20,9 +20,11 @@ from selpres.engines.batch import check_batch_options
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.engines.optim import HPARAM_KEYS, checked_hparams
 from selpres.errors import ConfigError
+from selpres.run.estimate import refuse_before_task
 from selpres.storage import to_container
 
 MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
+MAX_SEED = 2**64 - 1  # torch.manual_seed's largest
 MAX_LAYER_WIDTH = 4096  # wider layers are refused: a guard against typos such as 6-13000-2
 
 
@@ -72,6 +74,10 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         )
     if cfg.replicas < 1:
         raise ConfigError("replicas", cfg.replicas, "a whole number >= 1")
+    top = MAX_SEED - cfg.replicas + 1  # replica r uses seed + r; torch.manual_seed takes < 2^64
+    if not 0 <= cfg.seed <= top:
+        raise ConfigError("seed", cfg.seed, f"a whole number in [0, {top}] (seed + replicas - 1 < 2^64)")
+    refuse_before_task(cfg)  # replicas=1000000000 and 10^9 epochs: refused before any data or seed list is made
     if cfg.threads < 0:
         raise ConfigError("threads", cfg.threads, "0 (all cores) or a positive number of threads")
     if cfg.eval.every < 0:

@@ -150,7 +150,10 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
     except OSError as e:  # disk full, a read-only or immutable folder: the checkpoint already written stays
         log.debug("%s", traceback.format_exc())
         kept = "the last checkpoint is kept" if Checkpoints.present(out) else "no checkpoint was written yet"
-        line = f"cannot write {e.filename or out}: {e.strerror or e} (errno {e.errno}); {kept}: fix it and run again"
+        line = (
+            f"cannot write {e.filename or out}: {e.strerror or e} (errno {e.errno}); {kept}: "
+            "run the same command again once it can be written"
+        )
         if multirun:
             log.error("%s", line)
             raise SweepJobError(f"{out}: {line}") from None

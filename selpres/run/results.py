@@ -12,6 +12,7 @@ import subprocess
 import time
 from pathlib import Path
 
+import torch
 from omegaconf import DictConfig
 
 from selpres.data.file import file_digest
@@ -62,6 +63,21 @@ def _value(t) -> float | None:
     return v if math.isfinite(v) else None  # an nMSE of a target that does not vary
 
 
+def unscored(final: dict, progress) -> None:
+    """A replica whose final scores are not all finite (weights finite, errors overflowing) is not complete:
+    it counts as diverged at the end, so no job is ``complete`` with null metrics."""
+    for name, ev in final.items():
+        for unit in ("nm", "scaled"):  # the errors; an nMSE is undefined (None) where a target does not vary
+            for v in ev[unit].values():
+                for r in (~torch.isfinite(v)).nonzero().flatten().tolist():
+                    if progress.diverged_at[r] is None:
+                        progress.diverged_at[r] = {
+                            "epoch": progress.epoch,
+                            "presentations": progress.presentations,
+                            "reason": f"final {name} RMS ({unit}) not finite",
+                        }
+
+
 def summary(replicas: list[dict]) -> dict:
     """mean / std / 95 % interval over complete replicas of every final metric (overall, tau1..tauK)."""
     joints = list(replicas[0]["final"]["heldout"]["nm"]) if replicas else []
@@ -77,6 +93,7 @@ def summary(replicas: list[dict]) -> dict:
 def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seconds: dict) -> dict:
     """results.json of a finished job (``prob``: selpres.run.train.Problem; ``progress``: its Progress)."""
     R = len(prob.seeds)
+    unscored(final, progress)
     reps = replica_results(prob.seeds, final, progress.diverged_at, progress.history[-1]["train_mse"])
     n_div = sum(d is not None for d in progress.diverged_at)
     heldout_n = int(prob.tests["heldout"][0].shape[0])

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from selpres.storage import flatten
+from selpres.storage import flatten, naming
 
 log = logging.getLogger("selpres")
 
@@ -55,15 +55,18 @@ class EventFile:
     tensorboard's RecordWriter frames it; written here because importing that writer took 0.1 s of every job."""
 
     def __init__(self, path: Path):
+        self.path = path
         self._file = open(path, "wb")
         self._crc = event_checksum()[0]
 
     def write(self, data: bytes) -> None:
         header = struct.pack("<Q", len(data))
-        self._file.write(header + struct.pack("<I", self._crc(header)) + data + struct.pack("<I", self._crc(data)))
+        with naming(self.path):
+            self._file.write(header + struct.pack("<I", self._crc(header)) + data + struct.pack("<I", self._crc(data)))
 
     def flush(self) -> None:
-        self._file.flush()
+        with naming(self.path):
+            self._file.flush()
 
     def close(self) -> None:
         self._file.close()

@@ -38,6 +38,7 @@ from selpres.run import floor, lock, orphan
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
 from selpres.run.checks import batch_mode, optim_hparams, validate
+from selpres.run.estimate import refuse_job
 from selpres.run.tracking import Tracker
 from selpres.seeding import derive_seed, generator, seed_everything
 from selpres.storage import RESULTS, WEIGHTS, atomic_write, to_container, write_json
@@ -91,6 +92,9 @@ def prepare(cfg: DictConfig) -> Problem:
     sizes = validate(cfg)
     task = load_task(cfg.robot, cfg.data)
     schedule, note = task_schedule(cfg, task)
+    torch_eval = batch_mode(cfg.optim) or cfg.engine.value in ("torch", "reference")
+    largest_test = max(len(task.tests.heldout.X), len(task.tests.test10.X))
+    refuse_job(cfg, sizes, schedule, task.n, largest_test, torch_eval)  # before any replica's state is made
     seed = int(cfg.seed)  # read once: an OmegaConf access costs ~20 us, 1000 of them 23 ms at R = 1000
     seeds = [seed + r for r in range(cfg.replicas)]
     kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
@@ -277,7 +281,8 @@ class Job:
     @functools.cached_property
     def orders_buffer(self) -> torch.Tensor:
         """Where every epoch's presentation orders are written ([R * the largest epoch], reused)."""
-        return torch.empty(len(self.prob.seeds) * max(p.presentations for p in self.prob.plan), dtype=torch.int64)
+        largest = max(st.size if st.epochs else st.extra for st in self.prob.schedule.stages)
+        return torch.empty(len(self.prob.seeds) * largest, dtype=torch.int64)
 
     @functools.cached_property
     def cadence(self) -> Cadence:
