@@ -4,6 +4,7 @@ loads back as the same dynamics, exported CSVs that name their columns and carry
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -199,3 +200,22 @@ def test_planar3_with_a_massless_hand_is_the_paper_arm():
     assert torch.allclose(tau[:, :2], paper.inverse_dynamics(q[:, :2], qd[:, :2], qdd[:, :2]), atol=1e-12, rtol=0)
     assert torch.allclose(tau[:, 2], torch.zeros(64, dtype=F64), atol=1e-15)
     assert np.isfinite(tau.numpy()).all()
+
+
+def test_urdf_chain_keys_from_the_command_line(tmp_path):
+    """robot.joints / robot.hold / robot.gravity / robot.g as a user types them; bad values name the key."""
+    from test_urdf import HAND
+
+    path = tmp_path / "hand.urdf"
+    path.write_text(HAND)
+    base = ("robot=urdf", f"robot.path={path}")
+    arm = make_arm(cfg_of(*base, "robot.joints=[j1]", "robot.hold={j2: 0.25}").robot)
+    assert arm.source["held"] == {"j2": 0.25} and arm.dof == 1
+    assert make_arm(cfg_of(*base, "robot.gravity=null", "robot.g=3").robot).gravity_vector == (0.0, 0.0, -3.0)
+    for overrides, key in (
+        (("robot.g=3",), "robot.g=3.0 is not allowed: expected unset when robot.gravity is given"),
+        (("robot.hold=3",), "robot.hold=3 is not allowed"),
+        (("robot.gravity=[0,1]",), "robot.gravity=[0.0, 1.0] is not allowed"),
+    ):
+        with pytest.raises(ConfigError, match=re.escape(key)):
+            make_arm(cfg_of(*base, *overrides).robot)

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, List, Optional
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, OmegaConf
@@ -80,7 +80,7 @@ class RobotConfig:
     links: Optional[List[Any]] = None
     path: Optional[str] = None  # urdf: the file
     joints: Optional[List[str]] = None  # urdf: the modelled joints (null: the chain's revolute joints)
-    hold: Optional[Dict[str, float]] = None  # urdf: held joints' positions
+    hold: Optional[Any] = None  # urdf: held joints' positions {name: value} (Any: a dict a command line can set)
 
 
 @dataclass
