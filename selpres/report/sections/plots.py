@@ -52,7 +52,6 @@ def nm_log_axis(ax) -> None:
     ax.yaxis.set_major_formatter(plain)
     ax.yaxis.set_minor_locator(LogLocator(subs=(2, 3, 5)))
     ax.yaxis.set_minor_formatter(plain)
-    ax.tick_params(axis="y", which="minor", labelsize=7)
 
 
 def thousands(ax) -> None:
