@@ -19,7 +19,7 @@ from selpres.report.compare import mean_curve
 from selpres.report.context import Context, Section
 from selpres.report.families import Family, families, paper_conventional
 from selpres.report.groups import Group
-from selpres.report.sections.plots import family_styles, pyplot, save_png
+from selpres.report.sections.plots import family_styles, nm_log_axis, pyplot, save_png, thousands
 from selpres.run.stats import summarize
 
 NOTE = (
@@ -102,8 +102,6 @@ def draw_plane(rows: list[dict], groups, topologies: list[str], fams: list[Famil
     """The figure: one panel per topology, each family's configurations with 95 % bars in its own colour and
     marker, the paper's conventional mean curve as the frontier, one legend for all outside the panels."""
     plt = pyplot()
-    from matplotlib.ticker import FuncFormatter
-
     styles = family_styles(list(dict.fromkeys(r["family"] for r in rows)))
     fig, axes = plt.subplots(
         1, len(topologies), figsize=(6 * len(topologies) + 4, 5.2), squeeze=False, layout="constrained"
@@ -139,8 +137,8 @@ def draw_plane(rows: list[dict], groups, topologies: list[str], fams: list[Famil
                 alpha=0.9,
             )
             legend.setdefault(f"{fam} ({len(pts)})", handle)
-        ax.set_yscale("log")
-        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
+        nm_log_axis(ax)
+        thousands(ax)
         ax.set_title(t)
         ax.set_xlabel("presentations (units of t)")
         ax.set_ylabel("held-out RMS (Nm)")

@@ -1,15 +1,16 @@
-"""Figures: held-out error against cost (the fair axis), and the cost of each method in presentations and
-in measured seconds."""
+"""Figures: held-out error against cost (the fair axis), the paper's Table 1 as unit-free ratios beside ours,
+and the cost of each method in presentations."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from selpres.report.compare import mean_curve
 from selpres.report.context import Context, Section
 from selpres.report.families import families, paper_run
 from selpres.report.groups import REFERENCE
-from selpres.report.paper import PAPER, PAPER_UNITS_NOTE
+from selpres.report.paper import PAPER, paper_setting
 from selpres.run.stats import summarize
 from selpres.storage import atomic_write
 
@@ -42,20 +43,124 @@ def family_styles(names: list[str]) -> dict[str, tuple[str, str]]:
     return {n: (cycle[i % len(cycle)], MARKERS[i % len(MARKERS)]) for i, n in enumerate(names)}
 
 
-def plot_curves(groups, topologies, methods, path: Path, labels: dict[str, str] | None = None) -> None:
-    """Held-out curve RMS (Nm) against cumulative presentations; one panel per topology. ``labels``: legend
-    text per method (a study's), then drawn outside the panels."""
-    plt = pyplot()
+def nm_log_axis(ax) -> None:
+    """A log axis of errors with plain decimal tick labels (0.02, 0.03, ...), not 2 × 10⁻²."""
+    from matplotlib.ticker import FuncFormatter, LogLocator
+
+    ax.set_yscale("log")
+    plain = FuncFormatter(lambda v, _: f"{v:g}")
+    ax.yaxis.set_major_formatter(plain)
+    ax.yaxis.set_minor_locator(LogLocator(subs=(2, 3, 5)))
+    ax.yaxis.set_minor_formatter(plain)
+
+
+def thousands(ax) -> None:
     from matplotlib.ticker import FuncFormatter
 
-    if labels:
-        fig, axes = plt.subplots(
-            1, len(topologies), figsize=(5.2 * len(topologies) + 5, 4.6), squeeze=False, layout="constrained"
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:g}k"))
+
+
+RATIO_SET = "test10"  # the paper's RMS is over its 10 test patterns
+
+
+def _paper_group(groups, topology: str, method: str):
+    """The paper's run of ``method``: found by its setting (:func:`paper_run`), else the group of that name
+    when it has the paper's n_i and N_i (as Table 1 sets the paper's value beside it)."""
+    g = paper_run(groups, topology, method) or groups.get((topology, method))
+    return g if g is not None and paper_setting(method, g.sched) == "yes" else None
+
+
+def paper_ratio_rows(groups, topologies) -> list[dict]:
+    """Per topology with the paper's two runs: selective ÷ conventional final test-10 RMS, ours and the
+    paper's. A ratio of two errors in the same units has none, so the paper's Table 1 (units unstated) can
+    be set beside ours. Ours: the geometric mean over paired seeds of each seed's ratio, with the 95 %
+    t-interval of the mean log ratio taken back (None below two paired seeds)."""
+    rows = []
+    for t in topologies:
+        con, sel = (_paper_group(groups, t, m) for m in ("conventional", REFERENCE))
+        paper = [PAPER[m]["rms"].get(t) for m in ("conventional", REFERENCE)]
+        if con is None or sel is None or None in paper:
+            continue
+        a, b = sel.values(RATIO_SET), con.values(RATIO_SET)
+        logs = [math.log(a[s] / b[s]) for s in sorted(set(a) & set(b)) if a[s] > 0 and b[s] > 0]
+        st = summarize(logs)
+        lo, hi = st["ci95"]
+        rows.append(
+            {
+                "topology": t,
+                "n": st["n"],
+                "ours": math.exp(st["mean"]) if st["mean"] is not None else None,
+                "ours_ci_lo": math.exp(lo) if lo is not None else None,
+                "ours_ci_hi": math.exp(hi) if hi is not None else None,
+                "paper": paper[1] / paper[0],
+            }
         )
-        colors = [c for c, _ in family_styles(methods).values()]
-    else:
-        fig, axes = plt.subplots(1, len(topologies), figsize=(5.2 * len(topologies), 4.2), squeeze=False)
-        colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    return rows
+
+
+def draw_ratios(ax, rows: list[dict], colour: str) -> list:
+    """The ratio panel: ours with its interval, the paper's as a hollow marker, 1 = equal error."""
+    x = list(range(len(rows)))
+    ours = [(k, r) for k, r in zip(x, rows) if r["ours"] is not None]
+    handles = []
+    if ours:
+        yerr = [
+            [r["ours"] - (r["ours_ci_lo"] or r["ours"]) for _, r in ours],
+            [(r["ours_ci_hi"] or r["ours"]) - r["ours"] for _, r in ours],
+        ]
+        n = sorted({r["n"] for _, r in ours})
+        handles.append(
+            ax.errorbar(
+                [k - 0.08 for k, _ in ours],
+                [r["ours"] for _, r in ours],
+                yerr=yerr,
+                fmt="o",
+                color=colour,
+                capsize=3,
+                label=f"ours: geometric mean of paired ratios, 95 % interval (n={'/'.join(map(str, n))})",
+            )
+        )
+    handles.append(
+        ax.plot(
+            [k + 0.08 for k in x],
+            [r["paper"] for r in rows],
+            "D",
+            mfc="none",
+            mec="k",
+            mew=1.2,
+            ls="none",
+            label="paper's Table 1: its selective ÷ its conventional",
+        )[0]
+    )
+    handles.append(ax.axhline(1.0, color="0.5", lw=0.8, ls="--", label="ratio 1: equal error"))
+    ax.set_xticks(x, [r["topology"] for r in rows])
+    ax.set_xlim(-0.5, len(rows) - 0.5)
+    ax.set_xlabel("topology")
+    ax.set_ylabel(f"{REFERENCE} ÷ conventional, final test-10 RMS\n(ratio of errors, no unit)")
+    ax.set_title("against the paper: ratios", fontsize=10)
+    ax.grid(True, axis="y", alpha=0.3)
+    return handles
+
+
+def draw_curves(groups, topologies, methods, labels: dict[str, str] | None = None):
+    """Held-out curve RMS (Nm) against cumulative presentations, one panel per topology, and (a Table-1
+    sweep) a panel of selective ÷ conventional ratios beside the paper's: its RMS values have no stated unit,
+    so they are never drawn on the Nm axis. One legend for all, outside the panels. ``labels``: legend text
+    per method (a study's)."""
+    plt = pyplot()
+    ratios = [] if labels else paper_ratio_rows(groups, topologies)
+    widths = [5.0] * len(topologies) + ([1.2 + 0.9 * len(ratios)] if ratios else [])
+    width = sum(widths) + 5.5 if labels else max(sum(widths) + 0.6, 11.0)  # room for the legend's columns
+    fig, axes = plt.subplots(
+        1,
+        len(widths),
+        figsize=(width, 5.4 if labels else 5.8),
+        squeeze=False,
+        layout="constrained",
+        gridspec_kw={"width_ratios": widths},
+    )
+    colors = [c for c, _ in family_styles(methods).values()]
+    legend: dict[str, object] = {}
     for ax, t in zip(axes[0], topologies):
         for i, m in enumerate(methods):
             g = groups.get((t, m))
@@ -64,87 +169,96 @@ def plot_curves(groups, topologies, methods, path: Path, labels: dict[str, str] 
                 continue
             c = colors[i % len(colors)]
             x = [p for p, _, _ in curve]
-            ax.plot(
-                x, [v for _, v, _ in curve], color=c, label=f"{labels[m] if labels else m} (n={len(g.complete_seeds)})"
-            )
+            (line,) = ax.plot(x, [v for _, v, _ in curve], color=c)
+            legend.setdefault(labels[m] if labels else m, line)
             lo = [st["ci95"][0] if st["ci95"][0] is not None else v for _, v, st in curve]
             hi = [st["ci95"][1] if st["ci95"][1] is not None else v for _, v, st in curve]
             ax.fill_between(x, [max(v, 1e-12) for v in lo], hi, color=c, alpha=0.2, lw=0)
-            if m == REFERENCE and g.sched:
+            if m == REFERENCE and g.sched and not labels:
                 per_stage = g.sched["presentations_per_stage"]
                 for k in range(len(g.sched["sizes"]) - 1):
-                    ax.axvline(sum(per_stage[: k + 1]), color=c, ls=":", lw=0.8)
-            paper = PAPER.get(m, {})
-            if t in paper.get("rms", {}):
-                ax.plot(
-                    [paper["presentations"]],
-                    [paper["rms"][t]],
-                    marker="_",
-                    ms=18,
-                    mew=2.5,
-                    color=c,
-                    ls="none",
-                    label=f"{PAPER_UNITS_NOTE}: {m}",
-                )
-        ax.set_yscale("log")
-        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:g}k"))
-        ax.set_title(f"{t}")
+                    stage = ax.axvline(sum(per_stage[: k + 1]), color=c, ls=":", lw=0.8)
+                legend.setdefault(f"{REFERENCE}: stage boundaries", stage)
+        nm_log_axis(ax)
+        thousands(ax)
+        seeds = sorted({len(g.complete_seeds) for (tt, _), g in groups.items() if tt == t and g.curves})
+        ax.set_title(f"{t}  (seeds per curve: {'/'.join(map(str, seeds)) or '0'})", fontsize=10)
         ax.set_xlabel("cumulative presentations (units of t)")
         ax.set_ylabel("held-out curve RMS (Nm)")
         ax.grid(True, which="both", alpha=0.3)
-        if not labels:
-            ax.legend(fontsize=7)
+    if ratios:
+        for h in draw_ratios(axes[0][-1], ratios, colors[methods.index(REFERENCE)] if REFERENCE in methods else "k"):
+            legend.setdefault(h.get_label(), h)
     fig.suptitle(
-        "Held-out RMS vs cost: mean over seeds, band = 95 % t-interval of the mean"
-        + ("" if labels else f"; dotted = {REFERENCE} stage boundaries"),
-        fontsize=9,
+        "Held-out RMS against cost: mean over seeds,\nband = 95 % t-interval of the mean"
+        + ("; right: the paper's values as unit-free ratios" if ratios else ""),
+        fontsize=10,
     )
-    if labels:  # one legend for all panels, outside them
-        handles = {h.get_label(): h for ax in axes[0] for h in ax.get_legend_handles_labels()[0]}
-        fig.legend(list(handles.values()), list(handles), loc="outside right center", fontsize=7)
-    else:
-        fig.tight_layout()
-    save_png(fig, path)
+    where = {"loc": "outside right center"} if labels else {"loc": "outside lower center", "ncols": 2 + (width >= 15)}
+    fig.legend(list(legend.values()), list(legend), fontsize=8, **where)
+    return fig
 
 
-def plot_cost(groups, topologies, methods, path: Path) -> None:
-    """Presentations per method, and measured wall seconds per replica-run per (topology, method)."""
+def plot_curves(groups, topologies, methods, path: Path, labels: dict[str, str] | None = None) -> None:
+    save_png(draw_curves(groups, topologies, methods, labels), path)
+
+
+def draw_cost(groups, topologies, methods):
+    """Presentations charged per method (training, and the forward passes spent choosing subsets at their
+    charge), the paper's printed cost as a marker. Wall time is not drawn: a job trains its replicas
+    together, so each (topology, method) has one measurement and no spread (Table 1 lists it; speed
+    ratios come from ``selpres-bench``)."""
     plt = pyplot()
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
-    pres = {}
+    from matplotlib.ticker import FuncFormatter
+
+    train, charged = {}, {}
     for m in methods:
         for t in topologies:
             g = groups.get((t, m))
-            if g and g.sched:
-                pres.setdefault(m, g.sched["presentations"])
-    a1.bar(list(pres), list(pres.values()), color="tab:blue", label="ours")
-    for k, m in enumerate(pres):
-        if m in PAPER:
-            a1.plot(
-                [k],
-                [PAPER[m]["presentations"]],
-                marker="_",
-                ms=30,
-                mew=2,
-                color="k",
-                label="paper" if k == 0 or "paper" not in a1.get_legend_handles_labels()[1] else None,
-            )
-    a1.set_ylabel("presentations T/t")
-    a1.set_title("cost in presentations")
-    a1.legend(fontsize=8)
-    width = 0.8 / max(1, len(methods))
-    ran = {key: g.engines()["engine"] for key, g in groups.items() if g.used}
-    for i, m in enumerate(methods):
-        ys = [(groups[(t, m)].wall()["per_replica"] or 0) if (t, m) in ran else 0 for t in topologies]
-        engines = sorted({e for (_, mm), e in ran.items() if mm == m})
-        label = m if len(set(ran.values())) <= 1 else f"{m} ({', '.join(engines)})"
-        a2.bar([k + i * width for k in range(len(topologies))], ys, width, label=label)
-    a2.set_xticks([k + width * (len(methods) - 1) / 2 for k in range(len(topologies))], topologies)
-    a2.set_ylabel("train seconds / replica (job train time ÷ replicas)")
-    a2.set_title(f"measured wall time per replica-run, engine: {', '.join(sorted(set(ran.values())))}")
-    a2.legend(fontsize=8)
-    fig.tight_layout()
-    save_png(fig, path)
+            if g and g.sched and m not in train:
+                train[m] = g.sched["presentations"]
+                charged[m] = (g.cost or 0) - g.sched["presentations"]
+    fig, ax = plt.subplots(figsize=(1.6 * max(1, len(train)) + 4.2, 4.4), layout="constrained")
+    x = list(range(len(train)))
+    ax.bar(x, list(train.values()), color="tab:blue", label="training presentations")
+    if any(charged.values()):
+        ax.bar(
+            x,
+            list(charged.values()),
+            bottom=list(train.values()),
+            color="tab:blue",
+            alpha=0.45,
+            hatch="//",
+            label="selection forward passes, at their charge",
+        )
+    for k, m in enumerate(train):
+        total = train[m] + charged[m]
+        ax.annotate(f"{total:,}", (k, total / 2), ha="center", va="center", fontsize=8, color="w")
+    paper = [(k, PAPER[m]["presentations"]) for k, m in enumerate(train) if m in PAPER]
+    if paper:
+        ax.plot(
+            [k for k, _ in paper],
+            [v for _, v in paper],
+            "D",
+            ms=7,
+            mfc="none",
+            mec="k",
+            mew=1.4,
+            ls="none",
+            label="paper's Table 1 (1,50,000t printed\nfor 1002 × 150 = 150,300t)",
+        )
+    ax.set_xticks(x, list(train))
+    ax.set_xlabel("method")
+    ax.set_ylabel("presentations T/t (units of t)")
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:,.0f}"))
+    ax.set_ylim(0, 1.12 * max([*(train[m] + charged[m] for m in train), *(v for _, v in paper)], default=1))
+    ax.set_title("cost in presentations", fontsize=10)
+    fig.legend(loc="outside right center", fontsize=8)
+    return fig
+
+
+def plot_cost(groups, topologies, methods, path: Path) -> None:
+    save_png(draw_cost(groups, topologies, methods), path)
 
 
 def study_methods(ctx: Context) -> dict[str, str]:
@@ -165,6 +279,33 @@ def study_methods(ctx: Context) -> dict[str, str]:
     return out
 
 
+def ratio_text(rows: list[dict]) -> list[str]:
+    """The ratio panel's numbers and what they are, for the report's text (nothing without the paper's runs)."""
+    if not rows:
+        return []
+
+    def ours(r: dict) -> str:
+        if r["ours"] is None:
+            return "—"
+        iv = f" [{r['ours_ci_lo']:.3f}, {r['ours_ci_hi']:.3f}]" if r["ours_ci_lo"] is not None else ""
+        return f"{r['ours']:.3f}{iv} (n={r['n']})"
+
+    table = [
+        f"| topology | {REFERENCE} ÷ conventional, ours (95 % interval) | paper's Table 1 |",
+        "|---|---|---|",
+        *(f"| {r['topology']} | {ours(r)} | {r['paper']:.3f} |" for r in rows),
+    ]
+    note = (
+        "The paper's RMS values have no stated unit, so `curves.png` does not draw them on the Nm axis: its "
+        f"right panel and this table set the paper's ratio {REFERENCE} ÷ conventional (final error over the 10 "
+        "test patterns; the units cancel) beside ours, the geometric mean over paired seeds of each seed's "
+        "ratio with the 95 % t-interval of the mean log ratio. `cost.png` draws presentations only: a job "
+        "trains its replicas together, so its wall time is one measurement with no spread (Table 1 lists it; "
+        "`selpres-bench` measures speed ratios side by side)."
+    )
+    return ["\n".join(table), note]
+
+
 def section(ctx: Context) -> Section | None:
     """Every method's curve and cost for a Table-1-like sweep; for a study, those of :func:`study_methods`
     (None when it has none)."""
@@ -175,7 +316,7 @@ def section(ctx: Context) -> Section | None:
             "cost.png": ("cost", lambda p: plot_cost(*args, p)),
         }
         images = "\n\n".join(f"![{caption}]({name})" for name, (caption, _) in figures.items())
-        return Section("Plots", [images], figures=figures)
+        return Section("Plots", [images, *ratio_text(paper_ratio_rows(ctx.groups, ctx.topologies))], figures=figures)
     labels = study_methods(ctx)
     if not labels:
         return None
