@@ -9,7 +9,8 @@ import torch
 
 from selpres.engines.model import BPN, init_replica_params, load_into
 from selpres.presentation.pruning import backprop_probability, infobatch_keep, percentile
-from tests.conftest import cfg_of
+
+from conftest import cfg_of
 
 
 def _grad(model: BPN, X, Y, weights) -> torch.Tensor:
