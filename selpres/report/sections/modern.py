@@ -326,7 +326,8 @@ def section(ctx: Context) -> Section | None:
             note(ctx.options),
             "![final held-out RMS against total cost, per regime and arm](modern_error_cost.png)\n\n"
             "Each point: the mean over the paired seeds with its 95 % t-interval; methods of one cost are drawn "
-            "side by side (within ±7 % of their cost; conventional training at its own) so their intervals can be told apart.",
+            "side by side (within ±7 % of their cost; conventional training at its own) so their intervals "
+            "can be told apart.",
         ],
         csv={"modern.csv": summary, "modern_verdict.csv": verdicts},
         figures={"modern_error_cost.png": ("error against cost", lambda p: plot_error_cost(summary, p))},
