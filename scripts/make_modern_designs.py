@@ -13,7 +13,7 @@ from pathlib import Path
 OUT = Path(__file__).resolve().parents[1] / "configs" / "design" / "modern"
 PAPER_N, PAPER_SIZES = 1002, (50, 100, 400, 800)
 # arm -> (robot, topology, n, epochs N): N sized so that the whole experiment fits 15 min on 2 shared cores
-ARMS = {"two_link": ("two_link", "6-13-2", 10_000, 30), "puma560": ("puma560", "18-40-6", 100_000, 5)}
+ARMS = {"two_link": ("two_link", "6-13-2", 10_000, 20), "puma560": ("puma560", "18-40-6", 100_000, 5)}
 # regime -> (what it is, the lines it sets); the Adam rate is the one experiment=modern_lr chose on the
 # validation draw (data.test_seed=1), not on the test sets
 ADAM_LR = {"two_link": 0.01, "puma560": 0.003}  # experiment=modern_lr, 2026-12-01: lowest mean validation RMS
