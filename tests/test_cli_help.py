@@ -29,7 +29,9 @@ def test_help_names_every_group_and_key(help_text):
     assert [k for k in keys if f"  {k}=" not in help_text and f" {k}." not in help_text] == []
     # every option of the small groups is listed (design/ and experiment/ are studies, named by their folder)
     for group in ("robot", "data", "schedule", "topology", "optim", "experiment"):
-        line = next(ln for ln in help_text.splitlines() if ln.startswith(f"  {group} "))
+        lines = help_text.splitlines()
+        i = next(i for i, ln in enumerate(lines) if ln.startswith(f"  {group} "))
+        line = " ".join([lines[i], *[ln for ln in lines[i + 1 : i + 3] if ln.startswith("              ")]])
         options = sorted(p.stem for p in (REPO / "configs" / group).glob("*.yaml"))
         assert [o for o in options if o not in line] == [], group
 

@@ -2,7 +2,10 @@
 
 A topology is written as in the paper, ``6-13-2``: input width, hidden widths, output width.
 Every layer (hidden *and* output) uses the logistic sigmoid, as in Rumelhart et al.'s BPN, so
-targets must be scaled into (0, 1) (see :mod:`selpres.data.paper`).
+targets must be scaled into (0, 1) (see :mod:`selpres.data.paper`). ``model.activation`` (issue 22)
+offers today's hidden units too: ``tanh``, ``relu``, ``silu``; with those the output layer is linear (the
+usual regression head: a sigmoid output would squash what a ReLU net is chosen for), with ``sigmoid`` it
+stays the paper's sigmoid, so the default network is unchanged.
 
 Weights of R independent replicas are carried as a flat list ``[W1, b1, W2, b2, ...]`` of tensors with
 a leading replica dimension (``W_l``: ``[R, out, in]``, ``b_l``: ``[R, out]``). That list is the common
@@ -11,10 +14,12 @@ currency between engines, evaluation, checkpoints and tests.
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 _TOPOLOGY_RE = re.compile(r"^\d+(-\d+)+$")
@@ -44,18 +49,30 @@ def parse_topology(topology: str) -> tuple[int, ...]:
     return sizes
 
 
-class BPN(nn.Module):
-    """Sigmoid multilayer perceptron: the idiomatic ``nn.Module`` that defines correct results."""
+ACTIVATIONS = {"sigmoid": torch.sigmoid, "tanh": torch.tanh, "relu": torch.relu, "silu": F.silu}
 
-    def __init__(self, sizes: tuple[int, ...] | str, dtype: torch.dtype = torch.float64):
+
+class BPN(nn.Module):
+    """Multilayer perceptron (sigmoid: the paper's BPN): the idiomatic ``nn.Module`` that defines correct
+    results. ``activation``: the hidden units' function (:data:`ACTIVATIONS`)."""
+
+    def __init__(self, sizes: tuple[int, ...] | str, dtype: torch.dtype = torch.float64, activation: str = "sigmoid"):
         super().__init__()
+        if activation not in ACTIVATIONS:
+            raise ValueError(f"activation {activation!r}: choose one of {', '.join(ACTIVATIONS)}")
         self.sizes = parse_topology(sizes) if isinstance(sizes, str) else tuple(sizes)
+        self.activation = activation
         self.layers = nn.ModuleList(nn.Linear(i, o, dtype=dtype) for i, o in zip(self.sizes[:-1], self.sizes[1:]))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        for layer in self.layers:
-            x = torch.sigmoid(layer(x))
-        return x
+        if self.activation == "sigmoid":  # the paper's net, exactly as before
+            for layer in self.layers:
+                x = torch.sigmoid(layer(x))
+            return x
+        f = ACTIVATIONS[self.activation]
+        for layer in self.layers[:-1]:
+            x = f(layer(x))
+        return self.layers[-1](x)
 
     def flat_params(self) -> list[torch.Tensor]:
         """``[W1, b1, W2, b2, ...]`` in the replica list's order (without the replica dim)."""
@@ -108,16 +125,22 @@ _BLOCK_ACTIVATIONS = 1 << 20
 _MAX_BLOCKS = 8
 
 
-def _forward_block(params: list[torch.Tensor], x: torch.Tensor) -> torch.Tensor:
+def _forward_block(params: list[torch.Tensor], x: torch.Tensor, activation: str = "sigmoid") -> torch.Tensor:
     """Every layer is one batched product over the replicas (``x`` broadcast, not copied), then an
-    in-place sigmoid: [R, N, in] -> [R, N, out] with no transposes."""
+    in-place sigmoid: [R, N, in] -> [R, N, out] with no transposes (other activations: linear output)."""
     h = x.expand(params[0].shape[0], *x.shape)
-    for w, b in zip(params[0::2], params[1::2]):
-        h = torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2)).sigmoid_()
+    if activation == "sigmoid":
+        for w, b in zip(params[0::2], params[1::2]):
+            h = torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2)).sigmoid_()
+        return h
+    f, last = ACTIVATIONS[activation], len(params) // 2 - 1
+    for k, (w, b) in enumerate(zip(params[0::2], params[1::2])):
+        h = torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2))
+        h = h if k == last else f(h)
     return h
 
 
-def forward_replicas(params: list[torch.Tensor], x: torch.Tensor) -> torch.Tensor:
+def forward_replicas(params: list[torch.Tensor], x: torch.Tensor, activation: str = "sigmoid") -> torch.Tensor:
     """Outputs of all R replicas on the same inputs: ``x`` [N, in] -> [R, N, out].
 
     Evaluation of many replicas (R = 1000 on 2,000 patterns) is bound by memory traffic, not arithmetic:
@@ -129,11 +152,12 @@ def forward_replicas(params: list[torch.Tensor], x: torch.Tensor) -> torch.Tenso
     R, N = params[0].shape[0], x.shape[0]
     widest = max(w.shape[1] for w in params[0::2])
     block = max(1, _BLOCK_ACTIVATIONS // max(1, N * widest), -(-R // _MAX_BLOCKS))
+    fwd = _forward_block if activation == "sigmoid" else functools.partial(_forward_block, activation=activation)
     if block >= R:
-        return _forward_block(params, x)
+        return fwd(params, x)
     out = torch.empty(R, N, params[-1].shape[-1], dtype=params[-1].dtype)
     for r0 in range(0, R, block):
-        out[r0 : r0 + block] = _forward_block([p[r0 : r0 + block] for p in params], x)
+        out[r0 : r0 + block] = fwd([p[r0 : r0 + block] for p in params], x)
     return out
 
 

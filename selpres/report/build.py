@@ -13,11 +13,22 @@ from pathlib import Path
 from selpres.report.compare import Options
 from selpres.report.context import Context, Section
 from selpres.report.markdown import to_csv
-from selpres.report.sections import error_cost, plots, runs, selection, sensitivity, table1, time_to_target, verdict
+from selpres.report.sections import (
+    error_cost,
+    modern,
+    plots,
+    runs,
+    selection,
+    sensitivity,
+    table1,
+    time_to_target,
+    verdict,
+)
 from selpres.storage import atomic_write
 
 # a section that has nothing to show for a sweep returns None and is left out
 SECTIONS = [
+    modern.section,
     table1.section,
     verdict.section,
     selection.section,
@@ -29,6 +40,7 @@ SECTIONS = [
 ]
 # a study of parameters (not Table 1's grid): the sections it is about first, Table 1's (compact) last
 STUDY_SECTIONS = [
+    modern.section,
     sensitivity.section,
     error_cost.section,
     selection.section,

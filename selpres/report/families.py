@@ -71,14 +71,24 @@ def same_cost(a: float, b: float) -> bool:
     return abs(a / b - 1) <= BUDGET_TOLERANCE
 
 
+def pruned(g: Group) -> bool:
+    """A data-pruning run (InfoBatch, Selective Backprop): one stage, but not conventional training."""
+    return bool(g.used and g.used[0].results.get("pruning"))
+
+
 def matched_partner(groups: dict[tuple[str, str], Group], g: Group) -> Group | None:
-    """The one-stage run of the same topology and settings (outside the schedule) whose presentations are
-    closest to ``g``'s, if within 1 %; None if there is none."""
+    """The one-stage conventional run of the same topology and settings (outside the schedule) whose
+    presentations are closest to ``g``'s, if within 1 %; None if there is none."""
     cost, rest = g.cost, _rest(g)
     candidates = [
         h
         for (t, _), h in groups.items()
-        if t == g.topology and h.sched is not None and stages(h) == 1 and same_cost(h.cost, cost) and _rest(h) == rest
+        if t == g.topology
+        and h.sched is not None
+        and stages(h) == 1
+        and not pruned(h)
+        and same_cost(h.cost, cost)
+        and _rest(h) == rest
     ]
     return min(candidates, key=lambda h: (abs(h.cost - cost), h.schedule), default=None)
 

@@ -98,6 +98,12 @@ def run_job(cfg: DictConfig) -> float:
     hc = HydraConfig.get()
     out = Path(hc.runtime.output_dir)
     multirun = hc.mode == RunMode.MULTIRUN
+    try:
+        _check_name(hc, multirun)
+    except ConfigError as e:  # before the job touches its folder: remove only what this run created
+        print(f"error: {e}", file=sys.stderr)
+        guard.undo(out)
+        sys.exit(2)
     if multirun and orphan.watch() is not None and orphan.gone():
         _orphaned(out, "before it started")
     try:
@@ -130,7 +136,6 @@ def _orphaned(out: Path, where: str) -> None:
 def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
     remove_stale_temps(out)
     try:
-        _check_name(HydraConfig.get(), multirun)
         res = None if cfg.overwrite else _finished(out, cfg)
         if res is not None:
             log.info("already done: %s (overwrite=true to run it again)", out / RESULTS)

@@ -32,7 +32,25 @@ class OptimName(Enum):
     quickprop = "quickprop"  # the batch methods run in selpres.engines.batch.BatchEngine
     delta_bar_delta = "delta_bar_delta"
     rprop = "rprop"
-    adam = "adam"
+    adam = "adam"  # batch mode with batch_size 0 (configs/optim/adam.yaml); mini-batch with batch_size >= 1
+    adamw = "adamw"  # Loshchilov & Hutter 2019: decoupled weight decay (batch or mini-batch, as adam)
+
+
+class Activation(Enum):
+    sigmoid = "sigmoid"  # the paper's BPN: sigmoid hidden and output units
+    tanh = "tanh"  # the others: these hidden units, a linear output layer (selpres.engines.minibatch)
+    relu = "relu"
+    silu = "silu"
+
+
+class LrSchedule(Enum):
+    constant = "constant"
+    cosine = "cosine"  # lr * (1 + cos(pi c / C)) / 2 over the run's own budget C (presentations)
+
+
+class Pruning(Enum):
+    infobatch = "infobatch"  # Qin et al. 2024 (selpres.presentation.pruning)
+    selective_backprop = "selective_backprop"  # Jiang et al. 2019
 
 
 class Reduction(Enum):
@@ -153,6 +171,10 @@ class ScheduleConfig:
     order: Order = MISSING
     strata_bins: int = MISSING
     selection_cost: float = MISSING  # presentations charged per candidate scored (selpres.presentation.selection)
+    pruning: Optional[Pruning] = None  # data pruning every epoch (selpres.presentation.pruning); null: none
+    prune_ratio: Optional[float] = None  # infobatch: share of the well-learned patterns left out
+    delta: Optional[float] = None  # infobatch: share of the epochs pruned before training on all
+    beta: Optional[float] = None  # selective_backprop: selectivity, P = percentile(loss)^beta
 
 
 @dataclass
@@ -183,6 +205,12 @@ class OptimConfig:
     eps: Optional[float] = None
     sigmoid_prime_offset: float = 0.0  # batch mode: added to σ' in the backward pass (Fahlman: 0.1)
     reduction: Reduction = Reduction.sum  # batch mode: the epoch's error, summed or mean
+    lr_schedule: LrSchedule = LrSchedule.constant  # mini-batch engine: constant, or cosine over the run's budget
+
+
+@dataclass
+class ModelConfig:
+    activation: Activation = MISSING  # hidden units (selpres.engines.model.ACTIVATIONS)
 
 
 @dataclass
@@ -211,6 +239,7 @@ class TrainConfig:
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
     topology: TopologyConfig = field(default_factory=TopologyConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
     checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)

@@ -101,11 +101,17 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
     train_Y = prob.task.exemplar.Y if prob.task is not None else prob.scaler.inverse_y(prob.Y)
     task_floor = floor.task_floor(train_Y, prob.tests)
     stats = summary(reps)
+    pruning = prob.pruning.describe() if getattr(prob, "pruning", None) is not None else None
+    schedule = {"name": cfg.schedule.name, "order": cfg.schedule.order.value, **prob.schedule.describe()}
+    if pruning is not None:  # what ran, not the plan's upper bound: mean over replicas (each in pruning)
+        training = sum(pruning["trained_presentations"]) / R
+        schedule.update(presentations=training, epochs=[max(pruning["epochs"])], planned_epochs=schedule["epochs"])
     return {
         "status": "diverged" if n_div == R else "complete",
         "diverged_replicas": n_div,
         "config_hash": chash,
-        "schedule": {"name": cfg.schedule.name, "order": cfg.schedule.order.value, **prob.schedule.describe()},
+        "schedule": schedule,
+        "pruning": pruning,  # infobatch / selective_backprop: parameters, per-replica cost, patterns left out
         "topology": cfg.topology.layers,
         "engine": engine.name,  # what ran
         "engine_requested": cfg.engine.value,

@@ -26,18 +26,20 @@ from selpres.data import paper as D
 from selpres.data.file import DataFileError
 from selpres.data.task import Task, load_task
 from selpres.engines.batch import BatchEngine
+from selpres.engines.minibatch import MiniBatchEngine
 from selpres.engines.model import init_replica_params
 from selpres.engines.online import make_engine
 from selpres.errors import ConfigError
 from selpres.presentation.orders import priority_orders
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
+from selpres.presentation.pruning import Pruning, pruning_plan
 from selpres.presentation.sampler import SelectivePresentation, epoch_orders, shuffle_implementation
 from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
-from selpres.presentation.selection import StageSelection, initial_kind, stage_selection
+from selpres.presentation.selection import StageSelection, initial_kind, planned_charge, stage_selection
 from selpres.run import floor, lock, orphan
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
-from selpres.run.checks import batch_mode, optim_hparams, validate
+from selpres.run.checks import batch_mode, minibatch_reason, optim_hparams, validate
 from selpres.run.estimate import refuse_job
 from selpres.run.tracking import Tracker
 from selpres.seeding import derive_seed, generator, seed_everything
@@ -62,6 +64,8 @@ class Problem:
     selection: StageSelection | None = None  # loss_high/loss_low/reselect: A_k chosen at each stage start
     task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
     schedule_note: str | None = None  # how a named schedule's counts were applied to this n (None: as given)
+    pruning: Pruning | None = None  # infobatch / selective_backprop: each epoch's patterns chosen by loss
+    budget: float | None = None  # the run's own planned cost (presentations): the cosine schedule's horizon
 
     @functools.cached_property
     def plan(self) -> list[EpochPlan]:
@@ -102,6 +106,12 @@ def prepare(cfg: DictConfig) -> Problem:
     orders = priority_orders(task.exemplar.X, initial_kind(kind), gens, bins)
     samplers = [SelectivePresentation(order=order, schedule=schedule, seed=s) for order, s in zip(orders, seeds)]
     X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
+    pruning, budget = None, schedule.presentations + planned_charge(kind, schedule.sizes, cfg.schedule.selection_cost)
+    if cfg.schedule.pruning is not None:
+        fitted = fit_schedule(cfg.schedule.sizes, cfg.schedule.budget, task.n)[1]
+        epochs = None if cfg.schedule.epochs is None else int(cfg.schedule.epochs[0])
+        pruning = Pruning(cfg.schedule.pruning.value, cfg.schedule, task.n, seeds, fitted, epochs)
+        budget = fitted if fitted is not None else task.n * epochs
     return Problem(
         sizes=sizes,
         schedule=schedule,
@@ -117,6 +127,8 @@ def prepare(cfg: DictConfig) -> Problem:
         ),
         task=task,
         schedule_note=note,
+        pruning=pruning,
+        budget=budget,
     )
 
 
@@ -128,6 +140,8 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
     sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
     if note:
         log.info(note)
+    if cfg.schedule.pruning is not None:  # checked in validate: sizes [1.0], a budget or one epoch count
+        return pruning_plan(cfg.schedule.pruning.value, cfg.schedule, task.n, budget), note
     try:
         return build_schedule(sizes, sch["epochs"], task.n, budget), note
     except ConfigError as e:
@@ -149,6 +163,21 @@ def job_engine(cfg: DictConfig, prob: Problem):
     from selpres.native import KernelUnavailable
 
     o = cfg.optim
+    reason = minibatch_reason(cfg)
+    if reason is not None:
+        log.warning("engine %s runs the mini-batch torch engine: %s", cfg.engine.value, reason)
+        return MiniBatchEngine(
+            prob.sizes,
+            prob.init_params,
+            o.name.value,
+            {k: v for k, v in optim_hparams(o).items() if v is not None},
+            o.batch_size,
+            cfg.model.activation.value,
+            o.lr_schedule.value,
+            prob.budget,
+            o.reduction.value,
+            fallback_reason=reason,
+        )
     if batch_mode(o):
         return BatchEngine(
             prob.sizes,
@@ -306,7 +335,8 @@ def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
         log.warning("the per-epoch shuffles run in numpy (slower, the same permutations): %s", shuffle_implementation())
     out = Path(out_dir) if out_dir is not None else None
     chash = results_json.job_hash(cfg)
-    ckpts = Checkpoints(out, chash) if out is not None and cfg.checkpoint.enabled else None
+    # a pruning job's scores are not checkpointed (recorded as results.json's pruning.checkpointed): it restarts
+    ckpts = Checkpoints(out, chash) if out is not None and cfg.checkpoint.enabled and not prob.pruning else None
     if ckpts and cfg.overwrite:
         ckpts.discard()
     progress = ckpts.resume(engine, len(prob.seeds)) if ckpts else Progress.fresh(len(prob.seeds))
@@ -337,11 +367,37 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
         for s in prob.samplers:
             s.set_epoch(ep.index)
         order = epoch_orders(prob.samplers, job.orders_buffer)
+    if prob.pruning is not None:
+        return run_pruned_epoch(job, ep, order, clock)
+    if isinstance(job.engine, MiniBatchEngine):  # its lr schedule's clock: the job's cost so far
+        job.engine.spent.fill_(progress.presentations)
     with clock("train"):
         loss = job.engine.train_epoch(prob.X, prob.Y, order)
     progress.epoch, progress.presentations = ep.index + 1, progress.presentations + ep.presentations
     with clock("eval"):
         mark_diverged(progress, job.engine, loss, ep.index)
+        rec = curve_point(job.engine, prob, job.cadence, ep, loss, progress)
+    with clock("log"):
+        record(job, rec)
+    return rec
+
+
+def run_pruned_epoch(job: Job, ep: EpochPlan, order: torch.Tensor, clock: Clock) -> dict:
+    """An epoch of a data-pruning schedule (selpres.presentation.pruning): the patterns each replica presents
+    (and their weights) chosen from its shuffle of U, the updates, the costs (mean over replicas on the curve)."""
+    prob, progress, pr = job.prob, job.progress, job.prob.pruning
+    with clock("select"):
+        choice = pr.choose(ep.index, order, job.engine, prob.X, prob.Y)
+    job.engine.spent.copy_(pr.spent)
+    with clock("train"):
+        loss = job.engine.train_epoch(prob.X, prob.Y, choice.order, weights=choice.weights, counts=choice.counts)
+    pr.finish(choice, job.engine.last_losses)
+    progress.epoch = ep.index + 1
+    # whole presentations on the curve, as for every schedule (each replica's exact cost: results' pruning)
+    progress.presentations = round(float(pr.spent.mean()))
+    progress.selection_presentations = round(float(pr.charged.mean()))
+    with clock("eval"):
+        mark_diverged(progress, job.engine, torch.nan_to_num(loss, nan=0.0), ep.index)
         rec = curve_point(job.engine, prob, job.cadence, ep, loss, progress)
     with clock("log"):
         record(job, rec)
@@ -369,6 +425,8 @@ def train(
                 if job.progress.all_diverged:  # nothing left to train: stop the job here
                     log.warning("every replica diverged by epoch %d; stopping", ep.index + 1)
                     break
+                if job.prob.pruning is not None and job.prob.pruning.exhausted:  # every replica spent its budget
+                    break
                 due = job.checkpoint_due(ep)
                 if due or (orphan.gone() and job.ckpts is not None and ep.index < len(job.prob.plan) - 1):
                     with clock("checkpoint"):
@@ -395,6 +453,7 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
         "params": job.engine.params(),
         "seeds": prob.seeds,
         "topology": cfg.topology.layers,
+        "activation": cfg.model.activation.value,  # load_into(BPN(topology, activation=...), params, r)
         "scaler": dataclasses.asdict(prob.scaler),
         "config_hash": job.chash,
     }

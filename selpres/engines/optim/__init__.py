@@ -14,7 +14,9 @@ them. Each is a ``torch.optim.Optimizer`` here (the definition of correct), step
 
 Config keys (flat, so that each can be swept and named in an error): ``sgd``: lr, momentum;
 ``quickprop``: lr, mu, weight_decay; ``delta_bar_delta``: lr, kappa, phi, theta, momentum;
-``rprop``: lr, eta_minus, eta_plus, step_min, step_max; ``adam``: lr, beta1, beta2, eps, weight_decay.
+``rprop``: lr, eta_minus, eta_plus, step_min, step_max; ``adam``, ``adamw``: lr, beta1, beta2, eps,
+weight_decay. Mini-batch SGD/Adam/AdamW (``optim.batch_size`` >= 1) step replica by replica in
+:mod:`selpres.engines.optim.replica`.
 Keys whose value is ``None`` are left at the optimizer's default.
 
 **Why Samad's rule is absent.** The paper cites Samad [6] only as compensating "not only present weight
@@ -56,6 +58,7 @@ OPTIMIZER_KEYS = {
     "delta_bar_delta": ("lr", "kappa", "phi", "theta", "momentum"),
     "rprop": ("lr", "eta_minus", "eta_plus", "step_min", "step_max"),
     "adam": ("lr", "beta1", "beta2", "eps", "weight_decay"),
+    "adamw": ("lr", "beta1", "beta2", "eps", "weight_decay"),
 }
 HPARAM_KEYS = tuple(sorted(set().union(*OPTIMIZER_KEYS.values())))  # pass them all: unused ones must be None
 
@@ -106,6 +109,12 @@ _OPTIMIZERS = {
     "adam": (
         _adam,
         lambda params, lr, beta1, beta2, eps, weight_decay: torch.optim.Adam(
+            params, lr=lr, betas=(beta1, beta2), eps=eps, weight_decay=weight_decay
+        ),
+    ),
+    "adamw": (
+        lambda lr=1e-3, beta1=0.9, beta2=0.999, eps=1e-8, weight_decay=0.01: _adam(lr, beta1, beta2, eps, weight_decay),
+        lambda params, lr, beta1, beta2, eps, weight_decay: torch.optim.AdamW(
             params, lr=lr, betas=(beta1, beta2), eps=eps, weight_decay=weight_decay
         ),
     ),

@@ -1,0 +1,188 @@
+"""Mini-batch training of R replicas with today's units and optimizers: ReLU/SiLU/tanh nets, Adam, AdamW, SGD.
+
+The online engines (:mod:`selpres.engines.online`) run the paper's network - sigmoid units, SGD with
+momentum at a constant rate - and the native kernel runs nothing else. :class:`MiniBatchEngine` runs what
+they cannot, replica-batched in eager torch with a hand-written backward (checked against autograd on
+:class:`selpres.engines.model.BPN`, ``tests/test_minibatch.py``):
+
+* ``model.activation``: sigmoid, tanh, relu or silu hidden units (linear output unless sigmoid);
+* ``optim.name``: sgd, adam or adamw on mini-batches of ``optim.batch_size`` patterns
+  (:class:`selpres.engines.optim.replica.ReplicaOptimizer`, per replica as torch.optim's own rules);
+* ``optim.lr_schedule``: ``constant`` or ``cosine``: lr · ½(1 + cos(π c / C)) where c is the replica's cost
+  so far (presentations, forward passes charged for choosing included) and C the run's own budget, so a
+  run scheduled for a smaller budget decays to zero at its own end (a compute-matched run is one scheduled
+  for that budget, not a prefix of a longer run);
+* per-pattern weights and per-replica pattern counts (``train_epoch(..., weights, counts)``), which the
+  data-pruning schedules of :mod:`selpres.presentation.pruning` need: replica r presents the first
+  ``counts[r]`` entries of ``order[r]`` and a mini-batch's loss is the mean of ``weights · loss`` over its
+  patterns (InfoBatch's rescaled loss); a replica with nothing left in a mini-batch does not step.
+
+Loss per pattern: ``mse`` over the outputs (``reduction=mean``: the online engines' loss; ``sum``:
+Rumelhart's ½Σe², for configs written for batch mode). ``last_losses`` holds every presented pattern's loss
+before its update (InfoBatch's scores come from there, at no extra cost).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import torch
+
+from selpres.engines.model import forward_replicas
+from selpres.engines.online import ScoredByPredict, _check_inputs, _check_patterns
+from selpres.engines.optim.replica import ReplicaOptimizer
+
+LR_SCHEDULES = ("constant", "cosine")
+
+
+def lr_factor(kind: str, spent: torch.Tensor, horizon: float) -> torch.Tensor:
+    """The learning rate's factor [R] at costs ``spent`` [R] of a run whose budget is ``horizon``."""
+    if kind == "constant":
+        return torch.ones_like(spent)
+    frac = (spent / max(horizon, 1e-300)).clamp(0.0, 1.0)
+    return 0.5 * (1.0 + torch.cos(math.pi * frac))
+
+
+def _act(name: str, z: torch.Tensor) -> torch.Tensor:
+    if name == "sigmoid":
+        return torch.sigmoid(z)
+    if name == "tanh":
+        return torch.tanh(z)
+    if name == "relu":
+        return torch.relu(z)
+    return z * torch.sigmoid(z)  # silu
+
+
+def _act_prime(name: str, z: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
+    """d act / dz from the pre-activation z and the activation a."""
+    if name == "sigmoid":
+        return a * (1 - a)
+    if name == "tanh":
+        return 1 - a * a
+    if name == "relu":
+        return (z > 0).to(z.dtype)
+    s = torch.sigmoid(z)
+    return s * (1 + z * (1 - s))
+
+
+class MiniBatchEngine(ScoredByPredict):
+    """R replicas, mini-batches of ``batch_size``, ``rule`` in sgd/adam/adamw, ``activation`` hidden units."""
+
+    name = "minibatch"
+
+    def __init__(
+        self,
+        sizes,
+        params,
+        rule: str,
+        hparams: dict,
+        batch_size: int,
+        activation: str = "sigmoid",
+        lr_schedule: str = "constant",
+        horizon: float = 1.0,
+        reduction: str = "mean",
+        fallback_reason: str | None = None,
+    ):
+        self.sizes = tuple(int(s) for s in sizes)
+        if len(params) != 2 * (len(self.sizes) - 1):
+            raise ValueError(f"{len(params)} parameter tensors for topology {self.sizes}")
+        if lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"lr_schedule {lr_schedule!r}: one of {LR_SCHEDULES}")
+        self.rule, self.batch_size, self.activation = rule, int(batch_size), activation
+        self.lr_schedule, self.horizon, self.reduction = lr_schedule, float(horizon), reduction
+        self.fallback_reason = fallback_reason
+        self.R = params[0].shape[0]
+        # every replica's weights in one row of a flat [R, P] tensor (and its gradient likewise): the optimizer
+        # steps it in a dozen ops; self.p / self._g are per-layer views into them
+        self.shapes = [tuple(t.shape[1:]) for t in params]
+        self.flat = torch.cat([t.detach().to(torch.float64).reshape(self.R, -1) for t in params], dim=1)
+        self.flat.grad = torch.zeros_like(self.flat)
+        self.p, self._g = self._views(self.flat), self._views(self.flat.grad)
+        h = dict(hparams)
+        self.lr = float(h.pop("lr"))
+        self.opt = ReplicaOptimizer([self.flat], rule, **{k: v for k, v in h.items() if v is not None})
+        self.spent = torch.zeros(self.R, dtype=torch.float64)  # each replica's cost so far (the lr schedule's clock)
+        self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
+
+    def _views(self, flat: torch.Tensor) -> list[torch.Tensor]:
+        out, k = [], 0
+        for s in self.shapes:
+            n = int(torch.Size(s).numel())
+            out.append(flat[:, k : k + n].view(self.R, *s))
+            k += n
+        return out
+
+    @torch.no_grad()
+    def train_epoch(self, X, Y, order, weights=None, counts=None):
+        """Mini-batches over ``order[r, :counts[r]]``; returns the [R] mean pre-update pattern loss."""
+        _check_inputs(self.sizes, X, Y, order, self.R)
+        R, m = order.shape
+        X, Y = X.to(torch.float64), Y.to(torch.float64)
+        counts = torch.full((R,), m, dtype=torch.int64) if counts is None else counts.to(torch.int64)
+        nout, B, act = self.sizes[-1], self.batch_size, self.activation
+        Ws, bs = self.p[0::2], self.p[1::2]
+        self.last_losses = torch.full((R, m), float("nan"), dtype=torch.float64)
+        total = torch.zeros(R, dtype=torch.float64)
+        last = len(Ws) - 1
+        for start in range(0, m, B):
+            nb = (counts - start).clamp(0, B)  # [R] patterns of this mini-batch per replica
+            idx = order[:, start : start + B]
+            width = idx.shape[1]
+            full = bool((nb == width).all())  # the usual case: every replica presents a whole mini-batch
+            active = None if full else nb > 0
+            if active is not None and not bool(active.any()):
+                break
+            valid = torch.ones(R, width, dtype=torch.float64)
+            if not full:
+                valid = (torch.arange(width).unsqueeze(0) < nb.unsqueeze(1)).to(torch.float64)  # [R, b]
+                idx = torch.where(valid.bool(), idx, idx[:, :1])  # padding rows read a real pattern, weighted 0
+            zs, acts = [], [X[idx]]
+            for k, (W, b) in enumerate(zip(Ws, bs)):
+                z = torch.baddbmm(b.unsqueeze(1), acts[-1], W.transpose(1, 2))
+                zs.append(z)
+                acts.append(torch.sigmoid(z) if k == last and act == "sigmoid" else (z if k == last else _act(act, z)))
+            diff = acts[-1] - Y[idx]
+            loss_p = diff.square().mean(-1)  # [R, b] per-pattern mse
+            if not full:
+                loss_p = loss_p * valid  # 0 on padding
+            self.last_losses[:, start : start + width] = loss_p if full else torch.where(valid.bool(), loss_p, math.nan)
+            total += loss_p.sum(1)
+            w = valid if weights is None else valid * weights[:, start : start + width]
+            if self.reduction == "mean":
+                scale = (2.0 / (nb.clamp(min=1).to(torch.float64) * nout)).unsqueeze(1) * w
+            else:
+                scale = w
+            delta = diff * scale.unsqueeze(2)  # dL/d(output)
+            if act == "sigmoid":
+                delta = delta * acts[-1] * (1 - acts[-1])
+            for layer in range(last, -1, -1):
+                a_prev = acts[layer]
+                self._g[2 * layer].copy_(torch.bmm(delta.transpose(1, 2), a_prev))
+                self._g[2 * layer + 1].copy_(delta.sum(dim=1))
+                if layer:
+                    delta = torch.bmm(delta, Ws[layer]) * _act_prime(act, zs[layer - 1], a_prev)
+            lr = self.lr * lr_factor(self.lr_schedule, self.spent, self.horizon)
+            self.opt.step(lr=lr, active=active)
+            self.spent += nb.to(torch.float64)
+        presented = counts.clamp(max=m).to(torch.float64)
+        return torch.where(presented > 0, total / presented.clamp(min=1), float("nan"))
+
+    def predict(self, X):
+        return forward_replicas(self.p, _check_patterns(self.sizes, X), self.activation)
+
+    def finite(self):
+        return torch.isfinite(self.flat).all(1)
+
+    def params(self):
+        return [t.clone().contiguous() for t in self.p]
+
+    def state_dict(self):
+        return {"params": self.params(), "optimizer": copy.deepcopy(self.opt.state_dict()), "spent": self.spent.clone()}
+
+    def load_state_dict(self, state):
+        with torch.no_grad():
+            for p, src in zip(self.p, state["params"]):
+                p.copy_(src)  # views: into self.flat
+        self.opt.load_state_dict(copy.deepcopy(state["optimizer"]))
+        self.spent = state["spent"].clone()

@@ -1,0 +1,104 @@
+"""InfoBatch and Selective Backprop: their defining properties, against independent derivations."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from selpres.engines.model import BPN, init_replica_params, load_into
+from selpres.presentation.pruning import backprop_probability, infobatch_keep, percentile
+
+from conftest import cfg_of
+
+
+def _grad(model: BPN, X, Y, weights) -> torch.Tensor:
+    """d/dθ of Σ_i w_i · mse_i by autograd, flattened."""
+    model.zero_grad()
+    ((model(X) - Y).square().mean(-1) * weights).sum().backward()
+    return torch.cat([p.grad.flatten() for p in model.parameters()])
+
+
+def test_infobatch_expected_gradient_is_the_full_data_gradient():
+    """E over the pruning draw of Σ_kept w_i ∇l_i = Σ_all ∇l_i (Qin et al.'s unbiasedness), by autograd."""
+    torch.manual_seed(1)
+    n = 40
+    X, Y = torch.rand(n, 6, dtype=torch.float64), torch.rand(n, 2, dtype=torch.float64)
+    model = load_into(BPN((6, 5, 2)), init_replica_params((6, 5, 2), [3]), 0)
+    scores = (model(X) - Y).square().mean(-1).detach()
+    assert int((scores < scores.mean()).sum()) % 2 == 0  # (1 - r)|W| whole at r = 0.5: exactly unbiased
+    full = _grad(model, X, Y, torch.ones(n, dtype=torch.float64))
+    draws, acc = 3000, torch.zeros_like(full)
+    per_draw = []
+    for d in range(draws):
+        kept, weight = infobatch_keep(scores, 0.5, torch.Generator().manual_seed(d))
+        g = _grad(model, X, Y, weight * kept)
+        acc += g
+        per_draw.append(g)
+    mean = acc / draws
+    se = torch.stack(per_draw).std(0) / math.sqrt(draws)
+    assert ((mean - full).abs() <= 5 * se + 1e-12).all()
+    # and the rule itself: every pattern at or above the mean kept at weight 1, half the others at weight 2
+    kept, weight = infobatch_keep(scores, 0.5, torch.Generator().manual_seed(0))
+    well = scores < scores.mean()
+    assert kept[~well].all() and (weight[~well] == 1).all()
+    assert int(kept[well].sum()) == int(well.sum()) // 2 and (weight[well & kept] == 2).all()
+    # without the rescaling the kept set's gradient is biased: the test can tell
+    unscaled = (
+        sum(
+            _grad(model, X, Y, infobatch_keep(scores, 0.5, torch.Generator().manual_seed(d))[0] * 1.0)
+            for d in range(200)
+        )
+        / 200
+    )
+    assert (unscaled - full).abs().max() > 10 * se.max()
+
+
+def test_selective_backprop_selection_follows_the_percentile_rule():
+    """Chosen with frequency F(l)^β, F counted by hand; the engine-facing draw matches it statistically."""
+    losses = torch.tensor([[0.5, 0.1, 0.9, 0.3, 0.7, 0.3]], dtype=torch.float64)
+    by_hand = [sum(float(x) <= float(v) for x in losses[0]) / 6 for v in losses[0]]
+    assert percentile(losses)[0].tolist() == pytest.approx(by_hand)
+    beta = 2.0
+    P = backprop_probability(losses, beta)[0]
+    assert P.tolist() == pytest.approx([f**beta for f in by_hand])
+    from omegaconf import OmegaConf
+
+    from selpres.presentation.pruning import Pruning
+
+    sch = OmegaConf.create({"selection_cost": 1 / 3, "beta": beta})
+    pr = Pruning("selective_backprop", sch, 6, [7], None, 10)
+    draws, hits = 4000, torch.zeros(6)
+    order = torch.arange(6).unsqueeze(0)
+    for e in range(draws):
+        choice = pr._selective_backprop(e, order, losses)
+        hits[choice.order[0, : int(choice.counts[0])]] += 1
+    freq = hits / draws
+    sd = (P * (1 - P) / draws).sqrt()
+    assert ((freq - P).abs() <= 5 * sd + 1e-9).all()
+    assert float(pr.charged[0]) == pytest.approx(draws * 6 / 3)  # every candidate's forward pass charged
+
+
+@pytest.mark.parametrize("schedule", ["infobatch", "selective_backprop"])
+def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
+    from selpres.run.train import train
+
+    cfg = cfg_of(
+        f"schedule={schedule}",
+        "schedule.epochs=null",
+        "schedule.budget=6000",
+        "optim=adam_minibatch",
+        "model.activation=relu",
+        "replicas=3",
+    )
+    res = train(cfg)
+    pr = res["pruning"]
+    assert res["engine"] == "minibatch" and "schedule.pruning" in res["engine_fallback"]
+    for cost in pr["cost"]:
+        assert 6000 - (1 + 1 / 3) < cost <= 6000 + 1e-9
+    assert res["presentations_done"] == pytest.approx(6000, abs=2)
+    if schedule == "selective_backprop":
+        assert all(c > 0 for c in pr["charged_presentations"])
+    else:
+        assert all(c == 0 for c in pr["charged_presentations"]) and all(x > 0 for x in pr["left_out"])
