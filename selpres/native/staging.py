@@ -38,6 +38,7 @@ import torch
 STAGE_BYTES = 1 << 22  # inputs + targets of at least 4 MB (beyond a core's L2 here) are staged
 LINE_DOUBLES = 8  # 64-byte cache lines
 HUGE_PAGE = 2 << 20
+STAGED_DTYPES = (torch.float64, torch.float32)  # read exactly into float64 by numpy
 CHECK_ROWS = 64  # rows compared with the source at every reuse (a change outside torch's version counter)
 
 
@@ -61,16 +62,17 @@ def _rows(n: int, width: int) -> tuple[np.ndarray, mmap.mmap | None]:
 
 class Staged:
     """One set's rows ``[inputs, targets, padding]`` and the views the kernel reads (``X``, ``Y``: strided
-    views of the rows), with what identifies the source: the float64 tensors it was copied from (held, so
+    views of the rows), with what identifies the source: the tensors it was copied from (held, so
     their memory cannot be reused for another set) and their version counters (bumped by any in-place
     torch operation on them or a view of them)."""
 
     def __init__(self, X: torch.Tensor, Y: torch.Tensor):
+        X, Y = X.detach(), Y.detach()  # the same memory and version counter
         n, nin = X.shape
         nout = Y.shape[1]
         width = -(-(nin + nout) // LINE_DOUBLES) * LINE_DOUBLES
         rows, self._map = _rows(n, width)
-        rows[:, :nin] = X.numpy()
+        rows[:, :nin] = X.numpy()  # float32 or float64, any strides: converted exactly, as .to(float64) does
         rows[:, nin : nin + nout] = Y.numpy()
         self.rows = torch.from_numpy(rows)
         self.X, self.Y = self.rows[:, :nin], self.rows[:, nin : nin + nout]
@@ -81,22 +83,31 @@ class Staged:
         """Whether these are the tensors staged, unchanged: the same memory, shape and strides, the same
         versions, and a sample of rows still bitwise equal (a write through numpy bumps no version)."""
         sx, sy, vx, vy = self._source
-        same = all(
-            a.data_ptr() == b.data_ptr() and a.shape == b.shape and a.stride() == b.stride()
-            for a, b in ((X, sx), (Y, sy))
+        X, Y = X.detach(), Y.detach()
+        same = (
+            X.dtype == sx.dtype
+            and Y.dtype == sy.dtype
+            and all(
+                a.data_ptr() == b.data_ptr() and a.shape == b.shape and a.stride() == b.stride()
+                for a, b in ((X, sx), (Y, sy))
+            )
         )
         if not (same and X._version == vx and Y._version == vy):
             return False
         idx = self._check
-        return np.array_equal(X.numpy()[idx], self.X.numpy()[idx]) and np.array_equal(
-            Y.numpy()[idx], self.Y.numpy()[idx]
+        return np.array_equal(X.numpy()[idx], self.X.numpy()[idx], equal_nan=True) and np.array_equal(
+            Y.numpy()[idx], self.Y.numpy()[idx], equal_nan=True
         )
 
 
 def stage(previous: Staged | None, X: torch.Tensor, Y: torch.Tensor) -> Staged | None:
-    """The staged set for float64 contiguous ``X``, ``Y``: ``previous`` while it still holds them, a new
-    one when they changed, None below :data:`STAGE_BYTES` (the kernel then reads ``X`` and ``Y`` as they are)."""
+    """The staged set for the caller's ``X``, ``Y`` (before any conversion, so a float32 set is staged once,
+    not every epoch): ``previous`` while it still holds them, a new one when they changed, None below
+    :data:`STAGE_BYTES` or for what numpy cannot read exactly (not on the CPU, not float32/float64): the
+    kernel then reads float64 contiguous copies as before."""
     if (X.numel() + Y.numel()) * 8 < STAGE_BYTES:
+        return None
+    if any(t.device.type != "cpu" or t.dtype not in STAGED_DTYPES for t in (X, Y)):
         return None
     if previous is not None and previous.holds(X, Y):
         return previous
