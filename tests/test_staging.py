@@ -95,3 +95,21 @@ def test_small_sets_are_not_staged():
     assert (X.numel() + Y.numel()) * 8 < staging.STAGE_BYTES
     eng, _, _ = _train("native", sizes, 4, X, Y, [torch.randint(1002, (4, 100), generator=g)])
     assert eng._staged is None
+
+
+def test_a_float32_set_is_staged_once_and_trains_as_its_float64_copy(monkeypatch):
+    sizes, R = (6, 13, 2), 4
+    X, Y, g = _set(sizes, 2000)
+    X32, Y32 = X.float(), Y.float()
+    orders = [torch.randint(2000, (R, 500), generator=g) for _ in range(2)]
+    monkeypatch.setattr(staging, "STAGE_BYTES", 0)
+    eng = make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
+    first = eng.train_epoch(X32, Y32, orders[0])
+    staged = eng._staged
+    second = eng.train_epoch(X32, Y32, orders[1])
+    assert eng._staged is staged  # not copied again
+    monkeypatch.setattr(staging, "STAGE_BYTES", 1 << 62)
+    want = make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
+    w1, w2 = (want.train_epoch(X32.double(), Y32.double(), o) for o in orders)
+    assert torch.equal(first, w1) and torch.equal(second, w2)
+    assert all(torch.equal(a, b) for a, b in zip(eng.params(), want.params()))

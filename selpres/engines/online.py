@@ -314,8 +314,14 @@ class NativeEngine:
     def train_epoch(self, X, Y, order):
         _check_inputs(self.sizes, X, Y, order, self.R)
         m = order.shape[1]
-        X = X.detach().to(torch.float64).contiguous()
-        Y = Y.detach().to(torch.float64).contiguous()
+        # a large set is staged once, whatever its dtype and layout (selpres.native.staging); None for one
+        # that stays in the caches, read as it is
+        self._staged = stage(self._staged, X, Y)
+        if self._staged is not None:
+            X, Y = self._staged.X, self._staged.Y  # the same numbers, one row of whole cache lines per pattern
+        else:
+            X = X.detach().to(torch.float64).contiguous()
+            Y = Y.detach().to(torch.float64).contiguous()
         # numpy, not torch, for the padding: a large torch op would wake torch's OpenMP pool, whose
         # spinning threads then compete with the kernel's threads for the cores
         if self.R == self.G * self.LANES and order.dtype == torch.int64 and order.is_contiguous():
@@ -327,9 +333,6 @@ class NativeEngine:
             padded[self.R :] = o[:1]  # the padding lanes shadow replica 0 (see _pack)
             padded_order = torch.from_numpy(padded)
         loss = torch.zeros(self.G * self.LANES, dtype=torch.float64)
-        self._staged = stage(self._staged, X, Y)  # None for a set that stays in the caches
-        if self._staged is not None:
-            X, Y = self._staged.X, self._staged.Y  # the same numbers, one row of whole cache lines per pattern
         self._k.train(
             self.sizes, self.w, self.buf, X, Y, padded_order, self.batch_size, self.lr, self.mom, loss, self.threads
         )

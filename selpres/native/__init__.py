@@ -8,8 +8,8 @@ and the callers fall back to torch.
 What callers use, all from here: ``from selpres.native import KernelUnavailable, cpu_flags, load, load_shuffle``.
 The modules: ``build.py`` (compile, cache, load once per process), ``library.py`` (a loaded library and the
 thread pool its calls' chunks run on), ``sgd.py`` (the SGD kernel's binding, ``load``), ``shuffle.py`` (the
-shuffles' binding, ``load_shuffle``). ``load`` and ``load_shuffle`` are imported on first use, so importing
-``KernelUnavailable`` does not import torch.
+shuffles' binding, ``load_shuffle``), ``staging.py`` (a large set's rows laid out for the SGD kernel). ``load``
+and ``load_shuffle`` are imported on first use, so importing ``KernelUnavailable`` does not import torch.
 
 May import: ``selpres.errors`` only (and numpy, torch, ctypes).
 """
