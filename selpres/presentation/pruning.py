@@ -109,7 +109,8 @@ class Pruning:
         self.spent = torch.zeros(R, dtype=torch.float64)  # training + charged forward passes, per replica
         self.trained = torch.zeros(R, dtype=torch.float64)  # back-propagated presentations
         self.charged = torch.zeros(R, dtype=torch.float64)  # forward passes charged for choosing
-        self.left_out = torch.zeros(R, dtype=torch.float64)  # patterns of U not presented, summed over epochs
+        # patterns not back-propagated, summed over epochs: InfoBatch's pruned, Selective Backprop's scored not chosen
+        self.left_out = torch.zeros(R, dtype=torch.float64)
         self.epochs_done = torch.zeros(R, dtype=torch.int64)
         if kind == "infobatch":
             self.ratio, self.delta = float(cfg_schedule.prune_ratio), float(cfg_schedule.delta)
@@ -171,7 +172,7 @@ class Pruning:
             picked = order[r][:scored][chosen[:scored]]
             self.charged[r] += c * scored
             self.spent[r] += c * scored
-            self.left_out[r] += self.n - len(picked)
+            self.left_out[r] += scored - len(picked)  # forwarded, not back-propagated
             rows.append(picked)
             counts.append(len(picked))
         return EpochChoice(_pad(rows, 0), None, torch.tensor(counts, dtype=torch.int64))
