@@ -28,7 +28,8 @@ total cost are compared at one cost by construction, and the cosine learning rat
 InfoBatch's annealing then begins, per replica, once its remaining budget buys no more full epochs than
 (1 - δ)/δ times the epochs it has done, so the last share 1 - δ of its epochs are full ones, as published
 for an epoch count. Without a budget the schedule runs ``schedule.epochs`` epochs (InfoBatch anneals from
-epoch δN) and costs what it costs (recorded).
+epoch δN) and costs what it costs (recorded); a cosine rate then decays over n·N presentations, more than the
+run spends, so it does not reach zero (use the budget form with ``optim.lr_schedule=cosine``).
 
 **Choices the papers leave open** (also in the config files): Selective Backprop's history is the current
 epoch's losses of every candidate, computed in one forward pass over U at the epoch's start (Jiang et al.
