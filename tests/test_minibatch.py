@@ -80,3 +80,27 @@ def test_cosine_reaches_zero_at_the_runs_own_budget():
     f = lr_factor("cosine", torch.tensor([0.0, 50.0, 100.0, 150.0], dtype=torch.float64), 100.0)
     assert f.tolist() == pytest.approx([1.0, 0.5, 0.0, 0.0], abs=1e-15)
     assert lr_factor("constant", torch.zeros(2, dtype=torch.float64), 1.0).tolist() == [1.0, 1.0]
+
+
+@pytest.mark.parametrize(
+    "overrides, engine, fallback",
+    [
+        (["optim=sgd"], ("native", "torch"), None),  # sigmoid, constant rate: the online engines (native if built)
+        (["optim=sgd", "model.activation=tanh"], ("minibatch",), "model.activation=tanh"),
+        (["optim=adamw"], ("minibatch",), "optim.name=adamw"),
+        (["optim=adam", "optim.batch_size=32"], ("minibatch",), "optim.name=adam"),
+        (["optim=adam"], ("batch",), None),  # configs/optim/adam.yaml stays batch mode
+    ],
+)
+def test_which_engine_runs_and_the_recorded_reason(overrides, engine, fallback):
+    from selpres.run.train import job_engine, prepare
+
+    from conftest import cfg_of
+
+    cfg = cfg_of(*overrides, "replicas=2")
+    eng = job_engine(cfg, prepare(cfg))
+    assert eng.name in engine
+    if fallback is None:
+        assert eng.fallback_reason is None or eng.name == "torch"  # torch: no compiler here, said as such
+    else:
+        assert fallback in eng.fallback_reason

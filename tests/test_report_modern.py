@@ -53,6 +53,13 @@ def test_rivals_against_the_matched_partner_paired_by_seed_with_holm(sweep):
         assert r["rms_family_size"] == 2
     for r, p in zip(rows, holm(ps)):
         assert r["rms_p_holm"] == pytest.approx(p)
+    diffs = [r["rms_diff_mean"] for r in rows]
+    better = sum(p < 0.05 and d < 0 for p, d in zip(holm(ps), diffs))  # by hand, from the adjusted p-values
+    worse = sum(p < 0.05 and d > 0 for p, d in zip(holm(ps), diffs))
+    assert (
+        "held-out RMS: of 2 comparisons with compute-matched training, after Holm's correction "
+        f"{better} better, {worse} worse" in modern.headline(rows)
+    )
 
 
 def test_nmse_is_mse_over_the_heldout_targets_variance(sweep):

@@ -28,8 +28,10 @@ ENGINES = {
     # an adaptive order: A_k depends on the network at the enlargement, so the checkpoint carries the orders
     # (killed mid stage 4, its A_4 chosen by loss; a resume that forgot it would train on the stratified one)
     "loss_high": ["engine=reference", "schedule.epochs=[1,1,2,3,3]", "replicas=2", "schedule.order=loss_high"],
+    # the mini-batch engine: Adam's moments and per-replica step counts, and the cosine rate's clock
+    "minibatch": ["optim=adam_minibatch", "model.activation=relu", "schedule.epochs=[2,2,4,6,60]", "replicas=4"],
 }
-EPOCHS = {"reference": 10, "native": 214, "loss_high": 10}
+EPOCHS = {"reference": 10, "native": 214, "loss_high": 10, "minibatch": 74}
 
 
 def run(out: Path, args: list[str], wait: bool = True) -> subprocess.Popen:
@@ -62,7 +64,13 @@ def newest_checkpoint(folder: Path) -> tuple[Path | None, int]:
 
 
 @pytest.mark.parametrize(
-    "engine", [pytest.param("reference"), pytest.param("native", marks=requires_native), pytest.param("loss_high")]
+    "engine",
+    [
+        pytest.param("reference"),
+        pytest.param("native", marks=requires_native),
+        pytest.param("loss_high"),
+        pytest.param("minibatch"),
+    ],
 )
 def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
     args = ENGINES[engine]

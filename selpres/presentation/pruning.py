@@ -28,7 +28,8 @@ total cost are compared at one cost by construction, and the cosine learning rat
 InfoBatch's annealing then begins, per replica, once its remaining budget buys no more full epochs than
 (1 - δ)/δ times the epochs it has done, so the last share 1 - δ of its epochs are full ones, as published
 for an epoch count. Without a budget the schedule runs ``schedule.epochs`` epochs (InfoBatch anneals from
-epoch δN) and costs what it costs (recorded).
+epoch δN) and costs what it costs (recorded); a cosine rate then decays over n·N presentations, more than the
+run spends, so it does not reach zero (use the budget form with ``optim.lr_schedule=cosine``).
 
 **Choices the papers leave open** (also in the config files): Selective Backprop's history is the current
 epoch's losses of every candidate, computed in one forward pass over U at the epoch's start (Jiang et al.
@@ -109,7 +110,8 @@ class Pruning:
         self.spent = torch.zeros(R, dtype=torch.float64)  # training + charged forward passes, per replica
         self.trained = torch.zeros(R, dtype=torch.float64)  # back-propagated presentations
         self.charged = torch.zeros(R, dtype=torch.float64)  # forward passes charged for choosing
-        self.left_out = torch.zeros(R, dtype=torch.float64)  # patterns of U not presented, summed over epochs
+        # patterns not back-propagated, summed over epochs: InfoBatch's pruned, Selective Backprop's scored not chosen
+        self.left_out = torch.zeros(R, dtype=torch.float64)
         self.epochs_done = torch.zeros(R, dtype=torch.int64)
         if kind == "infobatch":
             self.ratio, self.delta = float(cfg_schedule.prune_ratio), float(cfg_schedule.delta)
@@ -171,7 +173,7 @@ class Pruning:
             picked = order[r][:scored][chosen[:scored]]
             self.charged[r] += c * scored
             self.spent[r] += c * scored
-            self.left_out[r] += self.n - len(picked)
+            self.left_out[r] += scored - len(picked)  # forwarded, not back-propagated
             rows.append(picked)
             counts.append(len(picked))
         return EpochChoice(_pad(rows, 0), None, torch.tensor(counts, dtype=torch.int64))

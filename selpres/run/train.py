@@ -420,12 +420,13 @@ def train(
         with clock("loop"):
             for ep in job.prob.plan[job.progress.epoch :]:
                 rec = run_epoch(job, ep, clock)
-                if on_stage_end is not None and ep.index in job.prob.stage_ends:
+                spent = job.prob.pruning is not None and job.prob.pruning.exhausted  # every replica spent its budget
+                if on_stage_end is not None and (ep.index in job.prob.stage_ends or spent):
                     on_stage_end(rec, job.prob)
                 if job.progress.all_diverged:  # nothing left to train: stop the job here
                     log.warning("every replica diverged by epoch %d; stopping", ep.index + 1)
                     break
-                if job.prob.pruning is not None and job.prob.pruning.exhausted:  # every replica spent its budget
+                if spent:
                     break
                 due = job.checkpoint_due(ep)
                 if due or (orphan.gone() and job.ckpts is not None and ep.index < len(job.prob.plan) - 1):

@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from selpres.report.compare import ALPHA, Options, adjust_family, paired, paired_columns, reading
+from selpres.report.compare import Options, adjust_family, outcome, paired, paired_columns, reading
 from selpres.report.context import Context, Section
 from selpres.report.markdown import table
 from selpres.run.stats import summarize
@@ -229,16 +229,26 @@ def verdict_markdown(rows: list[dict]) -> str:
 
 
 def headline(rows: list[dict]) -> str:
+    """The counts of each reading after Holm's correction (the adjusted p-values of the rows)."""
     out = []
     for metric, name, _ in METRICS:
-        tested = [r for r in rows if r.get(f"{metric}_p") is not None]
-        better = [r for r in tested if r[f"{metric}_p"] < ALPHA and r[f"{metric}_diff_mean"] < 0]
-        worse = [r for r in tested if r[f"{metric}_p"] < ALPHA and r[f"{metric}_diff_mean"] > 0]
-        eq = [r for r in tested if r[f"{metric}_p"] >= ALPHA and (r.get(f"{metric}_tost_p") or 1) < ALPHA]
+        tested = [r for r in rows if r.get(f"{metric}_p_holm") is not None]
+        said = [
+            outcome(
+                {
+                    "n": r[f"{metric}_pairs"],
+                    "p": r[f"{metric}_p_holm"],
+                    "mean": r[f"{metric}_diff_mean"],
+                    "p_tost": r.get(f"{metric}_tost_p_holm"),
+                }
+            )
+            for r in tested
+        ]
+        counts = ", ".join(
+            f"{said.count(k)} {k}" for k in ("better", "worse", "equivalent", "no detectable difference")
+        )
         out.append(
-            f"{name}: of {len(tested)} comparisons with compute-matched training, after Holm's correction "
-            f"{len(better)} better, {len(worse)} worse, {len(eq)} equivalent within the margin, "
-            f"{len(tested) - len(better) - len(worse) - len(eq)} no detectable difference"
+            f"{name}: of {len(tested)} comparisons with compute-matched training, after Holm's correction {counts}"
         )
     return "**Against compute-matched training** — " + "; ".join(out) + "."
 
