@@ -85,7 +85,7 @@ _OPTIONS = [pytest.param(g, o, marks=pytest.mark.slow) if (g, o) in _HEAVY else 
 
 @pytest.mark.parametrize("group, option", _OPTIONS, ids=[f"{g}={o}" for g, o in OPTIONS])
 def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, group, option):
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     extra = companions(group, option, user_files)
     cfg = compose_cfg(*SMALL, f"{group}={option}", *extra)
@@ -195,7 +195,7 @@ def test_schema_rejects_at_compose(compose_cfg, override, key):
 
 
 def _config_error(compose_cfg, *ov) -> ConfigError:
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     cfg = compose_cfg(*SMALL, *ov)
     with pytest.raises(ConfigError) as ei:
@@ -274,7 +274,7 @@ def test_more_test_patterns_from_the_exemplar_set_than_it_holds_is_a_config_erro
 
 def test_every_test_pattern_drawn_from_the_exemplar_set_works(compose_cfg):
     """test_from_exemplar == test_patterns is inside the documented range [0, test_patterns]."""
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     prob = prepare(compose_cfg(*SMALL, "data.test_from_exemplar=10"))
     assert prob.tests["test10"][0].shape[0] == 10
@@ -297,7 +297,7 @@ def test_huge_grid_is_rejected_before_allocation(compose_cfg):
     ],
 )
 def test_valid_variants_prepare(compose_cfg, overrides, sizes, presentations):
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     prob = prepare(compose_cfg(*SMALL, *overrides))
     assert prob.schedule.sizes == sizes and prob.schedule.presentations == presentations
@@ -325,7 +325,7 @@ def test_validation_checks_the_optimizer_without_building_one():
     code = (
         "import sys\n"
         "from selpres.run.config import CONFIG_DIR, compose_train\n"
-        "from selpres.run.train import prepare\n"
+        "from selpres.run.problem import prepare\n"
         "prepare(compose_train(CONFIG_DIR, ['replicas=2']))\n"
         "print('torch._dynamo' in sys.modules)\n"
         "import torch\n"

@@ -126,7 +126,7 @@ def test_every_schedule_order_and_optimizer_trains_on_it(sarcos, variant):
 
 # --------------------------------------------------------------------------------------------- errors
 def _error(path: Path, *overrides: str, **kw) -> ConfigError:
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     with pytest.raises(ConfigError) as ei:
         prepare(file_cfg(path, *overrides, **kw))

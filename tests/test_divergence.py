@@ -11,7 +11,7 @@ from conftest import cfg_of
 
 def test_divergence_is_reported_not_fatal(monkeypatch):
     """Sigmoid nets saturate rather than overflow, so poison one replica's weights after epoch 3."""
-    import selpres.run.train as T
+    import selpres.run.problem as T
 
     real = T.make_engine
 
@@ -44,7 +44,7 @@ def test_divergence_is_reported_not_fatal(monkeypatch):
 
 
 def test_a_job_whose_replicas_all_diverged_stops(monkeypatch):
-    import selpres.run.train as T
+    import selpres.run.problem as T
 
     real = T.make_engine
 

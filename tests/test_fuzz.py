@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 from selpres.data.task import Shape
 from selpres.errors import ConfigError
 from selpres.run.checks import check_topology
-from selpres.run.train import prepare, train
+from selpres.run.problem import prepare
+from selpres.run.train import train
 
 from conftest import compose
 

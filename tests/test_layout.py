@@ -81,3 +81,8 @@ def test_every_room_says_what_it_owns_and_may_import():
     for room in (*ROOMS, "native"):
         doc = ast.get_docstring(ast.parse((REPO / "selpres" / room / "__init__.py").read_text())) or ""
         assert "May import" in doc or "may import" in doc, room
+
+
+def test_no_module_over_450_lines():
+    long = {str(p.relative_to(REPO)): n for p, _ in modules() if (n := len(p.read_text().splitlines())) > MAX_LINES}
+    assert long == {}

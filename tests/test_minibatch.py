@@ -93,7 +93,7 @@ def test_cosine_reaches_zero_at_the_runs_own_budget():
     ],
 )
 def test_which_engine_runs_and_the_recorded_reason(overrides, engine, fallback):
-    from selpres.run.train import job_engine, prepare
+    from selpres.run.problem import job_engine, prepare
 
     from conftest import cfg_of
 

@@ -1,5 +1,5 @@
-"""Named schedules on any n (selpres.presentation.proportions through selpres.run.train.prepare): the paper's counts by
-their proportions, its budget scaled, the user's own counts kept or refused with the fraction form."""
+"""Named schedules on any n (selpres.presentation.proportions through selpres.run.problem.prepare): the paper's counts
+by their proportions, its budget scaled, the user's own counts kept or refused with the fraction form."""
 
 from __future__ import annotations
 
@@ -34,7 +34,7 @@ def test_budget_scales_with_n():
 
 
 def test_prepare_applies_and_logs_it(caplog):
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     with caplog.at_level(logging.INFO, logger="selpres"):
         prob = prepare(cfg_of(*SAMPLED))
@@ -46,7 +46,7 @@ def test_prepare_applies_and_logs_it(caplog):
 
 
 def test_other_counts_are_refused_with_the_fraction_form():
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     with pytest.raises(ConfigError) as ei:
         prepare(cfg_of(*SAMPLED, "schedule.sizes=[100,200,5000]", "schedule.epochs=[1,1,1]"))

@@ -211,7 +211,7 @@ def table():
 
 def test_a_range_float64_cannot_scale_is_refused_naming_file_column_and_line(tmp_path, table):
     from selpres.data.file import DataFileError
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     X, Y = table
     X1 = X.copy()
@@ -225,7 +225,7 @@ def test_a_range_float64_cannot_scale_is_refused_naming_file_column_and_line(tmp
 
 
 def test_a_column_collapsed_by_an_outlier_is_named_and_recorded(tmp_path, table, caplog):
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     X, Y = table
     X3 = X.copy()
@@ -267,7 +267,7 @@ def test_a_file_that_is_not_utf8_text_is_one_short_line(tmp_path, content, where
 )
 def test_work_that_cannot_fit_is_refused_from_the_estimate(overrides, key, monkeypatch):
     from selpres.errors import ConfigError
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     monkeypatch.setenv("SELPRES_MEMORY_LIMIT", "4e9")
     with pytest.raises(ConfigError) as e:
@@ -303,7 +303,7 @@ def test_a_huge_plan_is_never_materialised():
 
 def test_a_seed_beyond_64_bits_is_a_config_error():
     from selpres.errors import ConfigError
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     with pytest.raises(ConfigError, match=r"seed=18446744073709551616 is not allowed: expected a whole number in"):
         prepare(compose("seed=18446744073709551616"))

@@ -197,7 +197,7 @@ def test_commanded_scaling_uses_the_boxes():
     ],
 )
 def test_bad_sampled_configs_name_the_key(overrides, key, value):
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     with pytest.raises(ConfigError) as ei:
         prepare(cfg_of("data=sampled", "data.n=500", *overrides))

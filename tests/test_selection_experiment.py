@@ -15,7 +15,7 @@ from omegaconf import OmegaConf
 
 from selpres.presentation.selection import planned_charge
 from selpres.run.checks import validate
-from selpres.run.train import prepare
+from selpres.run.problem import prepare
 from selpres.storage import flatten
 
 from conftest import CONFIGS, cfg_of, compose, report_of, run_python

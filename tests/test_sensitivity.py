@@ -16,8 +16,8 @@ from hydra.core.override_parser.types import Glob
 from omegaconf import OmegaConf
 
 from selpres.run.checks import validate
+from selpres.run.problem import prepare
 from selpres.run.results import job_hash
-from selpres.run.train import prepare
 from selpres.storage import to_container
 
 from conftest import CONFIGS, cfg_of, compose, report_of, run_python

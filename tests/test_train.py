@@ -92,7 +92,7 @@ def test_saved_weights_and_scaler_reproduce_the_reported_error(tmp_path):
     """weights.pt is enough to use a trained net: BPN + saved scaler give results.json's held-out RMS."""
     from selpres.data.paper import Scaler, rms_errors
     from selpres.engines.model import BPN, load_into
-    from selpres.run.train import prepare
+    from selpres.run.problem import prepare
 
     cfg = cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2")
     res = train(cfg, tmp_path)

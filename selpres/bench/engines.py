@@ -92,7 +92,7 @@ def bench_batch_engines(table: EngineTable, quick: bool, configs: Path) -> None:
     engine table beside the online rows: the same random data and presentations, so ms per replica-run and
     the ratio compare directly. The note gives ms per epoch of all R replicas. Timed at one thread (as the
     sensitivity sweep's jobs run) and, at R = 1000, at torch's default threads."""
-    from selpres.run.train import job_engine
+    from selpres.run.problem import job_engine
 
     default_threads = torch.get_num_threads()
     for name in BATCH_OPTIMIZERS:

@@ -4,7 +4,7 @@ naming the key, the bad value and what is allowed (exit code 2 from ``python tra
 ``validate`` checks values against each other (ranges, grid steps, the robot and data configs of each
 kind, topology widths against the task's inputs and outputs); the checks that need the exemplar set
 (stage sizes against n, filters that keep nothing, a data file's cells) run in
-``selpres.run.train.prepare``, still before anything is written.
+``selpres.run.problem.prepare``, still before anything is written.
 """
 
 from __future__ import annotations

@@ -33,8 +33,9 @@ from omegaconf import DictConfig
 from selpres.errors import ConfigError
 from selpres.run import guard, lock, orphan
 from selpres.run.checkpoint import Checkpoints
+from selpres.run.problem import Problem
 from selpres.run.results import job_hash
-from selpres.run.train import Problem, train
+from selpres.run.train import train
 from selpres.storage import RESULTS, remove_stale_temps, write_json
 
 log = logging.getLogger("selpres")

@@ -91,7 +91,7 @@ def summary(replicas: list[dict]) -> dict:
 
 
 def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seconds: dict) -> dict:
-    """results.json of a finished job (``prob``: selpres.run.train.Problem; ``progress``: its Progress)."""
+    """results.json of a finished job (``prob``: selpres.run.problem.Problem; ``progress``: its Progress)."""
     R = len(prob.seeds)
     unscored(final, progress)
     reps = replica_results(prob.seeds, final, progress.diverged_at, progress.history[-1]["train_mse"])

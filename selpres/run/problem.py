@@ -1,0 +1,182 @@
+"""The problem a config determines before the first update: validated data, schedule, samplers, initial weights
+(``prepare``, which writes nothing), and the engine that will train it (``job_engine``). The loop that runs it is
+``selpres.run.train``.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from dataclasses import dataclass
+
+import torch
+from omegaconf import DictConfig
+
+from selpres.data import paper as D
+from selpres.data.file import DataFileError
+from selpres.data.task import Task, load_task
+from selpres.engines.batch import BatchEngine
+from selpres.engines.minibatch import MiniBatchEngine
+from selpres.engines.model import init_replica_params
+from selpres.engines.online import make_engine
+from selpres.errors import ConfigError
+from selpres.presentation.orders import priority_orders
+from selpres.presentation.proportions import fit_schedule, with_fraction_form
+from selpres.presentation.pruning import Pruning, pruning_plan
+from selpres.presentation.sampler import SelectivePresentation
+from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
+from selpres.presentation.selection import StageSelection, initial_kind, planned_charge, stage_selection
+from selpres.run.checks import batch_mode, minibatch_reason, optim_hparams, validate
+from selpres.run.estimate import refuse_job
+from selpres.seeding import derive_seed, generator
+from selpres.storage import to_container
+
+log = logging.getLogger("selpres")
+
+
+@dataclass
+class Problem:
+    """Everything a config determines before the first update."""
+
+    sizes: tuple[int, ...]
+    schedule: Schedule
+    seeds: list[int]
+    scaler: D.Scaler
+    X: torch.Tensor  # exemplar inputs, scaled
+    Y: torch.Tensor  # exemplar targets, scaled
+    tests: dict  # name -> (X scaled, Y in Nm)
+    samplers: list[SelectivePresentation]
+    init_params: list[torch.Tensor]
+    selection: StageSelection | None = None  # loss_high/loss_low/reselect: A_k chosen at each stage start
+    task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
+    schedule_note: str | None = None  # how a named schedule's counts were applied to this n (None: as given)
+    pruning: Pruning | None = None  # infobatch / selective_backprop: each epoch's patterns chosen by loss
+    budget: float | None = None  # the run's own planned cost (presentations): the cosine schedule's horizon
+
+    @functools.cached_property
+    def plan(self) -> list[EpochPlan]:
+        return self.schedule.plan()
+
+    @functools.cached_property
+    def stage_ends(self) -> frozenset[int]:
+        return frozenset(self.schedule.stage_ends())
+
+    @functools.cached_property
+    def scored(self) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
+        """name -> (inputs, targets), both scaled: what the engines score (tests holds targets in Nm)."""
+        return {name: (X, self.scaler.transform_y(Y)) for name, (X, Y) in self.tests.items()}
+
+    @functools.cached_property
+    def nm_per_scaled(self) -> torch.Tensor:
+        """Nm per scaled unit of each output (the scaler is affine): scaled errors times this are errors in Nm."""
+        return (self.scaler.y_max - self.scaler.y_min) / (self.scaler.hi - self.scaler.lo)
+
+    @functools.cached_property
+    def nm2_per_scaled2(self) -> torch.Tensor:
+        """Its square: what sums of squared scaled errors are multiplied by to be in Nm^2."""
+        return self.nm_per_scaled.square()
+
+
+def prepare(cfg: DictConfig) -> Problem:
+    """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
+    sizes = validate(cfg)
+    task = load_task(cfg.robot, cfg.data)
+    schedule, note = task_schedule(cfg, task)
+    torch_eval = batch_mode(cfg.optim) or cfg.engine.value in ("torch", "reference")
+    largest_test = max(len(task.tests.heldout.X), len(task.tests.test10.X))
+    refuse_job(cfg, sizes, schedule, task.n, largest_test, torch_eval)  # before any replica's state is made
+    seed = int(cfg.seed)  # read once: an OmegaConf access costs ~20 us, 1000 of them 23 ms at R = 1000
+    seeds = [seed + r for r in range(cfg.replicas)]
+    kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
+    gens = [generator(s, "subset") for s in seeds]
+    orders = priority_orders(task.exemplar.X, initial_kind(kind), gens, bins)
+    samplers = [SelectivePresentation(order=order, schedule=schedule, seed=s) for order, s in zip(orders, seeds)]
+    X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
+    pruning, budget = None, schedule.presentations + planned_charge(kind, schedule.sizes, cfg.schedule.selection_cost)
+    if cfg.schedule.pruning is not None:
+        fitted = fit_schedule(cfg.schedule.sizes, cfg.schedule.budget, task.n)[1]
+        epochs = None if cfg.schedule.epochs is None else int(cfg.schedule.epochs[0])
+        pruning = Pruning(cfg.schedule.pruning.value, cfg.schedule, task.n, seeds, fitted, epochs)
+        budget = fitted if fitted is not None else task.n * epochs
+    return Problem(
+        sizes=sizes,
+        schedule=schedule,
+        seeds=seeds,
+        scaler=task.scaler,
+        X=X,
+        Y=Y,
+        tests=task.scaled_tests(),
+        samplers=samplers,
+        init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
+        selection=stage_selection(
+            kind, schedule, seeds, task.exemplar.X, bins, X, Y, cfg.schedule.selection_cost, samplers
+        ),
+        task=task,
+        schedule_note=note,
+        pruning=pruning,
+        budget=budget,
+    )
+
+
+def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
+    """The schedule on the task's n: the paper's counts by their proportions when n is not 1002
+    (``selpres.presentation.proportions``, logged), refusals with the fraction form, and a data file too short for
+    the schedule named as such."""
+    sch = to_container(cfg.schedule)
+    sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
+    if note:
+        log.info(note)
+    if cfg.schedule.pruning is not None:  # checked in validate: sizes [1.0], a budget or one epoch count
+        return pruning_plan(cfg.schedule.pruning.value, cfg.schedule, task.n, budget), note
+    try:
+        return build_schedule(sizes, sch["epochs"], task.n, budget), note
+    except ConfigError as e:
+        if e.key == "schedule.sizes" and task.info.get("kind") == "file":
+            i = task.info
+            raise DataFileError(
+                i["path"],
+                "rows",
+                f"{i['rows']:,} rows ({task.n:,} for training after "
+                f"holding out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} "
+                f"({e.allowed})",
+            ) from None
+        raise with_fraction_form(e, sizes) from None
+
+
+def job_engine(cfg: DictConfig, prob: Problem):
+    """The engine the config asks for; ``engine=native`` where the kernel cannot run is a user error.
+    Batch methods (QuickProp, Delta-Bar-Delta, Rprop, Adam, batch SGD) step once per epoch in torch."""
+    from selpres.native import KernelUnavailable
+
+    o = cfg.optim
+    reason = minibatch_reason(cfg)
+    if reason is not None:
+        log.warning("engine %s runs the mini-batch torch engine: %s", cfg.engine.value, reason)
+        return MiniBatchEngine(
+            prob.sizes,
+            prob.init_params,
+            o.name.value,
+            {k: v for k, v in optim_hparams(o).items() if v is not None},
+            o.batch_size,
+            cfg.model.activation.value,
+            o.lr_schedule.value,
+            prob.budget,
+            o.reduction.value,
+            fallback_reason=reason,
+        )
+    if batch_mode(o):
+        return BatchEngine(
+            prob.sizes,
+            prob.init_params,
+            o.name.value,
+            optim_hparams(o),
+            sigmoid_prime_offset=o.sigmoid_prime_offset,
+            reduction=o.reduction.value,
+        )
+    try:
+        momentum = 0.0 if o.momentum is None else o.momentum
+        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, o.lr, momentum, o.batch_size)
+    except KernelUnavailable as exc:
+        raise ConfigError(
+            "engine", cfg.engine.value, f"fast, torch or reference: the native kernel cannot run here ({exc})"
+        ) from None
