@@ -181,9 +181,9 @@ def test_sweep_workers_stop_when_the_sweep_is_killed_and_the_rerun_matches(tmp_p
         res = json.loads((folder / "results.json").read_text())
         assert res["resumed_from_epoch"] is not None
         _epochs_once_each(res)
-        seed = folder.name.rsplit("seed=", 1)[1]
-        ref = train(compose(*job, f"seed={seed}"), tmp_path / f"ref{seed}")  # uninterrupted, in this process
-        assert numbers(res) == json.loads(json.dumps(numbers(ref)))
+        if folder.name.endswith("seed=0"):  # one job against an uninterrupted run of it, in this process
+            ref = train(compose(*job, "seed=0"), tmp_path / "ref")
+            assert numbers(res) == json.loads(json.dumps(numbers(ref)))
 
 
 # ----------------------------------------------------------------------------- edge data and configs
@@ -371,18 +371,18 @@ def test_a_write_the_kernel_refuses_is_one_line_and_the_rerun_resumes(tmp_path):
     """RLIMIT_FSIZE (what a full disk does to a write, without root): the checkpoint that would exceed it
     fails with EFBIG; one line names the file, the last checkpoint stays, the re-run completes."""
     out = tmp_path / "D"
-    args = [*TINY, "replicas=200", "checkpoint.every=1", "schedule.epochs=[5,5,5,5,5]", "logging.tensorboard=false",
-            f"hydra.run.dir={out}"]  # fmt: skip
+    args = [*TINY, "replicas=200", "checkpoint.every=1", "schedule.epochs=[10,10,10,10,10]",
+            "logging.tensorboard=false", f"hydra.run.dir={out}"]  # fmt: skip
 
-    def limit():
+    def limit():  # a checkpoint (~0.4 MB at R = 200) fits, results.json (~1.5 MB: 51 curve records) does not
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # the write then fails with EFBIG instead of a signal
-        resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))
+        resource.setrlimit(resource.RLIMIT_FSIZE, (600_000, 600_000))
 
     p = _train(*args, preexec_fn=limit)
     _, err = p.communicate(timeout=600)
     assert p.returncode == 2, err
     (line,) = err.strip().splitlines()
-    assert line.startswith(f"error: cannot write {out}/") and "File too large (errno 27)" in line
+    assert line.startswith(f"error: cannot write {out}/results.json: File too large (errno 27)")
     assert "the last checkpoint is kept" in line and "Traceback" not in err
     assert (out / "checkpoint.pt").exists() and not list(out.glob(".*.tmp"))
     again = _train(*args)
