@@ -1,10 +1,12 @@
-"""Checks a type cannot express, run before any training or output: each failure is one ConfigError
-naming the key, the bad value and what is allowed (exit code 2 from ``python train.py``).
+"""Checks a type cannot express, run before any training or output: each failure is one ConfigError naming the
+key, the bad value and what is allowed (exit code 2 from ``python train.py``).
 
-``validate`` checks values against each other (ranges, grid steps, the robot and data configs of each
-kind, topology widths against the task's inputs and outputs); the checks that need the exemplar set
-(stage sizes against n, filters that keep nothing, a data file's cells) run in
-``selpres.run.train.prepare``, still before anything is written.
+``validate`` checks values against each other (ranges, grid steps, the robot and data configs of each kind,
+topology widths against the task's inputs and outputs); the checks that need the exemplar set (stage sizes
+against n, filters that keep nothing, a data file's cells) run in ``selpres.run.train.prepare``, still before
+anything is written. Work that cannot fit this machine's memory or would take absurdly long is refused from
+estimates (``selpres.run.estimate``): replicas and the plan's length here, before the task is built, the whole
+job once the exemplar set is known.
 """
 
 from __future__ import annotations

@@ -100,7 +100,7 @@ class OutputGuard(Callback):
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
         HydraConfig.instance().set_config(config)  # resolves ${hydra:job.override_dirname} as run_job will
-        folder = Path(str(OmegaConf.select(config, "hydra.run.dir"))).absolute()
+        folder = Path(os.path.abspath(str(OmegaConf.select(config, "hydra.run.dir"))))  # as Hydra names it
         created = Before.missing(folder)
         try:
             held = lock.hold(folder)
@@ -117,7 +117,7 @@ class OutputGuard(Callback):
 
 
 def _undo(out: Path) -> None:
-    before = _BEFORE.get(out.absolute())
+    before = _BEFORE.get(Path(os.path.abspath(out)))
     if before is not None:  # unknown (train.py run without the callback): remove nothing
         before.undo(out)
 
@@ -243,14 +243,18 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
         _undo(out)
         sys.exit(2)
     except OSError as e:  # disk full, a read-only or immutable folder: the checkpoint already written stays
-        log.debug("%s", traceback.format_exc())
         kept = "the last checkpoint is kept" if Checkpoints.present(out) else "no checkpoint was written yet"
         line = (
             f"cannot write {e.filename or out}: {e.strerror or e} (errno {e.errno}); {kept}: "
             "run the same command again once it can be written"
         )
+        _to_log_file(f"job failed: {line}\n{traceback.format_exc()}")  # the traceback in train.log only
+        try:
+            _failed(out, cfg, line, "exception")
+        except OSError:  # the disk that is full cannot take this record either
+            pass
         if multirun:
-            log.error("%s", line)
+            print(line, file=sys.stderr)
             raise SweepJobError(f"{out}: {line}") from None
         print(f"error: {line}", file=sys.stderr)
         sys.exit(2)
@@ -268,6 +272,17 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
         raise
     log.info("%s\nresults: %s", summary_table(res), out / RESULTS)
     return _objective(res)
+
+
+def _to_log_file(text: str) -> None:
+    """``text`` into the job's log file (Hydra's file handler), not onto the console."""
+    record = logging.LogRecord("selpres", logging.ERROR, __file__, 0, text, None, None)
+    for handler in logging.getLogger().handlers:
+        if isinstance(handler, logging.FileHandler):
+            try:
+                handler.handle(record)
+            except OSError:
+                pass
 
 
 # ------------------------------------------------------------------------------ what gets printed

@@ -90,16 +90,22 @@ class FolderLock:
 _HELD: dict[Path, FolderLock] = {}
 
 
+def _key(folder: str | Path) -> Path:
+    """One name per folder in this process (``a/../D`` and ``D`` alike): a second flock of the same file by
+    the same process would conflict with the first."""
+    return Path(os.path.abspath(folder))
+
+
 def hold(folder: str | Path) -> FolderLock:
     """Take the lock of ``folder`` for the rest of this job (again for the same folder: the one held)."""
-    key = Path(folder).absolute()
+    key = _key(folder)
     if key not in _HELD:
         _HELD[key] = FolderLock.take(key)
     return _HELD[key]
 
 
 def release(folder: str | Path) -> None:
-    lock = _HELD.pop(Path(folder).absolute(), None)
+    lock = _HELD.pop(_key(folder), None)
     if lock is not None:
         lock.release()
 
@@ -108,7 +114,7 @@ def release(folder: str | Path) -> None:
 def holding(folder: str | Path | None):
     """The lock of ``folder`` for the duration (None: no folder, no lock); one already held by this process
     (``python train.py`` takes it before Hydra writes) is kept, not released here."""
-    if folder is None or Path(folder).absolute() in _HELD:
+    if folder is None or _key(folder) in _HELD:
         yield
         return
     hold(folder)
