@@ -301,12 +301,13 @@ def test_a_huge_plan_is_never_materialised():
     assert list(small.plan()[3:]) == [EpochPlan(3, 1, 100, 100), EpochPlan(4, 1, 100, 100)]
 
 
-def test_a_seed_beyond_64_bits_is_a_config_error():
+def test_a_seed_beyond_64_bits_is_a_config_error(tmp_path):
     from selpres.errors import ConfigError
-    from selpres.run.train import prepare
+    from selpres.run.train import train
 
     with pytest.raises(ConfigError, match=r"seed=18446744073709551616 is not allowed: expected a whole number in"):
-        prepare(compose("seed=18446744073709551616"))
+        train(compose("seed=18446744073709551616"), tmp_path / "job")  # before seed_everything
+    assert not (tmp_path / "job" / "results.json").exists()
 
 
 def test_final_scores_that_are_not_finite_make_the_replica_diverged():

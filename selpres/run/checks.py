@@ -76,9 +76,7 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         )
     if cfg.replicas < 1:
         raise ConfigError("replicas", cfg.replicas, "a whole number >= 1")
-    top = MAX_SEED - cfg.replicas + 1  # replica r uses seed + r; torch.manual_seed takes < 2^64
-    if not 0 <= cfg.seed <= top:
-        raise ConfigError("seed", cfg.seed, f"a whole number in [0, {top}] (seed + replicas - 1 < 2^64)")
+    check_seed(cfg)
     refuse_before_task(cfg)  # replicas=1000000000 and 10^9 epochs: refused before any data or seed list is made
     if cfg.threads < 0:
         raise ConfigError("threads", cfg.threads, "0 (all cores) or a positive number of threads")
@@ -100,6 +98,13 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
             "(0 = choosing is free; default 1/3, a forward pass of forward + backward)",
         )
     return check_topology(cfg.topology.layers, check_task(cfg))
+
+
+def check_seed(cfg: DictConfig) -> None:
+    """Replica r uses seed + r, and torch.manual_seed takes [0, 2^64): checked before anything is seeded."""
+    top = MAX_SEED - max(1, cfg.replicas) + 1
+    if not 0 <= cfg.seed <= top:
+        raise ConfigError("seed", cfg.seed, f"a whole number in [0, {top}] (seed + replicas - 1 < 2^64)")
 
 
 def check_task(cfg: DictConfig) -> Shape:

@@ -108,7 +108,7 @@ class OutputGuard(Callback):
             print(f"error: {e}", file=sys.stderr)
             sys.exit(2)
         except OSError as e:
-            print(f"error: cannot take the lock of {folder}: {e.strerror or e}", file=sys.stderr)
+            print(f"error: cannot write into {folder} ({e.strerror or e}): nothing was written", file=sys.stderr)
             sys.exit(2)
         _BEFORE[folder] = Before.look(folder, created, held.created)
 

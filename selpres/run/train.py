@@ -37,7 +37,7 @@ from selpres.presentation.selection import StageSelection, initial_kind, stage_s
 from selpres.run import lock, orphan
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
-from selpres.run.checks import batch_mode, optim_hparams, validate
+from selpres.run.checks import batch_mode, check_seed, optim_hparams, validate
 from selpres.run.estimate import refuse_job
 from selpres.run.tracking import Tracker
 from selpres.seeding import derive_seed, generator, seed_everything
@@ -296,6 +296,7 @@ class Job:
 
 def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
     """Validate and prepare; resume from this job's checkpoint if there is one (overwrite: start afresh)."""
+    check_seed(cfg)  # before seeding: seed=2^64 would overflow torch.manual_seed
     seed_everything(cfg.seed)
     if cfg.threads > 0:
         torch.set_num_threads(cfg.threads)
