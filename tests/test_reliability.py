@@ -120,6 +120,12 @@ def test_a_busy_job_in_a_sweep_is_skipped_and_the_others_run(tmp_path):
     sweep = tmp_path / "sweep"
     busy = sweep / "data.heldout=300,eval.heldout_curve=300,schedule.epochs=[1,1,1,1,1],seed=1"
     lock = FolderLock.take(busy)  # this test process holds the folder of job seed=1
+    record = {name: f"the holder's {name}\n".encode() for name in ("config.yaml", "hydra.yaml", "overrides.yaml")}
+    (busy / ".hydra").mkdir()
+    for name, data in record.items():
+        (busy / ".hydra" / name).write_bytes(data)
+    (busy / "train.log").write_text("the holder's log\n")
+    lock.remember(record)  # as a holder does once Hydra has written its record
     try:
         p = _train("-m", f"hydra.sweep.dir={sweep}", *TINY, "schedule.epochs=[1,1,1,1,1]", "seed=0,1")
         _, err = p.communicate(timeout=600)
@@ -128,6 +134,9 @@ def test_a_busy_job_in_a_sweep_is_skipped_and_the_others_run(tmp_path):
     assert p.returncode == 1 and "Traceback" not in err, err
     assert f"skipped (busy): {busy} is in use by process {os.getpid()}" in err
     assert not (busy / "results.json").exists()
+    assert {p.name: p.read_bytes() for p in (busy / ".hydra").iterdir()} == record  # Hydra's rewrite undone
+    assert sorted(p.name for p in busy.iterdir()) == [".hydra", "train.log"]  # (the lock file went with the lock)
+    assert (busy / "train.log").read_text() == "the holder's log\n"  # the skipped job wrote nothing into it
     (done,) = [d for d in sweep.iterdir() if d.name.endswith("seed=0")]
     assert json.loads((done / "results.json").read_text())["status"] == "complete"
 
