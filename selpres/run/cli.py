@@ -277,6 +277,15 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
             raise SweepJobError(f"{out}: {line}") from None
         print(f"error: {line}", file=sys.stderr)
         sys.exit(2)
+    except MemoryError:  # past the estimate (selpres.run.estimate): other processes took the memory, or it erred
+        kept = "the last checkpoint is kept" if Checkpoints.present(out) else "no checkpoint was written yet"
+        line = f"out of memory (the job's estimate fitted when it started; see selpres/run/estimate.py); {kept}"
+        _to_log_file(f"job failed: {line}\n{traceback.format_exc()}")
+        if multirun:
+            print(line, file=sys.stderr)
+            raise SweepJobError(f"{out}: {line}") from None
+        print(f"error: {line}", file=sys.stderr)
+        sys.exit(2)
     except KeyboardInterrupt:
         if multirun:
             raise
