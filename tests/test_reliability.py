@@ -296,7 +296,7 @@ def test_the_estimate_allows_the_paper_and_matches_a_measured_peak():
 
 
 def test_a_huge_plan_is_never_materialised():
-    from selpres.presentation.schedule import EpochPlan, build_schedule
+    from selpres.presentation.schedule import EpochPlan, Plan, build_schedule
 
     s = build_schedule([1002], None, 1002, 10**15)
     plan = s.plan()
@@ -304,6 +304,8 @@ def test_a_huge_plan_is_never_materialised():
     assert plan[-1] == EpochPlan(len(plan) - 1, 0, 1002, 10**15 % 1002)
     assert plan[len(plan) - 5 :][0].index == len(plan) - 5 and len(plan[len(plan) - 5 :]) == 5
     small = build_schedule([50, 100], [2, 3], 100)
+    assert small.plan() == tuple(Plan(small.stages))  # a short plan is the tuple it always was
+    assert list(Plan(small.stages)[3:]) == [EpochPlan(3, 1, 100, 100), EpochPlan(4, 1, 100, 100)]
     assert list(small.plan()) == [EpochPlan(0, 0, 50, 50), EpochPlan(1, 0, 50, 50)] + [
         EpochPlan(i, 1, 100, 100) for i in (2, 3, 4)
     ]
