@@ -36,7 +36,7 @@ def atomic_write(path: Path, write: Callable[[BinaryIO], Any]) -> None:
     except BaseException as e:
         if os.path.exists(tmp):
             os.unlink(tmp)
-        if isinstance(e, OSError) and e.filename is None:  # a failed write() names no file: name the target
+        if isinstance(e, OSError):  # name the file the user knows (a write() names none, a rename its temp file)
             raise OSError(e.errno, e.strerror, str(path)) from e
         raise
 

@@ -77,8 +77,9 @@ class Schedule:
         (a one-stage schedule's partial epoch counts as the fraction of an epoch it is)."""
         return self.n * sum(s.epochs for s in self.stages) + sum(s.extra for s in self.stages)
 
-    def plan(self) -> Plan:
-        """Every epoch in order (a lazy sequence, one per schedule: every replica's sampler shares it)."""
+    def plan(self) -> Sequence[EpochPlan]:
+        """Every epoch in order, one per schedule (every replica's sampler shares it): a tuple, or a lazy
+        :class:`Plan` when longer than MATERIALISED_EPOCHS."""
         return _plan(self.stages)
 
     def stage_ends(self) -> list[int]:
@@ -112,6 +113,7 @@ class Plan(Sequence):
         self._ends = list(itertools.accumulate(st.epochs + (1 if st.extra else 0) for st in stages))
         total = self._ends[-1] if self._ends else 0
         self._start, self._stop = start, total if stop is None else stop
+        self._asked, self._last = None, None  # the index last asked for (as given) and its epoch
 
     def __len__(self) -> int:
         return max(0, self._stop - self._start)
@@ -123,16 +125,18 @@ class Plan(Sequence):
         return EpochPlan(i, k, st.size, st.extra if partial else st.size)
 
     def __getitem__(self, i):
+        if i == self._asked:  # every replica's sampler asks for the same epoch in turn: one comparison
+            return self._last
         if isinstance(i, slice):
             start, stop, step = i.indices(len(self))
             if step != 1:
                 return tuple(self[j] for j in range(start, stop, step))
             return Plan(self._stages, self._start + start, self._start + max(start, stop))
-        if i < 0:
-            i += len(self)
-        if not 0 <= i < len(self):
+        j = i + len(self) if i < 0 else i
+        if not 0 <= j < len(self):
             raise IndexError(f"epoch {i} outside the plan's {len(self)} epochs")
-        return self._at(self._start + i)
+        self._last, self._asked = self._at(self._start + j), i
+        return self._last
 
     def __iter__(self):
         for i in range(self._start, self._stop):
@@ -145,9 +149,13 @@ class Plan(Sequence):
         return f"Plan({len(self)} epochs of {len(self._stages)} stages)"
 
 
+MATERIALISED_EPOCHS = 1_000_000  # plans up to this long are a tuple (~0.1 GB at most): the loop's fastest lookup
+
+
 @functools.lru_cache(maxsize=64)
-def _plan(stages: tuple[Stage, ...]) -> Plan:
-    return Plan(stages)
+def _plan(stages: tuple[Stage, ...]) -> Sequence[EpochPlan]:
+    plan = Plan(stages)
+    return tuple(plan) if len(plan) <= MATERIALISED_EPOCHS else plan
 
 
 def _is_fraction(v) -> bool:

@@ -1,10 +1,12 @@
-"""Checks a type cannot express, run before any training or output: each failure is one ConfigError
-naming the key, the bad value and what is allowed (exit code 2 from ``python train.py``).
+"""Checks a type cannot express, run before any training or output: each failure is one ConfigError naming the
+key, the bad value and what is allowed (exit code 2 from ``python train.py``).
 
-``validate`` checks values against each other (ranges, grid steps, the robot and data configs of each
-kind, topology widths against the task's inputs and outputs); the checks that need the exemplar set
-(stage sizes against n, filters that keep nothing, a data file's cells) run in
-``selpres.run.problem.prepare``, still before anything is written.
+``validate`` checks values against each other (ranges, grid steps, the robot and data configs of each kind,
+topology widths against the task's inputs and outputs); the checks that need the exemplar set (stage sizes
+against n, filters that keep nothing, a data file's cells) run in ``selpres.run.problem.prepare``, still before
+anything is written. Work that cannot fit this machine's memory or would take absurdly long is refused from
+estimates (``selpres.run.estimate``): replicas and the plan's length here, before the task is built, the whole
+job once the exemplar set is known.
 """
 
 from __future__ import annotations
@@ -115,9 +117,7 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         )
     if cfg.replicas < 1:
         raise ConfigError("replicas", cfg.replicas, "a whole number >= 1")
-    top = MAX_SEED - cfg.replicas + 1  # replica r uses seed + r; torch.manual_seed takes < 2^64
-    if not 0 <= cfg.seed <= top:
-        raise ConfigError("seed", cfg.seed, f"a whole number in [0, {top}] (seed + replicas - 1 < 2^64)")
+    check_seed(cfg)
     refuse_before_task(cfg)  # replicas=1000000000 and 10^9 epochs: refused before any data or seed list is made
     if cfg.threads < 0:
         raise ConfigError("threads", cfg.threads, "0 (all cores) or a positive number of threads")
@@ -139,6 +139,13 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
             "(0 = choosing is free; default 1/3, a forward pass of forward + backward)",
         )
     return check_topology(cfg.topology.layers, check_task(cfg))
+
+
+def check_seed(cfg: DictConfig) -> None:
+    """Replica r uses seed + r, and torch.manual_seed takes [0, 2^64): checked before anything is seeded."""
+    top = MAX_SEED - max(1, cfg.replicas) + 1
+    if not 0 <= cfg.seed <= top:
+        raise ConfigError("seed", cfg.seed, f"a whole number in [0, {top}] (seed + replicas - 1 < 2^64)")
 
 
 def check_task(cfg: DictConfig) -> Shape:

@@ -9,10 +9,11 @@ sweep it fails that job alone (its ``results.json`` says ``"status": "failed"``)
 
 One process writes a job folder at a time (:mod:`selpres.run.lock`): a single run takes the lock before Hydra
 creates or writes anything there, and a second run on a folder in use exits 2 naming the holder's PID; in a
-sweep the busy job is skipped (one line; Hydra has already rewritten its ``.hydra/`` record by then: no
-callback runs earlier for a sweep's job) and the others run. Workers of a sweep whose process is gone stop
-at the next epoch with their checkpoint kept (:mod:`selpres.run.orphan`). A write that fails (disk full, a
-read-only folder) prints one line naming the path; what was saved before stays.
+sweep the busy job is skipped (one line) and the others run (Hydra rewrites a sweep job's ``.hydra/`` before
+any callback can run: the skipped job puts back the holder's copy, which the holder keeps in the lock file).
+Workers of a sweep whose process is gone stop at the next epoch with their checkpoint kept
+(:mod:`selpres.run.orphan`). A write that fails (disk full, a read-only folder) prints one line naming the
+path; what was saved before stays.
 """
 
 from __future__ import annotations
@@ -108,17 +109,35 @@ def run_job(cfg: DictConfig) -> float:
     if multirun and orphan.watch() is not None and orphan.gone():
         _orphaned(out, "before it started")
     try:
-        lock.hold(out)  # a single run took it in OutputGuard.on_run_start; a sweep's job takes it here
+        held = lock.hold(out)  # a single run took it in OutputGuard.on_run_start; a sweep's job takes it here
     except lock.FolderBusy as e:  # not logged: the log file is the holder's
         if multirun:
+            _restore_record(out, e.record)
             print(f"skipped (busy): {e}", file=sys.stderr)
             raise SweepJobError(f"skipped (busy): {e}") from None
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
+    hydra = out / ".hydra"
+    try:
+        held.remember({p.name: p.read_bytes() for p in hydra.iterdir() if p.is_file()} if hydra.is_dir() else {})
+    except OSError:
+        pass
     try:
         return _run_locked(cfg, out, multirun)
     finally:
         lock.release(out)
+
+
+def _restore_record(out: Path, record: dict[str, bytes]) -> None:
+    """Put back the holder's ``.hydra/`` files that Hydra rewrote for this busy sweep job before any selpres
+    code ran (the holder left them in the lock file); nothing else of the folder was touched."""
+    for name, data in record.items():
+        path = out / ".hydra" / name
+        try:
+            if path.read_bytes() != data:
+                path.write_bytes(data)
+        except OSError:
+            pass
 
 
 def _orphaned(out: Path, where: str) -> None:
@@ -154,14 +173,27 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
         guard.undo(out)
         sys.exit(2)
     except OSError as e:  # disk full, a read-only or immutable folder: the checkpoint already written stays
-        log.debug("%s", traceback.format_exc())
         kept = "the last checkpoint is kept" if Checkpoints.present(out) else "no checkpoint was written yet"
         line = (
             f"cannot write {e.filename or out}: {e.strerror or e} (errno {e.errno}); {kept}: "
             "run the same command again once it can be written"
         )
+        _to_log_file(f"job failed: {line}\n{traceback.format_exc()}")  # the traceback in train.log only
+        try:
+            _failed(out, cfg, line, "exception")
+        except OSError:  # the disk that is full cannot take this record either
+            pass
         if multirun:
-            log.error("%s", line)
+            print(line, file=sys.stderr)
+            raise SweepJobError(f"{out}: {line}") from None
+        print(f"error: {line}", file=sys.stderr)
+        sys.exit(2)
+    except MemoryError:  # past the estimate (selpres.run.estimate): other processes took the memory, or it erred
+        kept = "the last checkpoint is kept" if Checkpoints.present(out) else "no checkpoint was written yet"
+        line = f"out of memory (the job's estimate fitted when it started; see selpres/run/estimate.py); {kept}"
+        _to_log_file(f"job failed: {line}\n{traceback.format_exc()}")
+        if multirun:
+            print(line, file=sys.stderr)
             raise SweepJobError(f"{out}: {line}") from None
         print(f"error: {line}", file=sys.stderr)
         sys.exit(2)
@@ -192,6 +224,17 @@ def _check_name(hc, multirun: bool) -> None:
             "only with -m (a sweep's folder outputs/sweeps/<name>/); a single run's folder is named by its "
             "overrides (or hydra.run.dir=...)",
         )
+
+
+def _to_log_file(text: str) -> None:
+    """``text`` into the job's log file (Hydra's file handler), not onto the console."""
+    record = logging.LogRecord("selpres", logging.ERROR, __file__, 0, text, None, None)
+    for handler in logging.getLogger().handlers:
+        if isinstance(handler, logging.FileHandler):
+            try:
+                handler.handle(record)
+            except OSError:
+                pass
 
 
 # ------------------------------------------------------------------------------ what gets printed

@@ -81,7 +81,7 @@ class OutputGuard(Callback):
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
         HydraConfig.instance().set_config(config)  # resolves ${hydra:job.override_dirname} as run_job will
-        folder = Path(str(OmegaConf.select(config, "hydra.run.dir"))).absolute()
+        folder = Path(os.path.abspath(str(OmegaConf.select(config, "hydra.run.dir"))))  # as Hydra names it
         created = Before.missing(folder)
         try:
             held = lock.hold(folder)
@@ -89,7 +89,7 @@ class OutputGuard(Callback):
             print(f"error: {e}", file=sys.stderr)
             sys.exit(2)
         except OSError as e:
-            print(f"error: cannot take the lock of {folder}: {e.strerror or e}", file=sys.stderr)
+            print(f"error: cannot write into {folder} ({e.strerror or e}): nothing was written", file=sys.stderr)
             sys.exit(2)
         _BEFORE[folder] = Before.look(folder, created, held.created)
 
@@ -99,7 +99,7 @@ class OutputGuard(Callback):
 
 def undo(out: Path) -> None:
     """Remove what this run created in ``out`` (nothing, if the callback did not look at it first)."""
-    before = _BEFORE.get(out.absolute())
+    before = _BEFORE.get(Path(os.path.abspath(out)))
     if before is not None:  # unknown (train.py run without the callback): remove nothing
         before.undo(out)
 

@@ -15,7 +15,9 @@ let two processes both believe they hold the folder.
 
 from __future__ import annotations
 
+import base64
 import fcntl
+import json
 import os
 from contextlib import contextmanager
 from pathlib import Path
@@ -24,15 +26,29 @@ LOCK = ".selpres.lock"
 
 
 class FolderBusy(RuntimeError):
-    """The job folder is held by another live process (named by its PID when it has written it)."""
+    """The job folder is held by another live process (named by its PID when it has written it); ``record``:
+    the holder's Hydra record (``.hydra/`` file name -> bytes) as it left it in the lock file, if it did."""
 
-    def __init__(self, folder, pid: str):
-        self.folder, self.pid = str(folder), pid
+    def __init__(self, folder, pid: str, record: dict[str, bytes] | None = None):
+        self.folder, self.pid, self.record = str(folder), pid, record or {}
         holder = f"process {pid}" if pid else "another process"
         super().__init__(f"{self.folder} is in use by {holder} (one writer per job folder); nothing was touched")
 
     def __reduce__(self):
-        return type(self), (self.folder, self.pid)
+        return type(self), (self.folder, self.pid, self.record)
+
+
+def _read_lock(fd: int) -> tuple[str, dict[str, bytes]]:
+    """(PID, Hydra record) from a lock file: the PID on the first line, then the record as JSON (base64)."""
+    data = b""
+    while chunk := os.pread(fd, 1 << 16, len(data)):
+        data += chunk
+    first, _, rest = data.partition(b"\n")
+    try:
+        record = {k: base64.b64decode(v) for k, v in json.loads(rest).items()} if rest.strip() else {}
+    except ValueError:
+        record = {}
+    return first.decode(errors="replace").strip(), record
 
 
 class FolderLock:
@@ -60,9 +76,9 @@ class FolderLock:
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
-                pid = os.pread(fd, 32, 0).decode(errors="replace").strip()
+                pid, record = _read_lock(fd)
                 os.close(fd)
-                raise FolderBusy(folder, pid) from None
+                raise FolderBusy(folder, pid, record) from None
             try:
                 same = os.stat(path).st_ino == os.fstat(fd).st_ino
             except FileNotFoundError:
@@ -74,6 +90,13 @@ class FolderLock:
             os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
             return cls(folder, fd, created)
         raise FolderBusy(folder, "")
+
+    def remember(self, record: dict[str, bytes]) -> None:
+        """Keep the holder's Hydra record (``.hydra/`` files) in the lock file: in a sweep, Hydra rewrites a
+        job's ``.hydra/`` before any callback runs, so a job that finds the folder busy puts these back."""
+        text = json.dumps({k: base64.b64encode(v).decode() for k, v in record.items()})
+        os.ftruncate(self._fd, 0)
+        os.pwrite(self._fd, f"{os.getpid()}\n{text}\n".encode(), 0)
 
     def release(self) -> None:
         if self._fd < 0:
@@ -90,16 +113,22 @@ class FolderLock:
 _HELD: dict[Path, FolderLock] = {}
 
 
+def _key(folder: str | Path) -> Path:
+    """One name per folder in this process (``a/../D`` and ``D`` alike): a second flock of the same file by
+    the same process would conflict with the first."""
+    return Path(os.path.abspath(folder))
+
+
 def hold(folder: str | Path) -> FolderLock:
     """Take the lock of ``folder`` for the rest of this job (again for the same folder: the one held)."""
-    key = Path(folder).absolute()
+    key = _key(folder)
     if key not in _HELD:
         _HELD[key] = FolderLock.take(key)
     return _HELD[key]
 
 
 def release(folder: str | Path) -> None:
-    lock = _HELD.pop(Path(folder).absolute(), None)
+    lock = _HELD.pop(_key(folder), None)
     if lock is not None:
         lock.release()
 
@@ -108,7 +137,7 @@ def release(folder: str | Path) -> None:
 def holding(folder: str | Path | None):
     """The lock of ``folder`` for the duration (None: no folder, no lock); one already held by this process
     (``python train.py`` takes it before Hydra writes) is kept, not released here."""
-    if folder is None or Path(folder).absolute() in _HELD:
+    if folder is None or _key(folder) in _HELD:
         yield
         return
     hold(folder)

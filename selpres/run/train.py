@@ -29,6 +29,7 @@ from selpres.presentation.schedule import EpochPlan
 from selpres.run import floor, lock, orphan
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
+from selpres.run.checks import check_seed
 from selpres.run.problem import Problem, job_engine, prepare
 from selpres.run.tracking import Tracker
 from selpres.seeding import seed_everything
@@ -167,6 +168,7 @@ class Job:
 
 def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
     """Validate and prepare; resume from this job's checkpoint if there is one (overwrite: start afresh)."""
+    check_seed(cfg)  # before seeding: seed=2^64 would overflow torch.manual_seed
     seed_everything(cfg.seed)
     if cfg.threads > 0:
         torch.set_num_threads(cfg.threads)
