@@ -22,7 +22,7 @@ with the default ``exemplar`` scaling that is the network's scaled input space u
 which leaves a farthest-point order unchanged. Raw and scaled inputs thus define the same order up to
 rounding, but on the paper's grid many distances tie exactly, and rounding can break such ties
 differently (measured: the orders differ from the 10th pattern on), so one config should always pass
-the same X (``train.prepare`` passes the raw exemplar inputs).
+the same X (``selpres.run.problem.prepare`` passes the raw exemplar inputs).
 """
 
 from __future__ import annotations

@@ -3,10 +3,12 @@ loop -> results -> report).
 
 Owns the typed config schema (``config``) and the checks a type cannot express, made before any work
 (``checks``, with the memory and time estimates of ``estimate``); one writer per job folder (``lock``) and
-sweep workers that stop with their sweep (``orphan``); the loop (``train``: prepare -> start (resume) ->
-run_epoch ... -> finish); checkpoints and the append-only history (``checkpoint``); TensorBoard
-(``tracking``); results.json and a job's identity (``results``) with the seed statistics (``stats``); the
-Hydra entry point's guard around ``train()`` (``cli``) and ``selpres-export`` (``export``).
+sweep workers that stop with their sweep (``orphan``); what a config determines before the first update
+(``problem``: prepare, job_engine); the loop (``train``: start (resume) -> run_epoch ... -> finish);
+checkpoints and the append-only history (``checkpoint``); TensorBoard (``tracking``); results.json and a job's
+identity (``results``) with the seed statistics (``stats``) and the task's floor (``floor``); the guard that
+train.py imports before Hydra starts (``guard``: lock, what a refusal removes, Ctrl-C), the task function around
+``train()`` (``cli``) and ``selpres-export`` (``export``).
 
 May import: every stage above it (``engines``, ``presentation``, ``data``, ``arms``) and the foundation.
 """

@@ -11,8 +11,8 @@ engine; the model below gives 84 KB, an overestimate by a few per cent):
   Python objects and its final results;
 - per scored epoch (the history a job keeps, and writes as JSON at the end): ~400 bytes a record, and
   ~3 × (32 + 25) bytes a replica (three curves: Python floats, then their JSON text);
-- torch evaluation (engine=torch/reference and batch methods): replica blocks of at most R / 8 on the largest test
-  set, [block, N, widest layer] float64 activations twice, plus [R, N, outputs] outputs.
+- torch evaluation (engine=torch/reference, batch methods and the mini-batch engine): replica blocks of at most
+  R / 8 on the largest test set, [block, N, widest layer] float64 activations twice, plus [R, N, outputs] outputs.
 
 The limit is what the machine has now: ``MemAvailable`` (/proc/meminfo), or the cgroup's limit if lower;
 ``SELPRES_MEMORY_LIMIT`` (bytes) sets it, for a machine shared with other work (and for tests).

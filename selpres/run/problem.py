@@ -82,7 +82,10 @@ def prepare(cfg: DictConfig) -> Problem:
     sizes = validate(cfg)
     task = load_task(cfg.robot, cfg.data)
     schedule, note = task_schedule(cfg, task)
-    torch_eval = batch_mode(cfg.optim) or cfg.engine.value in ("torch", "reference")
+    # scored in torch: batch methods, the mini-batch engine (what the native kernel cannot run), torch/reference
+    torch_eval = (
+        batch_mode(cfg.optim) or minibatch_reason(cfg) is not None or cfg.engine.value in ("torch", "reference")
+    )
     largest_test = max(len(task.tests.heldout.X), len(task.tests.test10.X))
     refuse_job(cfg, sizes, schedule, task.n, largest_test, torch_eval)  # before any replica's state is made
     seed = int(cfg.seed)  # read once: an OmegaConf access costs ~20 us, 1000 of them 23 ms at R = 1000

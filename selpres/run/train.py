@@ -278,7 +278,8 @@ def train(
                         job.ckpts.save(job.engine, job.progress)
                         job.tracker.flush()
                 if orphan.gone() and ep.index < len(job.prob.plan) - 1:  # the sweep's process is gone
-                    raise orphan.SweepGone(f"after epoch {ep.index + 1} (checkpoint kept)")
+                    kept = "checkpoint kept" if job.ckpts is not None else "no checkpoint: the re-run starts afresh"
+                    raise orphan.SweepGone(f"after epoch {ep.index + 1} ({kept})")
         with clock("eval"):
             final = final_scores(job.engine, job.prob)
         return finish(job, final, clock.snapshot())
