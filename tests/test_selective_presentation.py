@@ -59,7 +59,12 @@ def test_fractions_counts_and_the_paper_schedule(X):
 def test_named_schedules_are_the_config_files():
     """NAMED (for callers without configs/) holds what configs/schedule/*.yaml hold, with train.yaml's defaults."""
     files = {p.stem: OmegaConf.to_container(OmegaConf.load(p)) for p in (CONFIGS / "schedule").glob("*.yaml")}
+    pruning = {name for name, f in files.items() if f.get("pruning")}  # chosen by loss: the CLI's, not a sampler's
+    assert pruning == {"infobatch", "selective_backprop"}
+    files = {name: f for name, f in files.items() if name not in pruning}
     assert set(files) == set(NAMED)
+    with pytest.raises(ValueError, match="losses.*python train.py schedule=infobatch"):
+        SelectivePresentation(torch.rand(100, 6), schedule="infobatch")
     for name, f in files.items():
         want = {"sizes": f["sizes"], "epochs": f.get("epochs"), "budget": f.get("budget"), "order": "stratified"}
         want["order"] = f.get("order", "stratified")

@@ -66,6 +66,14 @@ def schedule_of(n: int, sizes, epochs, budget, schedule) -> tuple[Schedule, str 
             return schedule, None, None
         if not isinstance(schedule, str):
             raise TypeError(f"schedule={schedule!r}: expected a name ({', '.join(NAMED)}) or a Schedule")
+        from selpres.presentation.pruning import PRUNINGS  # (pruning imports the sampler, which imports this)
+
+        if schedule in PRUNINGS:  # configs/schedule/ has them, but they choose each epoch's patterns by loss
+            raise ValueError(
+                f"schedule={schedule!r} chooses each epoch's patterns from the network's losses, which a sampler "
+                f"does not see: run it with python train.py schedule={schedule}; "
+                f"a sampler takes one of {', '.join(NAMED)}"
+            )
         if schedule not in NAMED:
             raise ValueError(f"schedule={schedule!r}: expected one of {', '.join(NAMED)}")
         named = NAMED[schedule]
