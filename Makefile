@@ -17,7 +17,7 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 test: setup            ## the whole suite (what CI runs, with lint and the fallback tier)
 	$(BIN)/python -m pytest
 
-test-fast: setup       ## the edit loop: no subprocesses, sweeps or exhaustive grids (about a minute here)
+test-fast: setup       ## the edit loop: no subprocesses, sweeps or exhaustive grids (2-3 minutes here)
 	$(BIN)/python -m pytest -m "not slow"
 
 test-fallback: setup   ## the fast tier with the native kernel disabled: the pure-torch path stays green
