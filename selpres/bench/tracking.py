@@ -21,7 +21,7 @@ from pathlib import Path
 
 from selpres.bench.common import PACKAGE_PARENT
 from selpres.run.config import CONFIG_DIR
-from selpres.run.tracking import Tracker
+from selpres.run.tracking import Tracker, hparams_and_metrics
 
 _CHILD = (
     "import json, sys, time; t0 = time.perf_counter(); from selpres.bench import tracking as T; "
@@ -49,11 +49,7 @@ class SummaryWriterTracker(Tracker):
     def close(self, hparams: dict, metrics: dict) -> None:
         if self.writer is None:
             return
-        from selpres.storage import flatten
-
-        hp = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in flatten(hparams, "/").items()}
-        mt = {k: v for k, v in flatten(metrics, "/").items() if isinstance(v, (int, float)) and v == v}
-        self.writer.add_hparams(hp, mt, run_name=".")
+        self.writer.add_hparams(*hparams_and_metrics(hparams, metrics), run_name=".")
         self.writer.close()
         self.writer = None
 

@@ -72,6 +72,14 @@ class EventFile:
         self._file.close()
 
 
+def hparams_and_metrics(hparams: dict, metrics: dict) -> tuple[dict, dict]:
+    """The flat values TensorBoard's HParams plugin takes: hyperparameters as int/float/str/bool (others as text),
+    the finite numeric metrics."""
+    hp = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in flatten(hparams, "/").items()}
+    mt = {k: v for k, v in flatten(metrics, "/").items() if isinstance(v, (int, float)) and math.isfinite(v)}
+    return hp, mt
+
+
 _HPARAMS_PLUGIN = "hparams"  # tensorboard.plugins.hparams.metadata's names (importing it took 0.1 s)
 _HPARAMS_TAGS = ("_hparams_/experiment", "_hparams_/session_start_info", "_hparams_/session_end_info")
 
@@ -246,8 +254,7 @@ class Tracker:
         ``add_hparams(..., run_name=".")`` writes, into this same file), then the file is closed."""
         if self.writer is None:
             return
-        hp = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in flatten(hparams, "/").items()}
-        mt = {k: v for k, v in flatten(metrics, "/").items() if isinstance(v, (int, float)) and math.isfinite(v)}
+        hp, mt = hparams_and_metrics(hparams, metrics)
         for summary in hparams_summaries(hp, mt):  # experiment, session start, session end
             self._append(self._event(wall_time=time.time(), summary=summary))
         self._write(list(mt.items()), 0)
