@@ -106,7 +106,8 @@ def test_sobol_points_cover_their_box_more_evenly_than_random():
     assert errors["sobol"] < 2e-3 < errors["uniform"], errors
 
 
-def test_streams_are_independent_and_deterministic():
+def test_streams_are_independent_and_deterministic(monkeypatch):
+    monkeypatch.setenv("SELPRES_CACHE", "off")  # both builds simulate (selpres.data.cache)
     base = (
         "robot=planar3",
         "data.n=300",

@@ -16,7 +16,8 @@ data, so topology errors come before any work. ``Task.info`` records what was ma
 acceptance rate, the arm, the data hash) for the log and results.json.
 
 Built once per (robot, data) config and cached, so the jobs of an in-process sweep (Hydra's basic launcher)
-build the data once; cached tensors are never modified in place. Problems a config causes here (a filter
+build the data once, and kept on disk (``selpres.data.cache``), so the next job's process loads it; cached
+tensors are never modified in place. Problems a config causes here (a filter
 that keeps nothing, ranges with nothing to draw test patterns from) are ConfigErrors naming the key.
 """
 
@@ -36,6 +37,7 @@ from selpres.data import export as E
 from selpres.data import file as F
 from selpres.data import paper as D
 from selpres.data import sampled as S
+from selpres.data.cache import cached
 from selpres.errors import ConfigError
 from selpres.seeding import derive_seed
 from selpres.storage import to_container
@@ -149,19 +151,30 @@ def load_task(robot_cfg: DictConfig, data_cfg: DictConfig) -> Task:
 def _task(robot_json: str, data_json: str, files: str) -> Task:
     """``files``: the (path, mtime, size) of the files read, so an edited file is read again."""
     robot_cfg, data_cfg = OmegaConf.create(json.loads(robot_json)), OmegaConf.create(json.loads(data_json))
-    task = {"grid": _grid, "sampled": _sampled, "file": _file}[E.data_kind(data_cfg)](robot_cfg, data_cfg)
-    task.info["hash"] = E.config_hash(robot_cfg, data_cfg)
+    kind = E.data_kind(data_cfg)
+
+    def build() -> Task:
+        task = {"grid": _grid, "sampled": _sampled, "file": _file}[kind](robot_cfg, data_cfg)
+        task.info["hash"] = E.config_hash(robot_cfg, data_cfg)
+        return task
+
+    if json.loads(files):  # read from the user's files: reading them is most of the cost (selpres.data.cache)
+        task = build()
+        task.info["cache"] = "not stored (read from a file)"
+    else:
+        task = cached(robot_json, data_json, build, Task)
     i = task.info
     kept = (
         f" kept of {i['candidates']:,} candidates (acceptance {i['acceptance_rate']:.3g})" if "candidates" in i else ""
     )
     log.info(
-        "exemplar set: %s patterns%s, %s; test10 %d, held-out %d",
+        "exemplar set: %s patterns%s, %s; test10 %d, held-out %d%s",
         f"{task.n:,}",
         kept,
         i["source"],
         len(task.tests.test10),
         len(task.tests.heldout),
+        "; loaded from the data cache (SELPRES_CACHE=off builds it)" if i["cache"].startswith("hit") else "",
     )
     return task
 

@@ -1,0 +1,152 @@
+"""Tasks built before, kept on disk, so a job does not simulate the same data again.
+
+The default ``python train.py`` spent 0.10-0.13 s of its 0.3 s job simulating the paper's grid (1,050,625
+candidates) and drawing its 10,000 held-out patterns; a drawn PUMA set takes seconds. Loading the same task
+takes ~2 ms. A task is stored under a key that holds everything it is a function of: the robot and data
+configs, the source of the code that builds tasks (``selpres/arms``, ``selpres/data``, ``seeding.py``), and
+torch's and numpy's versions and the machine type, so an edit to any of them builds afresh. Tasks read from a
+user's file (a CSV, a URDF) are not stored: reading the file is most of their cost.
+
+Where: ``$SELPRES_CACHE`` if set (``off`` turns the cache off), else ``$XDG_CACHE_HOME/selpres/tasks``, else
+``~/.cache/selpres/tasks``. What a job did is recorded in results.json ``data.cache`` (``hit``, ``stored``,
+``off``, or why it was not stored). Entries are written atomically (a racing job writes the same bytes) and only
+entries of this cache are ever replaced or removed (the oldest beyond :data:`KEEP`).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import logging
+import os
+import platform
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from selpres.data.paper import ExemplarSet, Patterns, Scaler, TestSets
+from selpres.storage import atomic_write
+
+log = logging.getLogger("selpres")
+
+KEEP = 16  # entries kept; the least recently used beyond it are removed
+MAX_BYTES = 512 * 2**20  # a larger task is not stored (a 10^6-pattern PUMA set is ~150 MB)
+FORMAT = 1  # bump when the stored layout below changes
+_SUFFIX = ".task.pt"
+
+
+def cache_dir() -> Path | None:
+    """The cache folder (None: turned off by SELPRES_CACHE=off)."""
+    env = os.environ.get("SELPRES_CACHE")
+    if env is not None:
+        return None if env.strip().lower() in ("off", "0", "false", "") else Path(env).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "selpres" / "tasks"
+
+
+@functools.lru_cache(maxsize=1)
+def code_digest() -> str:
+    """sha256 of the source that builds tasks and of the numeric libraries' versions."""
+    root = Path(__file__).resolve().parents[1]  # selpres/
+    h = hashlib.sha256(f"{FORMAT} {torch.__version__} {np.__version__} {platform.machine()}".encode())
+    files = [*sorted((root / "arms").rglob("*.py")), *sorted((root / "data").rglob("*.py")), root / "seeding.py"]
+    for p in files:
+        h.update(str(p.relative_to(root)).encode() + b"\0" + p.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def key(robot_json: str, data_json: str) -> str:
+    return hashlib.sha256(f"{code_digest()}\0{robot_json}\0{data_json}".encode()).hexdigest()[:32]
+
+
+def _pack(task) -> dict:
+    ex, t = task.exemplar, task.tests
+    return {
+        "exemplar": (ex.X, ex.Y, ex.n_candidates),
+        "test10": (t.test10.X, t.test10.Y, t.test10_from_exemplar),
+        "heldout": (t.heldout.X, t.heldout.Y),
+        "scaler": (task.scaler.x_min, task.scaler.x_max, task.scaler.y_min, task.scaler.y_max),
+        "scaler_range": (task.scaler.lo, task.scaler.hi),
+        "names": (list(task.input_names), list(task.output_names)),
+        "json": json.dumps({"info": task.info, "arm": task.arm}),
+        "wrench": task.wrench,
+        "commanded": None if task.commanded is None else list(task.commanded),
+    }
+
+
+def _unpack(d: dict, make: Callable[..., Any]):
+    X, Y, n_candidates = d["exemplar"]
+    extra = json.loads(d["json"])
+    return make(
+        exemplar=ExemplarSet(X, Y, n_candidates=int(n_candidates)),
+        tests=TestSets(Patterns(*d["test10"][:2]), d["test10"][2], Patterns(*d["heldout"])),
+        scaler=Scaler(*d["scaler"], *d["scaler_range"]),
+        input_names=tuple(d["names"][0]),
+        output_names=tuple(d["names"][1]),
+        info=extra["info"],
+        arm=extra["arm"],
+        wrench=d["wrench"],
+        commanded=None if d["commanded"] is None else tuple(d["commanded"]),
+    )
+
+
+def cached(robot_json: str, data_json: str, build: Callable[[], Any], make: Callable[..., Any]):
+    """The task of these configs: loaded when stored before, else ``build()`` and stored. ``make`` builds a
+    Task from its fields. ``info["cache"]`` says which (and why not stored)."""
+    folder = cache_dir()
+    if folder is None:
+        task = build()
+        task.info["cache"] = "off (SELPRES_CACHE=off)"
+        return task
+    path = folder / (key(robot_json, data_json) + _SUFFIX)
+    if path.is_file():
+        try:
+            task = _unpack(torch.load(path, weights_only=True), make)
+        except Exception as e:  # a cut or foreign file: build afresh and replace it (it is this cache's)
+            log.warning("data cache: %s cannot be read (%s); building the task again", path, e)
+        else:
+            os.utime(path)  # recently used
+            task.info["cache"] = f"hit ({path})"
+            return task
+    task = build()
+    task.info["cache"] = _store(path, task)
+    return task
+
+
+def _store(path: Path, task) -> str:
+    packed = _pack(task)
+    size = sum(v.numel() * v.element_size() for v in _tensors(packed))
+    if size > MAX_BYTES:
+        return f"not stored ({size / 2**20:.0f} MB > {MAX_BYTES / 2**20:.0f} MB)"
+    try:
+        atomic_write(path, lambda f: torch.save(packed, f))
+    except OSError as e:
+        log.warning("data cache: cannot store the task in %s (%s); the job goes on without it", path.parent, e)
+        return f"not stored ({e.strerror or e})"
+    _evict(path.parent)
+    return f"stored ({path})"
+
+
+def _tensors(obj):
+    if isinstance(obj, torch.Tensor):
+        yield obj
+    elif isinstance(obj, dict | list | tuple):
+        for v in obj.values() if isinstance(obj, dict) else obj:
+            yield from _tensors(v)
+
+
+def _evict(folder: Path) -> None:
+    """Remove this cache's least recently used entries beyond KEEP (only files named like its entries)."""
+
+    def used(p: Path) -> float:
+        try:
+            return p.stat().st_mtime
+        except FileNotFoundError:  # a racing job removed it
+            return 0.0
+
+    for p in sorted(folder.glob("*" + _SUFFIX), key=used, reverse=True)[KEEP:]:
+        p.unlink(missing_ok=True)
