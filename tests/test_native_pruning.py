@@ -135,6 +135,25 @@ def test_a_full_unweighted_pruned_epoch_is_the_plain_epoch_bit_for_bit(B):
     assert all(torch.equal(p, q) for p, q in zip(a["params"] + a["momentum"], b["params"] + b["momentum"]))
 
 
+@requires_native
+def test_pruned_epochs_do_not_depend_on_threads(monkeypatch):
+    """Two threads (one lane group each) against one (the two groups interleaved): bit for bit, since the counts,
+    weights and losses are indexed by the replica, not by the thread's chunk."""
+    from selpres.native import library
+
+    monkeypatch.setattr(library, "MIN_THREAD_WORK", 1)  # every call this small on the pool
+    X, Y = _data()
+    states = []
+    for threads in (1, 2):
+        eng = make_engine("native", SIZES, init_replica_params(SIZES, list(range(10, 10 + R))), LR, MOM, 1, threads)
+        for order, w in _epochs():
+            loss = eng.train_epoch(X, Y, order, weights=w, counts=COUNTS)
+        st = eng.state_dict()
+        states.append([*st["params"], *st["momentum"], eng.last_losses, loss])
+    assert all(torch.equal(a.view(torch.int64), b.view(torch.int64)) for a, b in zip(*states))  # bits, NaN too
+    assert eng._k.threads_for(10, 2) == 2  # (the pool was used)
+
+
 def test_bad_counts_and_weights_are_rejected():
     eng = _engine("torch", 1)
     X, Y = _data()
