@@ -2,7 +2,8 @@
 engine -> loop -> results -> report).
 
 Owns the BPN module, topology parsing and the replica weight layout (``model``), the online-SGD engines
-(``online``: ``reference``, the executable definition of correct; ``torch``; ``native``, the C kernel), batch-mode
+(``online``: ``reference``, the executable definition of correct; ``torch``; ``native``, the C kernel; what
+they all take, pruned epochs included, checked in ``inputs``), batch-mode
 training with the speed-up methods of the paper's section 2 (``batch``) and those methods as
 ``torch.optim.Optimizer`` classes (``optim``). An engine takes an epoch's order of pattern indices and updates
 its replicas; it does not choose the order.

@@ -29,8 +29,9 @@ import copy
 
 import torch
 
+from selpres.engines.inputs import check_inputs
 from selpres.engines.model import forward_replicas, replicas_finite
-from selpres.engines.online import ScoredByPredict, _check_inputs
+from selpres.engines.online import ScoredByPredict
 from selpres.engines.optim import make_optimizer, offset_sigmoid
 from selpres.engines.optim._base import require
 from selpres.errors import ConfigError
@@ -86,7 +87,7 @@ class BatchEngine(ScoredByPredict):
     def train_epoch(self, X, Y, order):
         """One step per replica on the gradient of its error over ``order[r]``; returns the [R] mean
         per-pattern loss (``mse_loss`` per pattern) before the step."""
-        _check_inputs(self.sizes, X, Y, order, self.R)
+        check_inputs(self.sizes, X, Y, order, self.R)
         R, m = order.shape
         if m == 0:
             return torch.full((R,), float("nan"), dtype=torch.float64)

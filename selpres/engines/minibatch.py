@@ -15,7 +15,9 @@ they cannot, replica-batched in eager torch with a hand-written backward (checke
 * per-pattern weights and per-replica pattern counts (``train_epoch(..., weights, counts)``), which the
   data-pruning schedules of :mod:`selpres.presentation.pruning` need: replica r presents the first
   ``counts[r]`` entries of ``order[r]`` and a mini-batch's loss is the mean of ``weights · loss`` over its
-  patterns (InfoBatch's rescaled loss); a replica with nothing left in a mini-batch does not step.
+  patterns (InfoBatch's rescaled loss); a replica with nothing left in a mini-batch does not step. (The
+  online engines do the same for the paper's network, so pruning jobs with sigmoid units and SGD at a
+  constant rate run there, on the native kernel: ``selpres.run.checks.minibatch_reason``.)
 
 Loss per pattern: ``mse`` over the outputs (``reduction=mean``: the online engines' loss; ``sum``:
 Rumelhart's ½Σe², for configs written for batch mode). ``last_losses`` holds every presented pattern's loss
@@ -29,8 +31,9 @@ import math
 
 import torch
 
+from selpres.engines.inputs import check_inputs, check_patterns, pruned_epoch_args, pruned_mean
 from selpres.engines.model import forward_replicas
-from selpres.engines.online import ScoredByPredict, _check_inputs, _check_patterns
+from selpres.engines.online import ScoredByPredict
 from selpres.engines.optim.replica import ReplicaOptimizer
 
 LR_SCHEDULES = ("constant", "cosine")
@@ -116,10 +119,11 @@ class MiniBatchEngine(ScoredByPredict):
     @torch.no_grad()
     def train_epoch(self, X, Y, order, weights=None, counts=None):
         """Mini-batches over ``order[r, :counts[r]]``; returns the [R] mean pre-update pattern loss."""
-        _check_inputs(self.sizes, X, Y, order, self.R)
+        check_inputs(self.sizes, X, Y, order, self.R)
         R, m = order.shape
         X, Y = X.to(torch.float64), Y.to(torch.float64)
-        counts = torch.full((R,), m, dtype=torch.int64) if counts is None else counts.to(torch.int64)
+        weights, counts = pruned_epoch_args(order, weights, counts)
+        counts = torch.full((R,), m, dtype=torch.int64) if counts is None else counts
         nout, B, act = self.sizes[-1], self.batch_size, self.activation
         Ws, bs = self.p[0::2], self.p[1::2]
         self.last_losses = torch.full((R, m), float("nan"), dtype=torch.float64)
@@ -165,11 +169,10 @@ class MiniBatchEngine(ScoredByPredict):
             lr = self.lr * lr_factor(self.lr_schedule, self.spent, self.horizon)
             self.opt.step(lr=lr, active=active)
             self.spent += nb.to(torch.float64)
-        presented = counts.clamp(max=m).to(torch.float64)
-        return torch.where(presented > 0, total / presented.clamp(min=1), float("nan"))
+        return pruned_mean(total, counts)
 
     def predict(self, X):
-        return forward_replicas(self.p, _check_patterns(self.sizes, X), self.activation)
+        return forward_replicas(self.p, check_patterns(self.sizes, X), self.activation)
 
     def finite(self):
         return torch.isfinite(self.flat).all(1)

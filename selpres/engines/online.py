@@ -22,6 +22,7 @@ Interface (all engines)::
     eng.name              # the engine that actually runs: "reference", "torch" or "native"
     eng.fallback_reason   # None, or (engine "fast" only) why native could not run
     losses = eng.train_epoch(X, Y, order)   # order [R, m] int64; returns [R] mean pre-update pattern loss
+    eng.train_epoch(X, Y, order, weights=w, counts=c)   # a pruned epoch (below); then eng.last_losses [R, m]
     eng.predict(X)        # [N, in] -> [R, N, out] float64: every replica's scaled outputs (evaluation);
                           # reference/torch: model.forward_replicas(eng.params(), X)
     eng.squared_errors(X, Y)  # [N, in], [N, out] scaled targets -> [R, out] float64: per replica and
@@ -34,6 +35,16 @@ Semantics: replica r presents ``X[order[r, j]]`` for j = 0..m-1 in consecutive m
 ``mse_loss(out, target)`` (mean over batch and outputs), then ``zero_grad(); backward(); step()`` with
 ``SGD(lr, momentum)`` (no dampening/nesterov/weight decay): ``buf = momentum*buf + g; p -= lr*buf``.
 Momentum buffers persist across ``train_epoch`` calls and are part of ``state_dict``.
+
+Pruned epochs (the data-pruning schedules, :mod:`selpres.presentation.pruning`): with ``counts`` [R] replica
+r presents only ``order[r, :counts[r]]``, in its own mini-batches (the last may be smaller; a replica with
+nothing left does not step: its weights and momenta stay as they are), and with ``weights`` [R, m] pattern
+j's loss is weighted: a mini-batch's loss is the mean over its patterns of ``weight * mse`` (InfoBatch's
+rescaled loss; at batch 1 the pattern's gradient times its weight). ``last_losses`` [R, m] then holds each
+presented pattern's mse before its update (NaN past counts[r]): InfoBatch's scores, at no extra cost. The
+mini-batch engine (:mod:`selpres.engines.minibatch`) defines the same for its other optimizers; with
+``optim.reduction=mean`` and sgd it is this update. An epoch without ``counts`` or ``weights`` leaves
+``last_losses`` empty ([R, 0]).
 
 Threads: ``native`` splits replicas (in groups of 4; in ``predict`` and ``squared_errors``, patterns when
 there are fewer groups than threads) over up to ``threads`` OS threads, and runs small calls (a few
@@ -53,6 +64,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from selpres.engines.inputs import check_inputs, check_patterns, check_scoring, pruned_epoch_args, pruned_mean
 from selpres.engines.model import BPN, forward_replicas, load_into, replicas_finite, squared_errors_of
 from selpres.native.staging import stage
 
@@ -81,38 +93,6 @@ class Engine(Protocol):
     def load_state_dict(self, state: dict) -> None: ...
 
 
-def _check_inputs(sizes, X: torch.Tensor, Y: torch.Tensor, order: torch.Tensor, R: int) -> None:
-    if X.dim() != 2 or X.shape[1] != sizes[0]:
-        raise ValueError(f"X must be [n, {sizes[0]}], got {tuple(X.shape)}")
-    if Y.dim() != 2 or Y.shape[1] != sizes[-1] or Y.shape[0] != X.shape[0]:
-        raise ValueError(f"Y must be [{X.shape[0]}, {sizes[-1]}], got {tuple(Y.shape)}")
-    if order.dim() != 2 or order.shape[0] != R:
-        raise ValueError(f"order must be [R={R}, m], got {tuple(order.shape)}")
-    o = order.detach().cpu().numpy()  # numpy: see NativeEngine.train_epoch
-    if o.dtype == np.int64:  # one pass: viewed as unsigned, a negative index is larger than any valid one
-        bad = o.size and int(o.view(np.uint64).max()) >= X.shape[0]
-    else:
-        bad = o.size and (int(o.min()) < 0 or int(o.max()) >= X.shape[0])
-    if bad:
-        raise IndexError(f"order has indices outside [0, {X.shape[0]})")
-
-
-def _check_patterns(sizes, X: torch.Tensor) -> torch.Tensor:
-    if X.dim() != 2 or X.shape[1] != sizes[0]:
-        raise ValueError(f"X must be [N, {sizes[0]}], got {tuple(X.shape)}")
-    return X.detach().to(torch.float64)
-
-
-def _check_scoring(sizes, X: torch.Tensor, Y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """``squared_errors``' inputs as float64, or a ValueError naming the bad shape."""
-    X = _check_patterns(sizes, X)
-    if Y.dim() != 2 or Y.shape != (X.shape[0], sizes[-1]):
-        raise ValueError(
-            f"Y must be [{X.shape[0]}, {sizes[-1]}] (scaled targets of X's patterns), got {tuple(Y.shape)}"
-        )
-    return X, Y.detach().to(torch.float64)
-
-
 def _default_threads(threads: int | None) -> int:
     if threads is None:
         env = os.environ.get("SELPRES_THREADS")
@@ -132,7 +112,7 @@ class ScoredByPredict:
         return f"{self.name} (outputs from predict)"
 
     def squared_errors(self, X, Y):
-        X, Y = _check_scoring(self.sizes, X, Y)
+        X, Y = check_scoring(self.sizes, X, Y)
         return squared_errors_of(self.predict(X), Y)
 
 
@@ -148,26 +128,39 @@ class ReferenceEngine(ScoredByPredict):
         self.R = params[0].shape[0]
         self.models = [load_into(BPN(self.sizes), params, r) for r in range(self.R)]
         self.optimizers = [torch.optim.SGD(m.parameters(), lr=lr, momentum=momentum) for m in self.models]
+        self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
 
-    def train_epoch(self, X, Y, order):
-        _check_inputs(self.sizes, X, Y, order, self.R)
+    def train_epoch(self, X, Y, order, weights=None, counts=None):
+        check_inputs(self.sizes, X, Y, order, self.R)
         m = order.shape[1]
+        weights, counts = pruned_epoch_args(order, weights, counts)
+        if counts is not None:
+            self.last_losses = torch.full((self.R, m), float("nan"), dtype=torch.float64)
         losses = torch.zeros(self.R, dtype=torch.float64)
         for r, (model, opt) in enumerate(zip(self.models, self.optimizers)):
-            total = 0.0
-            for start in range(0, m, self.batch_size):
-                idx = order[r, start : start + self.batch_size]
+            total, c = 0.0, m if counts is None else int(counts[r])
+            for start in range(0, c, self.batch_size):
+                idx = order[r, start : min(start + self.batch_size, c)]
                 out = model(X[idx])
-                loss = F.mse_loss(out, Y[idx])
+                if weights is None:
+                    loss = F.mse_loss(out, Y[idx])
+                else:  # the mean over the mini-batch of each pattern's weighted mse
+                    loss = (
+                        F.mse_loss(out, Y[idx], reduction="none").mean(-1) * weights[r, start : start + len(idx)]
+                    ).mean()
+                if counts is not None:
+                    per = F.mse_loss(out.detach(), Y[idx], reduction="none").mean(-1)
+                    self.last_losses[r, start : start + len(idx)] = per
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
-                total += loss.item() * len(idx)  # loss is the batch mean: back to a per-pattern sum
-            losses[r] = total / m if m else float("nan")
+                # the epoch's loss is unweighted: the batch mean back to a per-pattern sum
+                total += loss.item() * len(idx) if weights is None else float(per.sum())
+            losses[r] = total / c if c else float("nan")
         return losses
 
     def predict(self, X):
-        return forward_replicas(self.params(), _check_patterns(self.sizes, X))
+        return forward_replicas(self.params(), check_patterns(self.sizes, X))
 
     def finite(self):
         return replicas_finite(self.params())
@@ -211,17 +204,21 @@ class TorchEngine(ScoredByPredict):
         self.R = params[0].shape[0]
         self.p = [t.detach().to(torch.float64).clone().contiguous() for t in params]
         self.buf = [torch.zeros_like(t) for t in self.p]
+        self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
 
     @torch.no_grad()
-    def train_epoch(self, X, Y, order):
-        _check_inputs(self.sizes, X, Y, order, self.R)
+    def train_epoch(self, X, Y, order, weights=None, counts=None):
+        check_inputs(self.sizes, X, Y, order, self.R)
         R, m = order.shape
+        weights, counts = pruned_epoch_args(order, weights, counts)
         X, Y = X.to(torch.float64), Y.to(torch.float64)
         Ws, bs = self.p[0::2], self.p[1::2]
         Wm, bm = self.buf[0::2], self.buf[1::2]
         nout = self.sizes[-1]
         total = torch.zeros(R, dtype=torch.float64)
-        for start in range(0, m, self.batch_size):
+        if counts is not None:
+            self.last_losses = torch.full((R, m), float("nan"), dtype=torch.float64)
+        for start in range(0, m if counts is None else int(counts.max()), self.batch_size):
             idx = order[:, start : start + self.batch_size]  # [R, B]
             B = idx.shape[1]
             acts = [X[idx]]  # [R, B, in]
@@ -229,8 +226,24 @@ class TorchEngine(ScoredByPredict):
                 acts.append(torch.sigmoid(torch.baddbmm(b.unsqueeze(1), acts[-1], W.transpose(1, 2))))
             y, t = acts[-1], Y[idx]
             diff = y - t
-            total += diff.square().sum(dim=(1, 2)) / nout
-            delta = diff * (2.0 / (B * nout)) * y * (1 - y)  # dL/dz of the output layer, [R, B, out]
+            active = None
+            if counts is None:
+                total += diff.square().sum(dim=(1, 2)) / nout
+                delta = diff * (2.0 / (B * nout)) * y * (1 - y)  # dL/dz of the output layer, [R, B, out]
+            else:  # each replica's own mini-batch: its first nb columns, each weighted
+                nb = (counts - start).clamp(0, B)
+                valid = torch.arange(B).unsqueeze(0) < nb.unsqueeze(1)  # [R, B]
+                per = diff.square().mean(-1)
+                self.last_losses[:, start : start + B] = torch.where(valid, per, float("nan"))
+                total += torch.where(valid, per, 0.0).sum(1)
+                w = (
+                    valid.to(torch.float64)
+                    if weights is None
+                    else torch.where(valid, weights[:, start : start + B], 0.0)
+                )
+                scale = (2.0 / (nb.clamp(min=1).to(torch.float64) * nout)).unsqueeze(1) * w
+                delta = diff * scale.unsqueeze(2) * y * (1 - y)
+                active = nb > 0
             for layer in range(len(Ws) - 1, -1, -1):
                 a_prev = acts[layer]
                 gW = torch.bmm(delta.transpose(1, 2), a_prev)
@@ -238,12 +251,20 @@ class TorchEngine(ScoredByPredict):
                 if layer:
                     delta = torch.bmm(delta, Ws[layer]) * a_prev * (1 - a_prev)  # uses W before its update
                 for p, buf, g in ((Ws[layer], Wm[layer], gW), (bs[layer], bm[layer], gb)):
-                    buf.mul_(self.mom).add_(g)
-                    p.sub_(buf, alpha=self.lr)
+                    if active is None:
+                        buf.mul_(self.mom).add_(g)
+                        p.sub_(buf, alpha=self.lr)
+                    else:  # a replica with nothing left keeps its weights and momenta
+                        keep = active.view(R, *([1] * (p.dim() - 1)))
+                        new_buf = buf.mul(self.mom).add_(g)
+                        p.copy_(torch.where(keep, p.sub(new_buf, alpha=self.lr), p))
+                        buf.copy_(torch.where(keep, new_buf, buf))
+        if counts is not None:
+            return pruned_mean(total, counts)
         return total / m if m else torch.full((R,), float("nan"), dtype=torch.float64)
 
     def predict(self, X):
-        return forward_replicas(self.p, _check_patterns(self.sizes, X))
+        return forward_replicas(self.p, check_patterns(self.sizes, X))
 
     def finite(self):
         return replicas_finite(self.p)
@@ -288,6 +309,7 @@ class NativeEngine:
         self.P = sum(int(torch.Size(s).numel()) for s in self.shapes)
         self.w = self._pack(params)
         self.buf = torch.zeros_like(self.w)
+        self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
         self._staged = None  # a large set's rows for the kernel (selpres.native.staging), kept between epochs
 
     # [W1, b1, ...] with leading R  <->  [G, P, 4] (per group: parameters in list order, 4 lanes innermost)
@@ -311,9 +333,10 @@ class NativeEngine:
             k += n
         return out
 
-    def train_epoch(self, X, Y, order):
-        _check_inputs(self.sizes, X, Y, order, self.R)
+    def train_epoch(self, X, Y, order, weights=None, counts=None):
+        check_inputs(self.sizes, X, Y, order, self.R)
         m = order.shape[1]
+        weights, counts = pruned_epoch_args(order, weights, counts)
         # a large set is staged once, whatever its dtype and layout (selpres.native.staging); None for one
         # that stays in the caches, read as it is
         self._staged = stage(self._staged, X, Y)
@@ -333,20 +356,36 @@ class NativeEngine:
             padded[self.R :] = o[:1]  # the padding lanes shadow replica 0 (see _pack)
             padded_order = torch.from_numpy(padded)
         loss = torch.zeros(self.G * self.LANES, dtype=torch.float64)
-        self._k.train(
-            self.sizes, self.w, self.buf, X, Y, padded_order, self.batch_size, self.lr, self.mom, loss, self.threads
-        )
+        pruned = {}
+        if counts is not None:  # per lane, the padding lanes shadowing replica 0 (numpy: see above)
+            pruned["counts"] = torch.from_numpy(self._lanes(counts.numpy()))
+            if weights is not None:
+                pruned["weights"] = torch.from_numpy(self._lanes(weights.numpy()))
+            pl = np.full((self.G * self.LANES, m), np.nan)
+            pruned["pattern_losses"] = torch.from_numpy(pl)
+        args = (self.sizes, self.w, self.buf, X, Y, padded_order, self.batch_size, self.lr, self.mom, loss)
+        self._k.train(*args, self.threads, **pruned)
+        if counts is not None:
+            self.last_losses = torch.from_numpy(pl[: self.R])
+            return pruned_mean(loss[: self.R], counts)
         return (loss[: self.R] / m) if m else torch.full((self.R,), float("nan"), dtype=torch.float64)
+
+    def _lanes(self, a: np.ndarray) -> np.ndarray:
+        """A per-replica array [R, ...] for every lane [G*4, ...], the padding lanes copying replica 0."""
+        out = np.empty((self.G * self.LANES, *a.shape[1:]), dtype=a.dtype)
+        out[: self.R] = a
+        out[self.R :] = a[:1]
+        return out
 
     def predict(self, X):
         """The kernel's forward pass on the packed weights (4 replicas per vector, threads over groups)."""
-        out = self._k.forward(self.sizes, self.w, _check_patterns(self.sizes, X), self.threads)
+        out = self._k.forward(self.sizes, self.w, check_patterns(self.sizes, X), self.threads)
         return out[: self.R]
 
     def squared_errors(self, X, Y):
         """Summed inside the kernel's forward pass: no [R, N, out] outputs are written (the RMS follows in
         the train loop: sqrt(sum / N), in Nm times (y_max - y_min) / (hi - lo) of the output's scaler)."""
-        X, Y = _check_scoring(self.sizes, X, Y)
+        X, Y = check_scoring(self.sizes, X, Y)
         return self._k.squared_errors(self.sizes, self.w, X, Y, self.threads)[: self.R]
 
     def finite(self):

@@ -62,6 +62,9 @@ class Kernel(Library):
             dp,
             i64,
             i64,
+            lp,
+            dp,
+            dp,
         ]
         self._train.restype = c_int
         self._forward = self.lib.selpres_forward
@@ -106,10 +109,18 @@ class Kernel(Library):
         mom: float,
         loss: torch.Tensor,
         threads: int,
+        counts: torch.Tensor | None = None,
+        weights: torch.Tensor | None = None,
+        pattern_losses: torch.Tensor | None = None,
     ) -> None:
         """One epoch for all groups of ``w``/``buf`` ([G, P, 4], updated in place); ``loss`` [G*4] gets
         per-lane sums. ``X``, ``Y``: one pattern per row, each row contiguous (contiguous arrays, or the
-        strided views of :class:`selpres.native.staging.Staged`). Threads take contiguous chunks of groups."""
+        strided views of :class:`selpres.native.staging.Staged`). Threads take contiguous chunks of groups.
+
+        A pruned epoch (any of the last three given; the C file's train_groups): lane i presents the first
+        ``counts[i]`` ([G*4] int64) entries of its row of ``order``, each pattern's gradient scaled by
+        ``weights`` [G*4, m] float64, and ``pattern_losses`` [G*4, m] float64 gets each presented pattern's
+        loss (the entries past a lane's count are left as they were)."""
         G, P, lanes = w.shape
         assert lanes == LANES and buf.shape == w.shape and w.is_contiguous() and buf.is_contiguous()
         assert w.dtype == buf.dtype == X.dtype == Y.dtype == loss.dtype == torch.float64
@@ -117,6 +128,13 @@ class Kernel(Library):
         order = order.contiguous()
         assert order.dtype == torch.int64 and order.shape[0] == G * LANES
         m = order.shape[1]
+        extra = []
+        for t, dtype, shape in ((counts, torch.int64, (G * LANES,)), (weights, torch.float64, (G * LANES, m))):
+            assert t is None or (t.dtype == dtype and tuple(t.shape) == shape and t.is_contiguous())
+            extra.append(None if t is None else t.data_ptr())
+        pl = pattern_losses
+        assert pl is None or (pl.dtype == torch.float64 and tuple(pl.shape) == (G * LANES, m) and pl.is_contiguous())
+        extra.append(None if pl is None else pl.data_ptr())
         threads = self.threads_for(TRAIN_WORK_PER_PARAMETER * G * LANES * m * P, threads)
         rest = (
             P,
@@ -132,6 +150,7 @@ class Kernel(Library):
             loss.data_ptr(),
             X.stride(0) if X.shape[0] > 1 else X.shape[1],  # a single row's stride may be anything
             Y.stride(0) if Y.shape[0] > 1 else Y.shape[1],
+            *extra,
         )
         head = self._sizes_arg(sizes)
         self._run(self._train, [(*head, g0, g1, *rest) for g0, g1 in self._bounds(G, threads)])

@@ -54,7 +54,7 @@ def batch_mode(o: DictConfig) -> bool:
 def minibatch_reason(cfg: DictConfig) -> str | None:
     """Why a job needs the mini-batch torch engine (selpres.engines.minibatch) rather than the online SGD
     engines (native kernel / torch / reference), or None: the native kernel runs sigmoid units and SGD with
-    momentum at a constant rate on unweighted patterns, nothing else."""
+    momentum at a constant rate, nothing else (pruned epochs too: per-replica counts, weighted patterns)."""
     o = cfg.optim
     if batch_mode(o):
         return None
@@ -65,8 +65,6 @@ def minibatch_reason(cfg: DictConfig) -> str | None:
         why.append(f"model.activation={cfg.model.activation.value}")
     if o.lr_schedule.value != "constant":
         why.append(f"optim.lr_schedule={o.lr_schedule.value}")
-    if cfg.schedule.pruning is not None:
-        why.append(f"schedule.pruning={cfg.schedule.pruning.value} (weighted patterns, per-replica counts)")
     if not why:
         return None
     return "the native kernel runs sigmoid units and SGD at a constant rate only; this job has " + ", ".join(why)

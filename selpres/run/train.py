@@ -231,7 +231,8 @@ def run_pruned_epoch(job: Job, ep: EpochPlan, order: torch.Tensor, clock: Clock)
     prob, progress, pr = job.prob, job.progress, job.prob.pruning
     with clock("select"):
         choice = pr.choose(ep.index, order, job.engine, prob.X, prob.Y)
-    job.engine.spent.copy_(pr.spent)
+    if isinstance(job.engine, MiniBatchEngine):  # its lr schedule's clock (the online engines' rate is constant)
+        job.engine.spent.copy_(pr.spent)
     with clock("train"):
         loss = job.engine.train_epoch(prob.X, prob.Y, choice.order, weights=choice.weights, counts=choice.counts)
     pr.finish(choice, job.engine.last_losses)

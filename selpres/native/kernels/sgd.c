@@ -98,11 +98,21 @@ static inline void layer_offsets(int64_t *woff, int64_t *boff, int64_t *aoff)
    overlaps their chains (~1.3x at 6-13-2; the update's loads/stores then bound it). Each replica still
    sees exactly the same sequence of IEEE operations, so results do not depend on how replicas are
    grouped. Called with ni = NI, then ni = 1 for a leftover group. Loops are unrolled by 4 only: fully
-   unrolled, the interleaved code was slower. */
+   unrolled, the interleaved code was slower.
+
+   Pruned epochs (masked = 1; selpres/presentation/pruning.py): lane k of group g presents only the first
+   cnt = counts[g*4 + k] entries of its row of order, pattern j's gradient scaled by wts[(g*4 + k) * m + j]
+   (InfoBatch's 1/(1 - r); NULL: 1), and plosses[(g*4 + k) * m + j] gets pattern j's loss (mean over the
+   outputs of (y - t)^2, before its update; NULL: not written). A lane's mini-batches are its own: the one
+   from s holds nb = min(B, cnt - s) patterns, each scaled by 2 / (nb * nout) * weight, so a lane with
+   nothing left (nb = 0) is masked out of the update: its weights and momenta are kept bit for bit (blends,
+   not arithmetic with zeros, which a NaN would defeat). masked is a constant at each call site, so the
+   usual epoch (masked = 0) compiles to the code it always was. */
 static inline __attribute__((always_inline)) void
-train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *work,
+train_groups(const int ni, const int masked, int64_t g, double *W, double *M, double *Gb, double *work,
              const double *X, const double *Y, const int64_t *order, int64_t m, int64_t B,
-             double lr, double mom, double *loss, int64_t ldx, int64_t ldy)
+             double lr, double mom, double *loss, int64_t ldx, int64_t ldy,
+             const int64_t *counts, const double *wts, double *plosses)
 {
     const int64_t nin = S[0], nout = S[NL];
     int64_t woff[NL], boff[NL], aoff[NL + 1];
@@ -112,6 +122,10 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *
     double *w[NI], *mb[NI], *G[NI];
     const int64_t *ord[NI][4];
     __m256d lsum[NI];
+    int64_t cnt[NI][4];       /* masked: patterns each lane presents (clamped to [0, m]) */
+    __m256i vcnt[NI];
+    __m256d scale[NI], live[NI], blive[NI];  /* per step: gradient scale, lane presents j, lane steps */
+    int64_t mend = m;         /* masked: the steps any lane of these groups presents */
     const __m256d one = _mm256_set1_pd(1.0);
     const __m256d vmom = _mm256_set1_pd(mom), vlr = _mm256_set1_pd(lr);
 
@@ -127,16 +141,49 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *
         for (int k = 0; k < 4; k++) ord[u][k] = order + ((g + u) * 4 + k) * m;
         lsum[u] = _mm256_setzero_pd();
     }
-    for (int64_t s = 0; s < m; s += B) {
-        const int64_t bs = (m - s < B) ? (m - s) : B;
-        const __m256d scale = _mm256_set1_pd(2.0 / (double)(bs * nout));
+    if (masked) {
+        mend = 0;
+        EACH {
+            for (int k = 0; k < 4; k++) {
+                int64_t c = counts ? counts[(g + u) * 4 + k] : m;
+                cnt[u][k] = c < 0 ? 0 : (c > m ? m : c);
+                if (cnt[u][k] > mend) mend = cnt[u][k];
+            }
+            vcnt[u] = _mm256_set_epi64x(cnt[u][3], cnt[u][2], cnt[u][1], cnt[u][0]);
+        }
+    }
+    for (int64_t s = 0; s < mend; s += B) {
+        const int64_t bs = (mend - s < B) ? (mend - s) : B;
+        const __m256d bscale = _mm256_set1_pd(2.0 / (double)(bs * nout));
+        double lscale[NI][4];   /* masked: each lane's 2 / (nb * nout) for this mini-batch (0: no step) */
+        if (masked) {
+            EACH {
+                for (int q = 0; q < 4; q++) {
+                    const int64_t left = cnt[u][q] - s, nb = left < B ? left : B;
+                    lscale[u][q] = nb > 0 ? 2.0 / (double)(nb * nout) : 0.0;
+                }
+                blive[u] = _mm256_castsi256_pd(_mm256_cmpgt_epi64(vcnt[u], _mm256_set1_epi64x(s)));
+            }
+        }
         if (B > 1) memset(Gb, 0, (size_t)ni * P_TOTAL * 32);
         for (int64_t k = 0; k < bs; k++) {
             const int64_t j = s + k;
+            if (masked) {
+                EACH {
+                    double sc[4];
+                    for (int q = 0; q < 4; q++)
+                        sc[q] = j < cnt[u][q] ? (wts ? lscale[u][q] * wts[((g + u) * 4 + q) * m + j] : lscale[u][q])
+                                              : 0.0;
+                    scale[u] = _mm256_set_pd(sc[3], sc[2], sc[1], sc[0]);
+                    live[u] = _mm256_castsi256_pd(_mm256_cmpgt_epi64(vcnt[u], _mm256_set1_epi64x(j)));
+                }
+            } else {
+                EACH scale[u] = bscale;
+            }
             /* prefetch the rows presented PF steps ahead, every cache line of them: on sets larger than
                the caches every row is a random fetch from memory, which would otherwise stall each step
                (issue 11, item 9; 18 inputs span 3 lines, of which first and last alone missed one) */
-            if (j + PF < m) {
+            if (j + PF < mend) {
 #pragma GCC unroll 4
                 EACH for (int q = 0; q < 4; q++) {
                     const int64_t r = ord[u][q][j + PF];
@@ -174,20 +221,34 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *
                     EACH ST(act[u] + (aoff[l + 1] + o) * 4, sigmoid4(z[u]));
                 }
             }
-            /* output deltas dL/dz = 2 (y - t) / (bs * nout) * y (1 - y); the loss sums (y - t)^2 */
+            /* output deltas dL/dz = 2 (y - t) / (bs * nout) * y (1 - y) (masked: times the pattern's
+               weight); the loss sums (y - t)^2 (masked: of the presented patterns only) */
             double **d = da, **dn = db;
 #pragma GCC unroll 4
             EACH {
                 const double *y = act[u] + aoff[NL] * 4;
                 const double *t0 = Y + ord[u][0][j] * ldy, *t1 = Y + ord[u][1][j] * ldy;
                 const double *t2 = Y + ord[u][2][j] * ldy, *t3 = Y + ord[u][3][j] * ldy;
+                __m256d pl = _mm256_setzero_pd();
 #pragma GCC unroll 4
                 for (int64_t o = 0; o < nout; o++) {
                     __m256d yv = LD(y + o * 4);
                     __m256d diff = _mm256_sub_pd(yv, _mm256_set_pd(t3[o], t2[o], t1[o], t0[o]));
-                    lsum[u] = _mm256_fmadd_pd(diff, diff, lsum[u]);
-                    ST(d[u] + o * 4, _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(diff, scale), yv),
+                    if (masked) {
+                        pl = _mm256_fmadd_pd(diff, diff, pl);
+                        const __m256d dm = _mm256_and_pd(diff, live[u]);
+                        lsum[u] = _mm256_fmadd_pd(dm, dm, lsum[u]);
+                    } else {
+                        lsum[u] = _mm256_fmadd_pd(diff, diff, lsum[u]);
+                    }
+                    ST(d[u] + o * 4, _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(diff, scale[u]), yv),
                                                    _mm256_sub_pd(one, yv)));
+                }
+                if (masked && plosses) {
+                    double v[4];
+                    _mm256_storeu_pd(v, _mm256_div_pd(pl, _mm256_set1_pd((double)nout)));
+                    for (int q = 0; q < 4; q++)
+                        if (j < cnt[u][q]) plosses[((g + u) * 4 + q) * m + j] = v[q];
                 }
             }
             /* backward, layer by layer: deltas of the layer below (from the weights before their
@@ -226,33 +287,55 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *
                             double *mr = mb[u] + (woff[l] + o * ni_) * 4;
 #pragma GCC unroll 4
                             for (int64_t i = 0; i < ni_; i++) {
-                                __m256d bv = _mm256_fmadd_pd(vmom, LD(mr + i * 4),
-                                                             _mm256_mul_pd(dv, LD(ain + i * 4)));
+                                const __m256d m0 = LD(mr + i * 4), w0 = LD(wr + i * 4);
+                                __m256d bv = _mm256_fmadd_pd(vmom, m0, _mm256_mul_pd(dv, LD(ain + i * 4)));
+                                __m256d wv = _mm256_fnmadd_pd(vlr, bv, w0);
+                                if (masked) {  /* a lane past its count keeps its weights and momenta */
+                                    bv = _mm256_blendv_pd(m0, bv, live[u]);
+                                    wv = _mm256_blendv_pd(w0, wv, live[u]);
+                                }
                                 ST(mr + i * 4, bv);
-                                ST(wr + i * 4, _mm256_fnmadd_pd(vlr, bv, LD(wr + i * 4)));
+                                ST(wr + i * 4, wv);
                             }
                             double *pb = w[u] + (boff[l] + o) * 4, *pm = mb[u] + (boff[l] + o) * 4;
-                            __m256d bv = _mm256_fmadd_pd(vmom, LD(pm), dv);
+                            const __m256d m0 = LD(pm), w0 = LD(pb);
+                            __m256d bv = _mm256_fmadd_pd(vmom, m0, dv);
+                            __m256d wv = _mm256_fnmadd_pd(vlr, bv, w0);
+                            if (masked) {
+                                bv = _mm256_blendv_pd(m0, bv, live[u]);
+                                wv = _mm256_blendv_pd(w0, wv, live[u]);
+                            }
                             ST(pm, bv);
-                            ST(pb, _mm256_fnmadd_pd(vlr, bv, LD(pb)));
+                            ST(pb, wv);
                         } else {
                             double *gr = G[u] + (woff[l] + o * ni_) * 4, *pgb = G[u] + (boff[l] + o) * 4;
 #pragma GCC unroll 4
-                            for (int64_t i = 0; i < ni_; i++)
-                                ST(gr + i * 4, _mm256_fmadd_pd(dv, LD(ain + i * 4), LD(gr + i * 4)));
-                            ST(pgb, _mm256_add_pd(LD(pgb), dv));
+                            for (int64_t i = 0; i < ni_; i++) {
+                                __m256d gv = _mm256_fmadd_pd(dv, LD(ain + i * 4), LD(gr + i * 4));
+                                if (masked) gv = _mm256_blendv_pd(LD(gr + i * 4), gv, live[u]);
+                                ST(gr + i * 4, gv);
+                            }
+                            __m256d gb = _mm256_add_pd(LD(pgb), dv);
+                            if (masked) gb = _mm256_blendv_pd(LD(pgb), gb, live[u]);
+                            ST(pgb, gb);
                         }
                     }
                 }
                 double **tmp = d; d = dn; dn = tmp;
             }
         }
-        if (B > 1) {  /* the mini-batch's update from the summed gradient */
+        if (B > 1) {  /* the mini-batch's update from the summed gradient (masked: lanes with patterns in it) */
 #pragma GCC unroll 4
             EACH for (int64_t p = 0; p < P_TOTAL; p++) {
-                __m256d bv = _mm256_fmadd_pd(vmom, LD(mb[u] + p * 4), LD(G[u] + p * 4));
+                const __m256d m0 = LD(mb[u] + p * 4), w0 = LD(w[u] + p * 4);
+                __m256d bv = _mm256_fmadd_pd(vmom, m0, LD(G[u] + p * 4));
+                __m256d wv = _mm256_fnmadd_pd(vlr, bv, w0);
+                if (masked) {
+                    bv = _mm256_blendv_pd(m0, bv, blive[u]);
+                    wv = _mm256_blendv_pd(w0, wv, blive[u]);
+                }
                 ST(mb[u] + p * 4, bv);
-                ST(w[u] + p * 4, _mm256_fnmadd_pd(vlr, bv, LD(w[u] + p * 4)));
+                ST(w[u] + p * 4, wv);
             }
         }
     }
@@ -268,12 +351,13 @@ train_groups(const int ni, int64_t g, double *W, double *M, double *Gb, double *
 /* One epoch for groups [g0, g1): W, M [G][P_TOTAL][4] updated in place; order [G*4][m] pattern indices;
    loss[g*4 + k] gets lane k's summed per-pattern loss. Pattern r's inputs are X[r * ldx ..], its targets
    Y[r * ldy ..]: ldx = S[0], ldy = S[NL] for separate arrays, or both the row length of one array holding
-   each pattern's inputs and targets side by side (selpres/native/staging.py). Returns 0, -1 (out of memory) or -3 (the caller's
-   topology is not the one compiled in). */
+   each pattern's inputs and targets side by side (selpres/native/staging.py). counts [G*4], wts [G*4][m],
+   plosses [G*4][m]: a pruned epoch (see train_groups), each NULL when not used; all three NULL is the usual
+   epoch. Returns 0, -1 (out of memory) or -3 (the caller's topology is not the one compiled in). */
 int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t P,
                   double *W, double *M, const double *X, const double *Y,
                   const int64_t *order, int64_t m, int64_t B, double lr, double mom, double *loss,
-                  int64_t ldx, int64_t ldy)
+                  int64_t ldx, int64_t ldy, const int64_t *counts, const double *wts, double *plosses)
 {
     if (nl != NL || P != P_TOTAL) return -3;
     for (int l = 0; l <= NL; l++) if (sizes[l] != S[l]) return -3;
@@ -286,8 +370,18 @@ int selpres_train(int nl, const int64_t *sizes, int64_t g0, int64_t g1, int64_t 
         return -1;
     }
     int64_t g = g0;
-    for (; g + NI <= g1; g += NI) train_groups(NI, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss, ldx, ldy);
-    for (; g < g1; g++) train_groups(1, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss, ldx, ldy);
+#define GROUPS(masked)                                                                                      \
+    for (; g + NI <= g1; g += NI)                                                                           \
+        train_groups(NI, masked, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss, ldx, ldy, counts, wts, \
+                     plosses);                                                                              \
+    for (; g < g1; g++)                                                                                     \
+        train_groups(1, masked, g, W, M, Gb, work, X, Y, order, m, B, lr, mom, loss, ldx, ldy, counts, wts, plosses);
+    if (counts || wts || plosses) {
+        GROUPS(1)
+    } else {
+        GROUPS(0)
+    }
+#undef GROUPS
     free(work);
     free(Gb);
     return 0;
