@@ -13,6 +13,7 @@ import pytest
 from selpres.report import aggregate, load_jobs
 from selpres.report.__main__ import main
 from selpres.report.compare import Margin, Options, reading, time_to_target_rows, verdict_rows
+from selpres.report.context import Context
 from selpres.report.jobs import job_folders
 from selpres.report.paper import paper_setting
 from selpres.report.sections.table1 import table1_rows
@@ -355,6 +356,30 @@ def test_runs_lists_failed_missing_diverged_and_files_written(sweep, tmp_path, c
     t1 = list(csv.DictReader((out / "table1.csv").open()))
     assert {(r["method"], r["topology"]) for r in t1} >= {("selective", "6-4-2"), ("matched", "6-8-2")}
     assert "curves.png" in md
+
+
+@pytest.mark.parametrize(
+    "swept, listed",
+    [
+        ({"schedule": "selective,conventional,matched,random_growth", "topology": "6-4-2,6-8-2"}, True),
+        ({"design": "a,b,c"}, False),  # design points: each its own topology and schedule, no grid
+    ],
+)
+def test_cells_with_no_folder_are_listed_only_for_a_sweep_that_crossed_them(sweep, swept, listed):
+    """The sweep's multirun.yaml says whether topology x schedule is a grid (as Hydra writes it: the sweeper's
+    params; command-line lists count too)."""
+    from omegaconf import OmegaConf
+
+    from selpres.report.sections.runs import runs_rows
+
+    OmegaConf.save({"hydra": {"sweeper": {"params": swept}, "overrides": {"task": []}}}, sweep / "multirun.yaml")
+    ctx = Context.load(sweep)
+    rows = runs_rows(ctx.jobs, ctx.groups, ctx.topologies, ctx.methods, sweep)
+    assert any(r["job"] == "(no folder)" for r in rows) == listed
+    OmegaConf.save({"hydra": {"overrides": {"task": ["schedule=selective,matched", "topology=6-4-2,6-8-2"]}}},
+                   sweep / "multirun.yaml")  # fmt: skip
+    rows = runs_rows(ctx.jobs, ctx.groups, ctx.topologies, ctx.methods, sweep)
+    assert any(r["job"] == "(no folder)" for r in rows)
 
 
 def test_default_out_dir(sweep, capsys):

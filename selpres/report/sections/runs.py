@@ -1,8 +1,15 @@
-"""Every job folder with its status (complete, diverged, failed, missing), and the grid cells with none."""
+"""Every job folder with its status (complete, diverged, failed, missing), and the grid cells with none.
+
+A (topology, method) cell with no folder is listed only when the sweep crossed the two: its ``multirun.yaml``
+sweeps a topology and a schedule (Table 1's ``schedule=... topology=...``). A sweep over design points (each its
+own topology and schedule, e.g. ``experiment=modern``) is no grid: crossing it listed 24 cells no job was meant to
+fill. Without a ``multirun.yaml`` (folders gathered by hand) every cell is expected, as before."""
 
 from __future__ import annotations
 
 from pathlib import Path
+
+from omegaconf import OmegaConf
 
 from selpres.report.context import Context, Section
 from selpres.report.groups import method_rank, topology_rank
@@ -12,6 +19,20 @@ from selpres.report.markdown import engine_text, fmt, table
 
 def _diverged_epoch(rep: dict):
     return (rep.get("diverged") or {}).get("epoch")
+
+
+def crossed(sweep: Path) -> bool:
+    """Whether the sweep is a topology x schedule grid (see the module's docstring)."""
+    try:
+        hydra = OmegaConf.load(sweep / "multirun.yaml").hydra
+    except Exception:  # none (folders gathered by hand) or unreadable: every cell is expected, as before
+        return True
+    swept = set((OmegaConf.select(hydra, "sweeper.params") or {}).keys())
+    for o in OmegaConf.select(hydra, "overrides.task") or []:
+        key, _, value = str(o).partition("=")
+        if "," in value or value.startswith(("range(", "choice(", "glob(")):
+            swept.add(key.lstrip("+~"))
+    return any(k.split(".")[0] == "topology" for k in swept) and any(k.split(".")[0] == "schedule" for k in swept)
 
 
 def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path) -> list[dict]:
@@ -42,7 +63,7 @@ def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path) -> list
                     if r["status"] != "complete"
                 )
         rows.append(row)
-    for t in topologies:
+    for t in topologies if crossed(sweep) else ():
         for m in methods:
             if (t, m) not in groups:
                 rows.append(
