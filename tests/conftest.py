@@ -15,9 +15,9 @@ REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"
 
 # the tests' own data cache (selpres.data.cache), shared by this session's jobs and the processes they start,
-# never the user's ~/.cache; a test about building data turns it off (monkeypatch.setenv("SELPRES_CACHE", "off"))
-os.environ["SELPRES_CACHE"] = tempfile.mkdtemp(prefix="selpres-test-cache-")
-atexit.register(shutil.rmtree, os.environ["SELPRES_CACHE"], ignore_errors=True)
+# never the user's ~/.cache; a test about building data turns it off (monkeypatch.setenv("SELPRES_DATA_CACHE", "off"))
+os.environ["SELPRES_DATA_CACHE"] = tempfile.mkdtemp(prefix="selpres-test-cache-")
+atexit.register(shutil.rmtree, os.environ["SELPRES_DATA_CACHE"], ignore_errors=True)
 
 
 def load_group(group: str, option: str):

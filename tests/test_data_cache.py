@@ -21,7 +21,7 @@ from conftest import REPO, cfg_of, compose, numbers
 @pytest.fixture
 def cache(tmp_path, monkeypatch):
     folder = tmp_path / "cache"
-    monkeypatch.setenv("SELPRES_CACHE", str(folder))
+    monkeypatch.setenv("SELPRES_DATA_CACHE", str(folder))
     T._task.cache_clear()  # the in-process cache would answer before the disk's
     yield folder
     T._task.cache_clear()
@@ -69,7 +69,7 @@ def test_a_hit_is_the_task_a_build_makes(cache, monkeypatch, overrides):
     assert stored.info["cache"].startswith("stored") and len(list(cache.glob("*.task.pt"))) == 1
     hit = _load(*overrides)
     assert hit.info["cache"].startswith("hit")
-    monkeypatch.setenv("SELPRES_CACHE", "off")
+    monkeypatch.setenv("SELPRES_DATA_CACHE", "off")
     built = _load(*overrides)
     assert built.info["cache"].startswith("off")
     _same(hit, built)
@@ -86,7 +86,7 @@ def test_a_job_on_a_hit_has_the_numbers_of_a_job_that_built_its_data(cache, tmp_
     T._task.cache_clear()
     second = train(cfg_of(*args), tmp_path / "b")
     assert first["data"]["cache"].startswith("stored") and second["data"]["cache"].startswith("hit")
-    monkeypatch.setenv("SELPRES_CACHE", "off")
+    monkeypatch.setenv("SELPRES_DATA_CACHE", "off")
     T._task.cache_clear()
     third = train(cfg_of(*args))
     assert numbers(first) == numbers(second) == numbers(third)
@@ -140,7 +140,7 @@ def test_a_cut_entry_is_built_again_and_replaced(cache, caplog):
 def test_an_unwritable_cache_folder_does_not_stop_the_job(tmp_path, monkeypatch, caplog):
     blocker = tmp_path / "a-file"
     blocker.write_text("not a folder")
-    monkeypatch.setenv("SELPRES_CACHE", str(blocker / "cache"))
+    monkeypatch.setenv("SELPRES_DATA_CACHE", str(blocker / "cache"))
     task = _load("data.heldout=300")
     assert task.info["cache"].startswith("not stored") and "cannot store the task" in caplog.text
     assert blocker.read_text() == "not a folder"
@@ -148,18 +148,69 @@ def test_an_unwritable_cache_folder_does_not_stop_the_job(tmp_path, monkeypatch,
 
 
 def test_off_writes_nothing(tmp_path, monkeypatch):
-    monkeypatch.setenv("SELPRES_CACHE", "off")
+    monkeypatch.setenv("SELPRES_DATA_CACHE", "off")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     assert _load("data.heldout=300").info["cache"].startswith("off") and not list(tmp_path.iterdir())
     T._task.cache_clear()
 
 
 def test_the_default_folder_follows_xdg(monkeypatch, tmp_path):
-    monkeypatch.delenv("SELPRES_CACHE")
+    monkeypatch.delenv("SELPRES_DATA_CACHE")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     assert C.cache_dir() == tmp_path / "selpres" / "tasks"
     monkeypatch.delenv("XDG_CACHE_HOME")
     assert C.cache_dir() == C.Path.home() / ".cache" / "selpres" / "tasks"
+
+
+def test_files_named_from_home_are_read_again_when_edited(cache, tmp_path, monkeypatch):
+    """``~/s.csv`` and ``~/arm.urdf`` (the readers expand ``~``): never stored, and an edit is seen, by the task
+    and by the job's identity (selpres.run.results.job_hash)."""
+    from test_datafile import INPUTS, OUTPUTS, file_cfg, sarcos_like, write_csv
+
+    from selpres.arms.two_link import make_arm
+    from selpres.arms.urdf import to_urdf
+    from selpres.run.results import job_hash
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    cfg = file_cfg("'~/s.csv'")
+    sums, hashes = [], []
+    for seed in (0, 1):
+        write_csv(tmp_path / "s.csv", sarcos_like(200, seed), INPUTS + OUTPUTS)
+        T._task.cache_clear()
+        task = T.load_task(cfg.robot, cfg.data)
+        sums.append(float(task.exemplar.X.sum()))
+        hashes.append(job_hash(cfg))
+        assert task.info["cache"].startswith("not stored")
+    assert sums[0] != sums[1] and hashes[0] != hashes[1]
+    urdf = compose("robot=urdf", "robot.path='~/arm.urdf'", "topology.layers=9-5-3", "data.n=200", "data.heldout=50")
+    means = []
+    for mass in (0.42, 0.84):
+        arm = compose("robot=planar3", "topology.layers=9-5-3", f"robot.links.0.mass={mass}").robot
+        to_urdf(make_arm(arm), tmp_path / "arm.urdf")
+        T._task.cache_clear()
+        task = T.load_task(urdf.robot, urdf.data)
+        means.append(float(task.exemplar.Y.abs().mean()))
+        assert task.info["cache"].startswith("not stored")
+    assert means[0] != means[1] and not cache.exists()
+
+
+def test_a_cache_that_cannot_record_a_hit_still_serves_it(cache, monkeypatch):
+    """A read-only or shared cache: os.utime fails; the hit is served, the job goes on."""
+    _load("data.heldout=300")
+
+    def refuse(*a, **k):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(C.os, "utime", refuse)
+    assert _load("data.heldout=300").info["cache"].startswith("hit")
+
+
+def test_a_stored_task_holds_its_own_tensors_not_their_bases(cache):
+    """torch.save writes a view's whole storage: the held-out set is a view of its draws."""
+    task = _load("data.heldout=2000")
+    (entry,) = cache.glob("*.task.pt")
+    tensors = sum(v.numel() * v.element_size() for v in C._tensors(C._pack(task)))
+    assert entry.stat().st_size < tensors + 64_000
 
 
 def test_a_task_read_from_a_file_is_not_stored(cache, tmp_path):
@@ -175,11 +226,17 @@ def test_only_the_least_recently_used_entries_beyond_keep_are_removed(cache, mon
     monkeypatch.setattr(C, "KEEP", 2)
     cache.mkdir()
     (cache / "notes.txt").write_text("mine")
+    (cache / "my.task.pt").write_text("mine too: not named like an entry")
+    old_temp, new_temp = cache / ".0123.task.pt.x1.tmp", cache / ".4567.task.pt.x2.tmp"
+    old_temp.write_text("a killed write")
+    new_temp.write_text("a write under way")
+    os.utime(old_temp, (1, 1))
     for h in (300, 301, 302):
         _load(f"data.heldout={h}")
         for i, p in enumerate(sorted(cache.glob("*.task.pt"), key=lambda p: p.stat().st_mtime)):
             os.utime(p, (1000 + i, 1000 + i))  # mtimes in the order written, whatever the clock's resolution
-    assert len(list(cache.glob("*.task.pt"))) == 2 and (cache / "notes.txt").read_text() == "mine"
+    assert len(list(cache.glob("[0-9a-f]*.task.pt"))) == 2 and (cache / "notes.txt").read_text() == "mine"
+    assert (cache / "my.task.pt").exists() and new_temp.exists() and not old_temp.exists()
     assert _load("data.heldout=300").info["cache"].startswith("stored")  # the oldest was the one removed
 
 
@@ -190,7 +247,7 @@ def test_two_processes_building_one_task_at_once_both_get_it(cache):
         "c = compose_train(os.path.abspath('configs'), ['data.heldout=2000']); t = T.load_task(c.robot, c.data); "
         "print(json.dumps([t.info['cache'].split()[0], float(t.tests.heldout.X.sum())]))"
     )
-    env = {**os.environ, "SELPRES_CACHE": str(cache)}
+    env = {**os.environ, "SELPRES_DATA_CACHE": str(cache)}
     procs = [subprocess.Popen([sys.executable, "-c", code], cwd=REPO, env=env, stdout=subprocess.PIPE, text=True)]
     procs.append(subprocess.Popen([sys.executable, "-c", code], cwd=REPO, env=env, stdout=subprocess.PIPE, text=True))
     outs = [json.loads(p.communicate(timeout=300)[0].strip().splitlines()[-1]) for p in procs]

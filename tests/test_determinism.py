@@ -19,7 +19,7 @@ from conftest import cfg_of, numbers, requires_native
     [pytest.param("reference", marks=pytest.mark.slow), "torch", pytest.param("native", marks=requires_native)],
 )
 def test_same_config_same_numbers(tmp_path, engine, monkeypatch):
-    monkeypatch.setenv("SELPRES_CACHE", "off")  # both runs simulate their data (selpres.data.cache)
+    monkeypatch.setenv("SELPRES_DATA_CACHE", "off")  # both runs simulate their data (selpres.data.cache)
     a = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2", f"engine={engine}"), tmp_path / "a")
     task._task.cache_clear()  # the second run rebuilds its data too, as a new process would
     b = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2", f"engine={engine}"), tmp_path / "b")

@@ -107,7 +107,7 @@ def test_sobol_points_cover_their_box_more_evenly_than_random():
 
 
 def test_streams_are_independent_and_deterministic(monkeypatch):
-    monkeypatch.setenv("SELPRES_CACHE", "off")  # both builds simulate (selpres.data.cache)
+    monkeypatch.setenv("SELPRES_DATA_CACHE", "off")  # both builds simulate (selpres.data.cache)
     base = (
         "robot=planar3",
         "data.n=300",

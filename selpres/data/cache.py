@@ -3,11 +3,12 @@
 The default ``python train.py`` spent 0.10-0.13 s of its 0.3 s job simulating the paper's grid (1,050,625
 candidates) and drawing its 10,000 held-out patterns; a drawn PUMA set takes seconds. Loading the same task
 takes ~2 ms. A task is stored under a key that holds everything it is a function of: the robot and data
-configs, the source of the code that builds tasks (``selpres/arms``, ``selpres/data``, ``seeding.py``), and
+configs, the source of the code that builds tasks (``selpres/arms``, ``selpres/data``, ``seeding.py``,
+``storage.py``), and
 torch's and numpy's versions and the machine type, so an edit to any of them builds afresh. Tasks read from a
 user's file (a CSV, a URDF) are not stored: reading the file is most of their cost.
 
-Where: ``$SELPRES_CACHE`` if set (``off`` turns the cache off), else ``$XDG_CACHE_HOME/selpres/tasks``, else
+Where: ``$SELPRES_DATA_CACHE`` if set (``off`` turns the cache off), else ``$XDG_CACHE_HOME/selpres/tasks``, else
 ``~/.cache/selpres/tasks``. What a job did is recorded in results.json ``data.cache`` (``hit``, ``stored``,
 ``off``, or why it was not stored). Entries are written atomically (a racing job writes the same bytes) and only
 entries of this cache are ever replaced or removed (the oldest beyond :data:`KEEP`).
@@ -21,6 +22,8 @@ import json
 import logging
 import os
 import platform
+import re
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -37,11 +40,13 @@ KEEP = 16  # entries kept; the least recently used beyond it are removed
 MAX_BYTES = 512 * 2**20  # a larger task is not stored (a 10^6-pattern PUMA set is ~150 MB)
 FORMAT = 1  # bump when the stored layout below changes
 _SUFFIX = ".task.pt"
+_NAME = re.compile(r"[0-9a-f]{32}" + re.escape(_SUFFIX))  # the entries' names (key + suffix): nothing else is removed
+STALE_TEMP_S = 3600.0  # a temp file this old is a killed write's, not a running one's
 
 
 def cache_dir() -> Path | None:
-    """The cache folder (None: turned off by SELPRES_CACHE=off)."""
-    env = os.environ.get("SELPRES_CACHE")
+    """The cache folder (None: turned off by SELPRES_DATA_CACHE=off)."""
+    env = os.environ.get("SELPRES_DATA_CACHE")
     if env is not None:
         return None if env.strip().lower() in ("off", "0", "false", "") else Path(env).expanduser()
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
@@ -53,7 +58,8 @@ def code_digest() -> str:
     """sha256 of the source that builds tasks and of the numeric libraries' versions."""
     root = Path(__file__).resolve().parents[1]  # selpres/
     h = hashlib.sha256(f"{FORMAT} {torch.__version__} {np.__version__} {platform.machine()}".encode())
-    files = [*sorted((root / "arms").rglob("*.py")), *sorted((root / "data").rglob("*.py")), root / "seeding.py"]
+    files = [*sorted((root / "arms").rglob("*.py")), *sorted((root / "data").rglob("*.py"))]
+    files += [root / "seeding.py", root / "storage.py"]  # storage: the config hash a task records
     for p in files:
         h.update(str(p.relative_to(root)).encode() + b"\0" + p.read_bytes() + b"\0")
     return h.hexdigest()
@@ -63,18 +69,24 @@ def key(robot_json: str, data_json: str) -> str:
     return hashlib.sha256(f"{code_digest()}\0{robot_json}\0{data_json}".encode()).hexdigest()[:32]
 
 
+def _own(x):
+    """A tensor's own copy: torch.save writes a view's whole storage (the held-out set is a view of its draws)."""
+    return x.clone() if isinstance(x, torch.Tensor) else x
+
+
 def _pack(task) -> dict:
     ex, t = task.exemplar, task.tests
+    sc = task.scaler
     return {
-        "exemplar": (ex.X, ex.Y, ex.n_candidates),
-        "test10": (t.test10.X, t.test10.Y, t.test10_from_exemplar),
-        "heldout": (t.heldout.X, t.heldout.Y),
-        "scaler": (task.scaler.x_min, task.scaler.x_max, task.scaler.y_min, task.scaler.y_max),
-        "scaler_range": (task.scaler.lo, task.scaler.hi),
+        "exemplar": (_own(ex.X), _own(ex.Y), ex.n_candidates),
+        "test10": (_own(t.test10.X), _own(t.test10.Y), _own(t.test10_from_exemplar)),
+        "heldout": (_own(t.heldout.X), _own(t.heldout.Y)),
+        "scaler": tuple(_own(v) for v in (sc.x_min, sc.x_max, sc.y_min, sc.y_max)),
+        "scaler_range": (sc.lo, sc.hi),
         "names": (list(task.input_names), list(task.output_names)),
         "json": json.dumps({"info": task.info, "arm": task.arm}),
-        "wrench": task.wrench,
-        "commanded": None if task.commanded is None else list(task.commanded),
+        "wrench": _own(task.wrench),
+        "commanded": None if task.commanded is None else [_own(v) for v in task.commanded],
     }
 
 
@@ -100,16 +112,24 @@ def cached(robot_json: str, data_json: str, build: Callable[[], Any], make: Call
     folder = cache_dir()
     if folder is None:
         task = build()
-        task.info["cache"] = "off (SELPRES_CACHE=off)"
+        task.info["cache"] = "off (SELPRES_DATA_CACHE=off)"
         return task
     path = folder / (key(robot_json, data_json) + _SUFFIX)
-    if path.is_file():
+    try:
+        present = path.is_file()
+    except OSError as e:  # a folder this user cannot read: build, and say so when storing fails too
+        log.warning("data cache: cannot look in %s (%s); building the task", folder, e.strerror or e)
+        present = False
+    if present:
         try:
             task = _unpack(torch.load(path, weights_only=True), make)
-        except Exception as e:  # a cut or foreign file: build afresh and replace it (it is this cache's)
+        except Exception as e:  # a cut or foreign file, or one removed meanwhile: build afresh and replace it
             log.warning("data cache: %s cannot be read (%s); building the task again", path, e)
         else:
-            os.utime(path)  # recently used
+            try:
+                os.utime(path)  # recently used (a read-only or shared cache cannot record it: no matter)
+            except OSError:
+                pass
             task.info["cache"] = f"hit ({path})"
             return task
     task = build()
@@ -140,7 +160,8 @@ def _tensors(obj):
 
 
 def _evict(folder: Path) -> None:
-    """Remove this cache's least recently used entries beyond KEEP (only files named like its entries)."""
+    """Remove this cache's least recently used entries beyond KEEP and its killed writes' temp files (only
+    files named like its own)."""
 
     def used(p: Path) -> float:
         try:
@@ -148,5 +169,10 @@ def _evict(folder: Path) -> None:
         except FileNotFoundError:  # a racing job removed it
             return 0.0
 
-    for p in sorted(folder.glob("*" + _SUFFIX), key=used, reverse=True)[KEEP:]:
+    ours = [p for p in folder.glob("*" + _SUFFIX) if _NAME.fullmatch(p.name)]
+    for p in sorted(ours, key=used, reverse=True)[KEEP:]:
         p.unlink(missing_ok=True)
+    now = time.time()
+    for p in folder.glob(f".*{_SUFFIX}.*.tmp"):  # left by a killed write (selpres.storage.atomic_write)
+        if now - used(p) > STALE_TEMP_S:
+            p.unlink(missing_ok=True)

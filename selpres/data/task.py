@@ -142,8 +142,8 @@ def task_shape(robot_cfg, data_cfg) -> Shape:
 def load_task(robot_cfg: DictConfig, data_cfg: DictConfig) -> Task:
     """The task of a robot/data config (cached); raises ConfigError, writes nothing."""
     robot, data = to_container(robot_cfg), to_container(data_cfg)
-    files = [p for p in (robot.get("path"), data.get("path")) if isinstance(p, str)]
-    stamp = [(p, Path(p).stat().st_mtime_ns, Path(p).stat().st_size) for p in files if Path(p).is_file()]
+    files = [Path(p).expanduser() for p in (robot.get("path"), data.get("path")) if isinstance(p, str)]
+    stamp = [(str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in files if p.is_file()]
     return _task(json.dumps(robot, sort_keys=True), json.dumps(data, sort_keys=True), json.dumps(stamp))
 
 
@@ -158,8 +158,8 @@ def _task(robot_json: str, data_json: str, files: str) -> Task:
         task.info["hash"] = E.config_hash(robot_cfg, data_cfg)
         return task
 
-    if json.loads(files):  # read from the user's files: reading them is most of the cost (selpres.data.cache)
-        task = build()
+    if kind == "file" or robot_cfg.get("kind") == "urdf":  # the user's files: reading them is most of the cost,
+        task = build()  # and the key holds their paths, not their contents (selpres.data.cache)
         task.info["cache"] = "not stored (read from a file)"
     else:
         task = cached(robot_json, data_json, build, Task)
@@ -174,7 +174,7 @@ def _task(robot_json: str, data_json: str, files: str) -> Task:
         i["source"],
         len(task.tests.test10),
         len(task.tests.heldout),
-        "; loaded from the data cache (SELPRES_CACHE=off builds it)" if i["cache"].startswith("hit") else "",
+        "; loaded from the data cache (SELPRES_DATA_CACHE=off builds it)" if i["cache"].startswith("hit") else "",
     )
     return task
 

@@ -33,7 +33,8 @@ def job_hash(cfg: DictConfig) -> str:
     for k in NOT_IDENTITY:
         c.pop(k, None)
     files = [c[g].get("path") for g in ("robot", "data")]
-    c["file_sha256"] = [file_digest(p) if isinstance(p, str) and Path(p).is_file() else None for p in files]
+    paths = [Path(p).expanduser() if isinstance(p, str) else None for p in files]  # as the readers open them
+    c["file_sha256"] = [file_digest(p) if p is not None and p.is_file() else None for p in paths]
     return stable_hash(c)
 
 
