@@ -105,3 +105,16 @@ def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
         assert all(c > 0 for c in pr["charged_presentations"])
     else:
         assert all(c == 0 for c in pr["charged_presentations"]) and all(x > 0 for x in pr["left_out"])
+
+
+def test_a_pruning_jobs_identity_carries_the_update_that_runs_it(monkeypatch):
+    """A paper-regime pruning job finished on the mini-batch engine (before issue 22 moved it to the online
+    engines) must not be taken for one of today's: its job hash depends on the routing. Other jobs' do not."""
+    import selpres.run.results as R
+
+    pruned = cfg_of("schedule=infobatch", "schedule.epochs=[2]")
+    plain = cfg_of()
+    today = R.job_hash(pruned), R.job_hash(plain)
+    monkeypatch.setattr(R, "minibatch_reason", lambda cfg: "the routing before issue 22")
+    assert R.job_hash(pruned) != today[0]
+    assert R.job_hash(plain) == today[1]

@@ -408,12 +408,12 @@ def test_a_write_the_kernel_refuses_is_one_line_and_the_rerun_resumes(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("delay", [0.5, 3.0])
 def test_ctrl_c_during_set_up_leaves_a_folder_that_existed_as_it_was(tmp_path, delay):
-    """The job is long (900 epochs a stage) so it is still running when the Ctrl-C comes: a SIGINT that reached a
-    job already exiting would find Python's finalisation, which restores SIG_DFL (exit -2, nothing to test)."""
+    """The job is long (9000 epochs a stage: a minute or more) so it is still running when the Ctrl-C comes: a
+    SIGINT that reached a job already exiting would find Python's finalisation, which restores SIG_DFL (exit -2)."""
     out = tmp_path / "D"
     out.mkdir()
     (out / "mine.txt").write_text("keep")
-    p = _train(*TINY, "replicas=20", "schedule.epochs=[900,900,900,900,900]", f"hydra.run.dir={out}",
+    p = _train(*TINY, "replicas=20", "schedule.epochs=[9000,9000,9000,9000,9000]", f"hydra.run.dir={out}",
                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # fmt: skip
     time.sleep(delay)
     p.send_signal(signal.SIGINT)

@@ -362,6 +362,7 @@ def test_runs_lists_failed_missing_diverged_and_files_written(sweep, tmp_path, c
     "swept, listed",
     [
         ({"schedule": "selective,conventional,matched,random_growth", "topology": "6-4-2,6-8-2"}, True),
+        ({"design/arm": "puma560,two_link", "data.n": "1000,10000", "schedule": "conventional,selective"}, True),
         ({"design": "a,b,c"}, False),  # design points: each its own topology and schedule, no grid
     ],
 )
@@ -376,7 +377,7 @@ def test_cells_with_no_folder_are_listed_only_for_a_sweep_that_crossed_them(swee
     ctx = Context.load(sweep)
     rows = runs_rows(ctx.jobs, ctx.groups, ctx.topologies, ctx.methods, sweep)
     assert any(r["job"] == "(no folder)" for r in rows) == listed
-    OmegaConf.save({"hydra": {"overrides": {"task": ["schedule=selective,matched", "topology=6-4-2,6-8-2"]}}},
+    OmegaConf.save({"hydra": {"overrides": {"task": ["schedule=selective,matched", "topology=6-4-2,6-8-2", "seed=0"]}}},
                    sweep / "multirun.yaml")  # fmt: skip
     rows = runs_rows(ctx.jobs, ctx.groups, ctx.topologies, ctx.methods, sweep)
     assert any(r["job"] == "(no folder)" for r in rows)

@@ -1,9 +1,9 @@
 """Every job folder with its status (complete, diverged, failed, missing), and the grid cells with none.
 
-A (topology, method) cell with no folder is listed only when the sweep crossed the two: its ``multirun.yaml``
-sweeps a topology and a schedule (Table 1's ``schedule=... topology=...``). A sweep over design points (each its
-own topology and schedule, e.g. ``experiment=modern``) is no grid: crossing it listed 24 cells no job was meant to
-fill. Without a ``multirun.yaml`` (folders gathered by hand) every cell is expected, as before."""
+A (topology, method) cell with no folder is listed only when the sweep is a grid: its ``multirun.yaml`` sweeps
+two or more keys (Table 1's ``schedule=... topology=...``; ``experiment=large``'s arm x n x schedule). One list of
+design points (each its own topology and schedule, e.g. ``experiment=modern``) is no grid: crossing it listed 24
+cells no job was meant to fill. Without a ``multirun.yaml`` (folders gathered by hand) every cell is expected."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ def _diverged_epoch(rep: dict):
 
 
 def crossed(sweep: Path) -> bool:
-    """Whether the sweep is a topology x schedule grid (see the module's docstring)."""
+    """Whether the sweep is a grid (see the module's docstring)."""
     try:
         hydra = OmegaConf.load(sweep / "multirun.yaml").hydra
     except Exception:  # none (folders gathered by hand) or unreadable: every cell is expected, as before
@@ -32,7 +32,9 @@ def crossed(sweep: Path) -> bool:
         key, _, value = str(o).partition("=")
         if "," in value or value.startswith(("range(", "choice(", "glob(")):
             swept.add(key.lstrip("+~"))
-    return any(k.split(".")[0] == "topology" for k in swept) and any(k.split(".")[0] == "schedule" for k in swept)
+    # a grid has at least two swept dimensions (Table 1: schedule x topology; experiment=large: design/arm, which
+    # sets the topology, x data.n x schedule); one list of design points (experiment=modern, sensitivity) is none
+    return len(swept) >= 2
 
 
 def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path) -> list[dict]:
