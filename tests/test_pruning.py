@@ -107,14 +107,23 @@ def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
         assert all(c == 0 for c in pr["charged_presentations"]) and all(x > 0 for x in pr["left_out"])
 
 
-def test_a_pruning_jobs_identity_carries_the_update_that_runs_it(monkeypatch):
+def test_a_finished_job_of_another_update_is_run_again(tmp_path, caplog):
     """A paper-regime pruning job finished on the mini-batch engine (before issue 22 moved it to the online
-    engines) must not be taken for one of today's: its job hash depends on the routing. Other jobs' do not."""
-    import selpres.run.results as R
+    engines) is not taken as done: results.json's engine must run the update this config now gets."""
+    import json
 
-    pruned = cfg_of("schedule=infobatch", "schedule.epochs=[2]")
-    plain = cfg_of()
-    today = R.job_hash(pruned), R.job_hash(plain)
-    monkeypatch.setattr(R, "minibatch_reason", lambda cfg: "the routing before issue 22")
-    assert R.job_hash(pruned) != today[0]
-    assert R.job_hash(plain) == today[1]
+    from selpres.run.cli import _finished
+    from selpres.run.results import job_hash
+
+    paper = cfg_of("schedule=infobatch", "schedule.epochs=[2]")
+    adam = cfg_of("schedule=infobatch", "schedule.epochs=[2]", "optim=adam_minibatch", "model.activation=relu")
+
+    def finished(cfg, engine):
+        (tmp_path / "results.json").write_text(
+            json.dumps({"status": "complete", "config_hash": job_hash(cfg), "engine": engine})
+        )
+        return _finished(tmp_path, cfg)
+
+    assert finished(paper, "minibatch") is None and "running it again" in caplog.text
+    assert finished(paper, "native") is not None and finished(paper, "reference") is not None
+    assert finished(adam, "minibatch") is not None and finished(adam, "native") is None

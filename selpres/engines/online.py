@@ -142,20 +142,19 @@ class ReferenceEngine(ScoredByPredict):
             for start in range(0, c, self.batch_size):
                 idx = order[r, start : min(start + self.batch_size, c)]
                 out = model(X[idx])
-                if weights is None:
+                if counts is None:
                     loss = F.mse_loss(out, Y[idx])
-                else:  # the mean over the mini-batch of each pattern's weighted mse
-                    loss = (
-                        F.mse_loss(out, Y[idx], reduction="none").mean(-1) * weights[r, start : start + len(idx)]
-                    ).mean()
-                if counts is not None:
-                    per = F.mse_loss(out.detach(), Y[idx], reduction="none").mean(-1)
+                else:  # each pattern's mse; the loss is their mean over the mini-batch, each weighted
+                    per = F.mse_loss(out, Y[idx], reduction="none").mean(-1)
+                    w = 1.0 if weights is None else weights[r, start : start + len(idx)]
+                    loss = (per * w).mean()
+                    per = per.detach()
                     self.last_losses[r, start : start + len(idx)] = per
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
                 # the epoch's loss is unweighted: the batch mean back to a per-pattern sum
-                total += loss.item() * len(idx) if weights is None else float(per.sum())
+                total += loss.item() * len(idx) if counts is None else float(per.sum())
             losses[r] = total / c if c else float("nan")
         return losses
 
@@ -349,12 +348,8 @@ class NativeEngine:
         # spinning threads then compete with the kernel's threads for the cores
         if self.R == self.G * self.LANES and order.dtype == torch.int64 and order.is_contiguous():
             padded_order = order  # no padding lanes: the kernel reads the orders as they are
-        else:
-            o = order.detach().cpu().numpy()
-            padded = np.empty((self.G * self.LANES, m), dtype=np.int64)
-            padded[: self.R] = o
-            padded[self.R :] = o[:1]  # the padding lanes shadow replica 0 (see _pack)
-            padded_order = torch.from_numpy(padded)
+        else:  # the padding lanes shadow replica 0 (see _pack)
+            padded_order = torch.from_numpy(self._lanes(order.detach().cpu().numpy().astype(np.int64, copy=False)))
         loss = torch.zeros(self.G * self.LANES, dtype=torch.float64)
         pruned = {}
         if counts is not None:  # per lane, the padding lanes shadowing replica 0 (numpy: see above)

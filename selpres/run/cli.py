@@ -34,7 +34,7 @@ from omegaconf import DictConfig
 from selpres.errors import ConfigError
 from selpres.run import guard, lock, orphan
 from selpres.run.checkpoint import Checkpoints
-from selpres.run.problem import Problem
+from selpres.run.problem import Problem, engine_kind, kind_of
 from selpres.run.results import job_hash
 from selpres.run.train import train
 from selpres.storage import RESULTS, remove_stale_temps, write_json
@@ -49,6 +49,9 @@ class SweepJobError(CompactHydraException):
 
 # ---------------------------------------------------------------------------------------- the job
 def _finished(out: Path, cfg: DictConfig) -> dict | None:
+    """The finished results of this job, if any: its config (job_hash) and the engines that ran it as this config
+    would run now (a routing change, as issue 22's move of paper-regime pruning jobs off the mini-batch engine,
+    makes a finished result another update's)."""
     path = out / RESULTS
     if not path.exists():
         return None
@@ -59,7 +62,10 @@ def _finished(out: Path, cfg: DictConfig) -> dict | None:
     if not isinstance(res, dict):
         return None
     if res.get("status") in ("complete", "diverged") and res.get("config_hash") == job_hash(cfg):
-        return res
+        ran, now = kind_of(res.get("engine")), engine_kind(cfg)
+        if ran == now:
+            return res
+        log.warning("%s ran on the %s engines; this config now runs on the %s ones: running it again", path, ran, now)
     return None
 
 

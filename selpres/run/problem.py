@@ -146,14 +146,28 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
         raise with_fraction_form(e, sizes) from None
 
 
+def engine_kind(cfg: DictConfig) -> str:
+    """The update a config's job runs: ``minibatch`` (selpres.engines.minibatch), ``batch`` (one step an epoch)
+    or ``online`` (the native, torch and reference engines: one update rule)."""
+    if minibatch_reason(cfg) is not None:
+        return "minibatch"
+    return "batch" if batch_mode(cfg.optim) else "online"
+
+
+def kind_of(engine_name: str | None) -> str:
+    """:func:`engine_kind` of an engine that ran (results.json ``engine``; records older than it name none)."""
+    return engine_name if engine_name in ("minibatch", "batch") else "online"
+
+
 def job_engine(cfg: DictConfig, prob: Problem):
     """The engine the config asks for; ``engine=native`` where the kernel cannot run is a user error.
     Batch methods (QuickProp, Delta-Bar-Delta, Rprop, Adam, batch SGD) step once per epoch in torch."""
     from selpres.native import KernelUnavailable
 
     o = cfg.optim
-    reason = minibatch_reason(cfg)
-    if reason is not None:
+    kind = engine_kind(cfg)
+    if kind == "minibatch":
+        reason = minibatch_reason(cfg)
         log.warning("engine %s runs the mini-batch torch engine: %s", cfg.engine.value, reason)
         return MiniBatchEngine(
             prob.sizes,
@@ -167,7 +181,7 @@ def job_engine(cfg: DictConfig, prob: Problem):
             o.reduction.value,
             fallback_reason=reason,
         )
-    if batch_mode(o):
+    if kind == "batch":
         return BatchEngine(
             prob.sizes,
             prob.init_params,

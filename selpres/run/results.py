@@ -18,7 +18,6 @@ from omegaconf import DictConfig
 from selpres.data.file import file_digest
 from selpres.presentation.sampler import shuffle_implementation
 from selpres.run import floor
-from selpres.run.checks import minibatch_reason
 from selpres.run.stats import summarize
 from selpres.storage import stable_hash, to_container
 
@@ -36,11 +35,6 @@ def job_hash(cfg: DictConfig) -> str:
     files = [c[g].get("path") for g in ("robot", "data")]
     paths = [Path(p).expanduser() if isinstance(p, str) else None for p in files]  # as the readers open them
     c["file_sha256"] = [file_digest(p) if p is not None and p.is_file() else None for p in paths]
-    if cfg.schedule.pruning is not None:
-        # which update a pruning job runs changed with its routing (issue 22: sigmoid/SGD/constant-rate ones moved
-        # from the mini-batch engine's ½Σe² to the online engines' mean over the outputs): a job finished under
-        # the old one must not be taken for this one (other jobs' hashes are as they were)
-        c["update"] = "minibatch" if minibatch_reason(cfg) is not None else "online"
     return stable_hash(c)
 
 
