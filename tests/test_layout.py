@@ -9,7 +9,7 @@ from pathlib import Path
 
 from conftest import REPO
 
-FOUNDATION = ("selpres.errors", "selpres.seeding", "selpres.storage", "selpres.native")
+FOUNDATION = ("selpres.errors", "selpres.registry", "selpres.seeding", "selpres.storage", "selpres.native")
 ROOMS = ("arms", "data", "presentation", "engines", "run", "report", "bench")
 MAX_LINES = 450
 

@@ -1,0 +1,77 @@
+"""Registries: where the built-in choices of one kind live, and how a user names their own.
+
+A built-in choice is one module of its kind's package: ``selpres/engines/optim/lion.py`` *is* the optimizer
+``lion``, exporting the class under the kind's entry name (e.g. ``OPTIMIZER = Lion``). The registry lists the
+package's modules without importing them (``--help`` and the config checks need no torch) and imports one only
+when it is asked for, so adding a choice is one module and one YAML, and no list is kept in step by hand.
+Modules whose names start with ``_`` are the package's helpers, not choices.
+
+A user's own choice lives outside the package and is named by its import path, as Hydra's ``_target_`` names a
+class (``mylion.Lion``, ``torch.optim.NAdam``): a dotted name is always an import path, a plain one a built-in.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from dataclasses import dataclass
+from functools import cached_property
+
+from selpres.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Registry:
+    """The choices of one kind: ``key`` is the config key that names one (for errors), ``package`` holds the
+    built-ins (one module each), ``entry`` the attribute each built-in module exports."""
+
+    key: str
+    package: str
+    entry: str
+
+    @cached_property
+    def names(self) -> tuple[str, ...]:
+        """The built-in choices, sorted: the package's public modules (none is imported)."""
+        pkg = importlib.import_module(self.package)
+        return tuple(sorted(m.name for m in pkgutil.iter_modules(pkg.__path__) if not m.name.startswith("_")))
+
+    def allowed(self) -> str:
+        return f"one of {', '.join(self.names)}, or a class by its import path (package.module.Class)"
+
+    def check(self, name) -> str:
+        """``name`` if it is a built-in or looks like an import path, else a ConfigError naming the choices.
+        Imports nothing: an import path is resolved (and its failure reported) by :meth:`get`."""
+        if not isinstance(name, str) or not name or (name not in self.names and not is_path(name)):
+            raise ConfigError(self.key, name, self.allowed())
+        return name
+
+    def get(self, name: str):
+        """The class (or object) a built-in module exports as ``entry``, or the one an import path names."""
+        self.check(name)
+        if is_path(name):
+            return locate(self.key, name)
+        return getattr(importlib.import_module(f"{self.package}.{name}"), self.entry)
+
+    def path_of(self, name: str) -> str:
+        """The import path of what ``name`` resolves to (results.json records it)."""
+        obj = self.get(name)
+        return f"{obj.__module__}.{obj.__qualname__}"
+
+
+def is_path(name: str) -> bool:
+    return "." in name
+
+
+def locate(key: str, path: str):
+    """The object at the import path ``path`` (``package.module.Name``), or a ConfigError saying why not."""
+    module, _, attr = path.rpartition(".")
+    if not module or not attr:
+        raise ConfigError(key, path, "an import path package.module.Name")
+    try:
+        mod = importlib.import_module(module)
+    except ImportError as e:
+        raise ConfigError(key, path, f"an importable module ({module}: {e}; is it on PYTHONPATH?)") from None
+    try:
+        return getattr(mod, attr)
+    except AttributeError:
+        raise ConfigError(key, path, f"a name defined in module {module} (it has no {attr!r})") from None
