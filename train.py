@@ -14,7 +14,7 @@ except KeyboardInterrupt:
     sys.exit(130)
 
 
-@hydra.main(version_base="1.3", config_path="configs", config_name="train")
+@hydra.main(version_base="1.3", config_path="selpres/configs", config_name="train")
 def main(cfg: DictConfig) -> float:
     from selpres.run.cli import run_job  # torch and the loop only for a job, not for --help or --cfg
 

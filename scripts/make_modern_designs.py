@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-OUT = Path(__file__).resolve().parents[1] / "configs" / "design" / "modern"
+OUT = Path(__file__).resolve().parents[1] / "selpres" / "configs" / "design" / "modern"
 PAPER_N, PAPER_SIZES = 1002, (50, 100, 400, 800)
 # arm -> (robot, topology, n, epochs N): N sized so that the whole experiment fits 15 min on 2 shared cores
 ARMS = {"two_link": ("two_link", "6-13-2", 10_000, 20), "puma560": ("puma560", "18-40-6", 100_000, 5)}

@@ -12,7 +12,7 @@ import pytest
 from omegaconf import OmegaConf
 
 REPO = Path(__file__).resolve().parents[1]
-CONFIGS = REPO / "configs"
+CONFIGS = REPO / "selpres" / "configs"
 
 # the tests' own data cache (selpres.data.cache), shared by this session's jobs and the processes they start,
 # never the user's ~/.cache; a test about building data turns it off (monkeypatch.setenv("SELPRES_DATA_CACHE", "off"))

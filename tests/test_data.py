@@ -15,7 +15,7 @@ from selpres.arms.two_link import TwoLinkArm
 from selpres.data import export as E
 from selpres.data import paper as D
 
-CONFIGS = Path(__file__).parents[1] / "configs"
+CONFIGS = Path(__file__).parents[1] / "selpres" / "configs"
 ROBOT_CFG = OmegaConf.load(CONFIGS / "robot/two_link.yaml")
 DATA_CFG = OmegaConf.load(CONFIGS / "data/paper.yaml")
 ARM = TwoLinkArm.from_config(ROBOT_CFG)

@@ -1,4 +1,4 @@
-"""Typed configuration schema (Hydra structured configs): types here, values in ``configs/``.
+"""Typed configuration schema (Hydra structured configs): types here, values in ``selpres/configs/``.
 
 The dataclasses are registered in Hydra's ConfigStore as ``selpres_schema`` and listed first in
 ``configs/train.yaml``'s defaults, so omegaconf itself rejects unknown keys and wrong types with a
@@ -17,7 +17,7 @@ from typing import Any, List, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, OmegaConf
 
-CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"  # train.py's configs (a source checkout)
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"  # shipped in the package (wheel and checkout alike)
 
 
 class EngineName(Enum):
