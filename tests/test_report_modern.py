@@ -12,9 +12,9 @@ from selpres.data.task import load_task
 from selpres.report.build import Report
 from selpres.report.compare import Options
 from selpres.report.context import Context
-from selpres.report.sections import modern
 from selpres.run.stats import holm, t_test
 from selpres.run.train import train
+from selpres.studies import modern
 
 from conftest import cfg_of
 

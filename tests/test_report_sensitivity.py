@@ -12,8 +12,8 @@ from selpres.report import aggregate, load_jobs
 from selpres.report.build import Report
 from selpres.report.families import families, family_name, paper_conventional
 from selpres.report.sections.error_cost import grid, plane_rows
-from selpres.report.sections.sensitivity import verdict_text
-from selpres.report.sensitivity import sensitivity_rows
+from selpres.studies._sensitivity import sensitivity_rows
+from selpres.studies.sensitivity import verdict_text
 
 T = "6-4-2"
 # selective presentation, three stage-size lists (n_1 = 50, 100, 200; N_i = 30): 31,560 / 33,060 / 36,060 t

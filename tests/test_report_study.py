@@ -17,8 +17,8 @@ from selpres.report.build import Report
 from selpres.report.compare import time_to_target_rows
 from selpres.report.families import families, paper_conventional
 from selpres.report.sections.error_cost import plane_rows
-from selpres.report.sections.sensitivity import verdict_text
-from selpres.report.sensitivity import sensitivity_rows
+from selpres.studies._sensitivity import sensitivity_rows
+from selpres.studies.sensitivity import verdict_text
 
 T = "6-4-2"
 # what configs/optim/*.yaml leave unset for an optimizer that does not use the key
@@ -198,7 +198,7 @@ def test_spread_level_and_the_papers_total_by_hand(study):
 
 
 def test_each_selective_setting_beside_its_budget_matched_partner(study):
-    from selpres.report.sensitivity import versus_matched_rows
+    from selpres.studies._sensitivity import versus_matched_rows
 
     groups, tops, _ = grouped(study)
     rows = {r["sizes"] + "/" + r["epochs"]: r for r in versus_matched_rows(groups, tops)}
@@ -217,7 +217,7 @@ def test_each_selective_setting_beside_its_budget_matched_partner(study):
 
 
 def test_verdict_separates_spread_from_level_and_answers_with_numbers(study):
-    from selpres.report.sensitivity import versus_matched_rows
+    from selpres.studies._sensitivity import versus_matched_rows
 
     groups, tops, _ = grouped(study)
     rows = sensitivity_rows(groups, tops)

@@ -1,8 +1,15 @@
 """The report: its sections in order, rendered to one Markdown file plus the CSV and PNG files behind it.
 
-A new section (sensitivity, error–cost plane, selection verdicts, ...) is a module in ``sections/`` with
-``section(ctx) -> Section | None`` (None: the sweep lacks what the section needs), added to
-:data:`SECTIONS` where it should appear.
+Two kinds of section. The *generic* ones (Table 1's grid, the verdicts, time to target, the plots, the runs) read
+any sweep and live in ``sections/``. A *study's* section (the modern study, selection, sensitivity, ...) is one
+module of :mod:`selpres.studies`, found by :data:`STUDIES` (a registry: the package's public modules, listed
+without importing them), exporting ``SECTION(ctx) -> Section | list[Section] | None`` (None: the study does not
+apply to this sweep). So a new study is one module there and no list here; the library and ``import
+selpres.report`` import no study until a report is built.
+
+Order: the sections of the studies that apply lead (the study the sweep ran, its recorded ``experiment=NAME``,
+first; the others by name), then the generic ones: Table 1's grid and its verdicts next for Table 1's grid of
+the paper's methods, last (compact) for a study of parameters.
 """
 
 from __future__ import annotations
@@ -10,46 +17,27 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from selpres.registry import Registry
 from selpres.report.compare import Options
 from selpres.report.context import Context, Section
 from selpres.report.markdown import to_csv
-from selpres.report.sections import (
-    error_cost,
-    modern,
-    plots,
-    runs,
-    selection,
-    sensitivity,
-    table1,
-    time_to_target,
-    verdict,
-)
+from selpres.report.sections import plots, runs, table1, time_to_target, verdict
 from selpres.storage import atomic_write
 
-# a section that has nothing to show for a sweep returns None and is left out
-SECTIONS = [
-    modern.section,
-    table1.section,
-    verdict.section,
-    selection.section,
-    sensitivity.section,
-    error_cost.section,
-    time_to_target.section,
-    plots.section,
-    runs.section,
-]
-# a study of parameters (not Table 1's grid): the sections it is about first, Table 1's (compact) last
-STUDY_SECTIONS = [
-    modern.section,
-    sensitivity.section,
-    error_cost.section,
-    selection.section,
-    time_to_target.section,
-    plots.section,
-    table1.section,
-    verdict.section,
-    runs.section,
-]
+STUDIES = Registry("report.study", "selpres.studies", "SECTION")
+# the generic sections, for Table 1's grid and for a study of parameters; a section with nothing to show is left out
+TABLE1_SECTIONS = [table1.section, verdict.section, time_to_target.section, plots.section, runs.section]
+STUDY_SECTIONS = [time_to_target.section, plots.section, table1.section, verdict.section, runs.section]
+
+
+def study_sections(ctx: Context) -> list[Section]:
+    """The sections of every study that applies to the sweep: the one it ran first, then the others by name."""
+    names = sorted(STUDIES.names, key=lambda name: (name != ctx.experiment, name))
+    out = []
+    for name in names:
+        made = STUDIES.get(name)(ctx)
+        out += made if isinstance(made, list) else [made] if made is not None else []
+    return out
 
 
 def write_text(path: Path, text: str) -> None:
@@ -66,8 +54,8 @@ class Report:
     @classmethod
     def build(cls, sweep: Path, options: Options | None = None) -> Report:
         ctx = Context.load(sweep, options)
-        order = SECTIONS if ctx.table1_like else STUDY_SECTIONS
-        return cls(ctx, [s for make in order if (s := make(ctx)) is not None])
+        generic = TABLE1_SECTIONS if ctx.table1_like else STUDY_SECTIONS
+        return cls(ctx, study_sections(ctx) + [s for make in generic if (s := make(ctx)) is not None])
 
     @property
     def markdown(self) -> str:

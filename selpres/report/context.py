@@ -6,6 +6,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from omegaconf import OmegaConf
+
 from selpres.report.compare import Options
 from selpres.report.groups import Group, aggregate
 from selpres.report.jobs import Job, load_jobs
@@ -22,11 +24,12 @@ class Context:
     topologies: list[str]
     methods: list[str]
     options: Options = field(default_factory=Options)
+    experiment: str | None = None  # the study the sweep ran (``experiment=NAME``), None when it names none
 
     @classmethod
     def load(cls, sweep: Path, options: Options | None = None) -> Context:
         jobs = load_jobs(sweep)
-        return cls(sweep, jobs, *aggregate(jobs), options=options or Options())
+        return cls(sweep, jobs, *aggregate(jobs), options=options or Options(), experiment=experiment_of(sweep))
 
     @property
     def table1_like(self) -> bool:
@@ -38,6 +41,17 @@ class Context:
     @property
     def warnings(self) -> list[str]:
         return [w for g in self.groups.values() for w in g.warnings]
+
+
+def experiment_of(sweep: Path) -> str | None:
+    """The experiment a sweep ran, as Hydra recorded its choice in the sweep's ``multirun.yaml``
+    (``hydra.runtime.choices.experiment``); None for folders gathered by hand or a sweep without one."""
+    try:
+        hydra = OmegaConf.load(sweep / "multirun.yaml").hydra
+    except Exception:  # none, or unreadable: the sweep names no study
+        return None
+    name = OmegaConf.select(hydra, "runtime.choices.experiment")
+    return str(name) if name else None
 
 
 @dataclass

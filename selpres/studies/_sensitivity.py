@@ -1,6 +1,6 @@
 """The sensitivity study's numbers: per family, its spread over its settings and its level against the best
 method at the same cost; per selective setting, its budget-matched partner. The words around them are
-``selpres.report.sections.sensitivity``."""
+``selpres.studies.sensitivity``."""
 
 from __future__ import annotations
 

@@ -1,13 +1,15 @@
 """Modern training and data pruning (issue 22): every method's final held-out error against its total cost, per
 arm and training regime, and each against conventional training scheduled for the same cost.
 
-A cell is (arm, regime, method): the arm from ``robot``, the regime from the optimizer, its mini-batch and
-the hidden units (the paper's: sigmoid, online SGD), the method from ``schedule.name``. Each method other
-than conventional training is compared with ``matched`` of the same arm and regime: one-stage
-conventional training *scheduled* for the same total cost (its cosine learning rate, where there is one,
-decays to zero at that budget), paired by seed. The family for Holm's correction is every such comparison of
-one metric in the sweep; the readings are the report's three (compare.reading), at the report's margin
-(``--margin``, by default 5 % of the method's own mean). nMSE = mean over joints of MSE ÷ the held-out
+A cell is (arm, regime, method): the arm from ``robot`` (its name, else its file's or its kind), the regime from
+the optimizer, its mini-batch and the hidden units (the paper's: sigmoid, online SGD), the method from the
+schedule's name the job recorded: a pruning policy no code here knows (SeTa, ...) or a new arm gets its rows as
+it is. The study's design (``modern.yaml`` beside this module) names the roles: the *reference* (training at full
+cost, compared with nothing) and the *partner*, one-stage conventional training *scheduled* for the same total
+cost (its cosine learning rate, where there is one, decays to zero at that budget), against which every other
+method of the same arm and regime is compared, paired by seed. The family for Holm's correction is every such
+comparison of one metric in the sweep; the readings are the report's three (compare.reading), at the report's
+margin (``--margin``, by default 5 % of the method's own mean). nMSE = mean over joints of MSE ÷ the held-out
 targets' variance (1 = predicting the mean).
 """
 
@@ -18,34 +20,69 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from omegaconf import OmegaConf
+
 from selpres.report.compare import Options, adjust_family, outcome, paired, paired_columns, reading
 from selpres.report.context import Context, Section
 from selpres.report.markdown import table
 from selpres.run.stats import summarize
 
-METHODS = ("conventional", "selective", "matched", "random_growth", "infobatch", "selective_backprop")
-PARTNER = "matched"
-RIVALS = ("selective", "random_growth", "infobatch", "selective_backprop")
 METRICS = (("rms", "held-out RMS", "Nm"), ("nmse", "held-out nMSE", ""))
-ARM_NAMES = {"two_link": "two-link", "puma560": "PUMA 560"}
-ACTS = {"sigmoid": "sigmoid", "tanh": "tanh", "relu": "ReLU", "silu": "SiLU"}
-OPTS = {"sgd": "SGD", "adam": "Adam", "adamw": "AdamW"}
+DODGE = 0.07  # methods of one cost are drawn side by side within ±7 % of their cost
+DESIGN_FILE = Path(__file__).with_suffix(".yaml")  # modern.yaml: the study's roles and display names
 
 
-def arm_of(cfg: dict) -> str:
+@dataclass(frozen=True)
+class Design:
+    """The study's roles and display names (``modern.yaml``): which recorded method is the reference and which the
+    compute-matched partner, the rows' order, and how arms, optimizers and activations are shown."""
+
+    reference: str
+    partner: str
+    order: tuple[str, ...] = ()
+    arms: dict = field(default_factory=dict)
+    optimizers: dict = field(default_factory=dict)
+    activations: dict = field(default_factory=dict)
+
+    @classmethod
+    def load(cls, path: Path = DESIGN_FILE) -> Design:
+        d = OmegaConf.to_container(OmegaConf.load(path))
+        return cls(**{**d, "order": tuple(d.get("order") or ())})
+
+    def methods(self, found) -> list[str]:
+        """The methods of a sweep in the rows' order: the listed ones first, then the others by name."""
+        found = set(found)
+        listed = [m for m in self.order if m in found]
+        return listed + sorted(found - set(listed))
+
+    def rivals(self, found) -> list[str]:
+        """Every method compared with the partner: all but the reference and the partner itself."""
+        return [m for m in self.methods(found) if m not in (self.reference, self.partner)]
+
+
+DESIGN = Design.load()
+
+
+def arm_of(cfg: dict, design: Design = DESIGN) -> str:
     r = cfg["robot"]
     key = r.get("name") or (r.get("path") and Path(r["path"]).stem) or r.get("kind")
-    return ARM_NAMES.get(str(key), str(key))
+    return design.arms.get(str(key), str(key))
 
 
-def regime_of(cfg: dict) -> str:
+def optimizer_of(o: dict) -> str:
+    """The optimizer's name as the config gave it: its registry name or import path (``_target_``), or the
+    older ``name``."""
+    return str(o.get("_target_") or o.get("name"))
+
+
+def regime_of(cfg: dict, design: Design = DESIGN) -> str:
     o, act = cfg["optim"], cfg.get("model", {}).get("activation", "sigmoid")
-    name, b = o["name"], o["batch_size"]
+    name, b = optimizer_of(o), o["batch_size"]
     if name == "sgd" and b == 1 and act == "sigmoid" and o.get("lr_schedule", "constant") == "constant":
         return f"paper: sigmoid, online SGD (lr {o['lr']:g}, momentum {o.get('momentum') or 0:g})"
     # the rate is left out: it is chosen per arm (on a validation draw), and shown in the table's lr column
     sched = f", {o['lr_schedule']} lr" if o.get("lr_schedule") else ""
-    return f"{OPTS.get(name, name)} (batch {b}{sched}), {ACTS.get(act, act)}"
+    return f"{design.optimizers.get(name, name)} (batch {b}{sched}), {design.activations.get(act, act)}"
 
 
 @functools.lru_cache(maxsize=8)
@@ -112,14 +149,15 @@ def job_cost(res: dict) -> float:
     return res["schedule"]["presentations"] + (res.get("selection_presentations") or 0)
 
 
-def cells(ctx: Context) -> dict[tuple[str, str, str], Cell]:
+def cells(ctx: Context, design: Design = DESIGN) -> dict[tuple[str, str, str], Cell]:
+    """Every finished job's replicas in its (arm, regime, method) cell; the method is the schedule's recorded name."""
     out: dict[tuple[str, str, str], Cell] = {}
     for job in ctx.jobs:
         res = job.results
-        if job.status not in ("complete", "diverged") or not res or res["schedule"]["name"] not in METHODS:
+        if job.status not in ("complete", "diverged") or not res:
             continue
         cfg = res["config"]
-        key = (arm_of(cfg), regime_of(cfg), res["schedule"]["name"])
+        key = (arm_of(cfg, design), regime_of(cfg, design), res["schedule"]["name"])
         c = out.setdefault(key, Cell(*key))
         c.costs.append(job_cost(res))
         c.engines.add(res.get("engine", "?"))
@@ -137,14 +175,14 @@ def applies(ctx: Context) -> bool:
     return any(job.results and job.results.get("pruning") for job in ctx.jobs)
 
 
-def _order(key: tuple[str, str, str]) -> tuple:
-    arm, regime, method = key
-    return (arm, not regime.startswith("paper"), regime, METHODS.index(method))
+def _order(methods: list[str]):
+    """Rows by arm, the paper's regime first, then the methods in the design's order."""
+    return lambda key: (key[0], not key[1].startswith("paper"), key[1], methods.index(key[2]))
 
 
-def summary_rows(cs: dict) -> list[dict]:
+def summary_rows(cs: dict, design: Design = DESIGN) -> list[dict]:
     rows = []
-    for key in sorted(cs, key=_order):
+    for key in sorted(cs, key=_order(design.methods(m for _, _, m in cs))):
         c = cs[key]
         row = {
             "arm": c.arm,
@@ -162,16 +200,17 @@ def summary_rows(cs: dict) -> list[dict]:
     return rows
 
 
-def verdict_rows(cs: dict, options: Options) -> list[dict]:
+def verdict_rows(cs: dict, options: Options, design: Design = DESIGN) -> list[dict]:
     """Every rival against its compute-matched partner, both metrics; Holm over each metric's family."""
     rows, found = [], {m: [] for m, _, _ in METRICS}
-    for arm, regime in sorted({(a, r) for a, r, _ in cs}, key=lambda k: _order((*k, "conventional"))):
-        partner = cs.get((arm, regime, PARTNER))
-        for method in RIVALS:
+    methods = design.methods(m for _, _, m in cs)
+    for arm, regime in sorted({(a, r) for a, r, _ in cs}, key=lambda k: _order(methods)((*k, methods[0]))):
+        partner = cs.get((arm, regime, design.partner))
+        for method in design.rivals(methods):
             c = cs.get((arm, regime, method))
             if c is None or partner is None:
                 continue
-            row = {"arm": arm, "regime": regime, "comparison": f"{method} − {PARTNER}"}
+            row = {"arm": arm, "regime": regime, "comparison": f"{method} − {design.partner}"}
             row["cost_ratio"] = c.cost / partner.cost if partner.cost else None
             for metric, _, _ in METRICS:
                 v = paired(c.values(metric), partner.values(metric), options.margin)
@@ -253,23 +292,24 @@ def headline(rows: list[dict]) -> str:
     return "**Against compute-matched training** — " + "; ".join(out) + "."
 
 
-def note(options: Options) -> str:
+def note(options: Options, design: Design = DESIGN) -> str:
     return (
         "Total cost: back-propagated presentations plus forward passes charged for choosing at "
         "`schedule.selection_cost` of a presentation (Selective Backprop's; InfoBatch's scores come from its "
         "training passes); InfoBatch and Selective Backprop are stopped at the selective budget "
-        "(`schedule.budget`). The partner `matched` is conventional training scheduled for that budget (its "
+        f"(`schedule.budget`). The partner `{design.partner}` is conventional training scheduled for that budget (its "
         "cosine learning rate reaches zero at its own end), not a prefix of the longer conventional run. "
-        "Δ = method − matched, paired by seed; Δ < 0: the method has the lower error. Margin m = "
+        f"Δ = method − {design.partner}, paired by seed; Δ < 0: the method has the lower error. Margin m = "
         f"{options.margin.describe('the method')}. Readings: *better/worse* when the Holm-adjusted paired "
         "t-test rejects Δ = 0, *equivalent within ±m* when the Holm-adjusted TOST rejects |Δ| ≥ m, else *no "
         "detectable difference*; the family is every comparison of one metric in this table."
     )
 
 
-def plot_error_cost(rows: list[dict], path: Path) -> None:
+def plot_error_cost(rows: list[dict], path: Path, design: Design = DESIGN) -> None:
     """Final held-out RMS (Nm) with 95 % intervals against total cost: one panel per (regime, arm), the legend
-    outside the panels."""
+    outside the panels. A method keeps its colour whichever others ran (the design's listed methods hold theirs);
+    the methods other than the reference are drawn side by side within ±DODGE of their cost."""
     from matplotlib.ticker import FuncFormatter
 
     from selpres.report.sections.plots import family_styles, pyplot, save_png
@@ -285,7 +325,10 @@ def plot_error_cost(rows: list[dict], path: Path) -> None:
         squeeze=False,
         layout="constrained",
     )
-    styles = family_styles(list(METHODS))
+    methods = design.methods({*design.order, *(r["method"] for r in rows)})
+    styles = family_styles(methods)
+    side = [m for m in methods if m != design.reference]
+    step = 2 * DODGE / max(len(side) - 1, 1)
     for i, regime in enumerate(regimes):
         for j, arm in enumerate(arms):
             ax = axes[i][j]
@@ -295,8 +338,8 @@ def plot_error_cost(rows: list[dict], path: Path) -> None:
                 colour, marker = styles[r["method"]]
                 lo, hi = r["rms_lo"], r["rms_hi"]
                 yerr = None if lo is None else [[r["rms_mean"] - lo], [hi - r["rms_mean"]]]
-                k = METHODS.index(r["method"])  # the five methods of one cost side by side; conventional alone
-                dodge = 1 + 0.035 * (k - 3) if k else 1.0
+                k = side.index(r["method"]) if r["method"] in side else None  # the reference at its own cost
+                dodge = 1.0 if k is None else 1 + step * (k - (len(side) - 1) / 2)
                 ax.errorbar(
                     r["cost"] * dodge,
                     r["rms_mean"],
@@ -321,24 +364,27 @@ def plot_error_cost(rows: list[dict], path: Path) -> None:
     save_png(fig, path)
 
 
-def section(ctx: Context) -> Section | None:
+def section(ctx: Context, design: Design = DESIGN) -> Section | None:
     if not applies(ctx):
         return None
-    cs = cells(ctx)
-    summary = summary_rows(cs)
-    verdicts = verdict_rows(cs, ctx.options)
+    cs = cells(ctx, design)
+    summary = summary_rows(cs, design)
+    verdicts = verdict_rows(cs, ctx.options, design)
     return Section(
         "Modern training and data pruning: error against total cost",
         [
             headline(verdicts),
             summary_markdown(summary),
             verdict_markdown(verdicts),
-            note(ctx.options),
+            note(ctx.options, design),
             "![final held-out RMS against total cost, per regime and arm](modern_error_cost.png)\n\n"
             "Each point: the mean over the paired seeds with its 95 % t-interval; methods of one cost are drawn "
             "side by side (within ±7 % of their cost; conventional training at its own) so their intervals "
             "can be told apart.",
         ],
         csv={"modern.csv": summary, "modern_verdict.csv": verdicts},
-        figures={"modern_error_cost.png": ("error against cost", lambda p: plot_error_cost(summary, p))},
+        figures={"modern_error_cost.png": ("error against cost", lambda p: plot_error_cost(summary, p, design))},
     )
+
+
+SECTION = section

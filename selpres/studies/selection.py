@@ -222,3 +222,6 @@ def section(ctx: Context) -> Section | None:
         [headline(rows, ctx.options), selection_markdown(rows, ctx.options), note(ctx.options)],
         csv={"selection.csv": rows},
     )
+
+
+SECTION = section

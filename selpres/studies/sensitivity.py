@@ -23,7 +23,8 @@ from selpres.report.families import (
     SELECTIVE,
 )
 from selpres.report.markdown import fmt, signed_interval, table
-from selpres.report.sensitivity import FAMILY, FIXED, PAPER_TOTAL, TOLERANCE, sensitivity_rows, versus_matched_rows
+from selpres.report.sections import error_cost
+from selpres.studies._sensitivity import FAMILY, FIXED, PAPER_TOTAL, TOLERANCE, sensitivity_rows, versus_matched_rows
 
 NOTE = (
     "A *family* is one method with its parameters swept (see `selpres/report/families.py`): the schedule's "
@@ -413,3 +414,12 @@ def section(ctx: Context) -> Section | None:
         ]
         csv["sensitivity_vs_matched.csv"] = versus
     return Section(title, blocks, csv=csv)
+
+
+def study(ctx: Context) -> list[Section] | None:
+    """The sensitivity study's report: its verdicts, then the error–cost plane of the same families."""
+    sec = section(ctx)
+    return None if sec is None else [sec, *filter(None, [error_cost.section(ctx)])]
+
+
+SECTION = study
