@@ -242,10 +242,17 @@ def test_verdict_separates_spread_from_level_and_answers_with_numbers(study):
 
 
 def test_a_studys_report_leads_with_its_sections_and_stays_short(study, tmp_path, capsys):
+    # folders gathered by hand name no study: the studies that apply lead, by name (selection, sensitivity with
+    # its error-cost plane)
+    heads = [line for line in Report.build(study).markdown.splitlines() if line.startswith("## ")]
+    assert [h.split(":")[0].split(" ")[1] for h in heads[:3]] == ["Selection", "Sensitivity", "Error–cost"]
+    # the sweep as Hydra runs it records its experiment: that study leads
+    (study / "multirun.yaml").write_text("hydra:\n  runtime:\n    choices:\n      experiment: sensitivity\n")
     md = Report.build(study).markdown
     heads = [line for line in md.splitlines() if line.startswith("## ")]
     assert md.startswith("# Sweep report:")
     assert heads[0].startswith("## Sensitivity") and heads[1].startswith("## Error–cost plane")
+    assert heads[2].startswith("## Selection verdict")
     assert heads[-3:][0].startswith("## Table 1") and heads[-1] == "## Runs"
     assert "| Table 1 |" not in md and "Not computed: this sweep is a study of parameters" in md
     assert "The verdict on 6-4-2 depends on these ranges" in md

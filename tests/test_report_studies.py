@@ -1,0 +1,141 @@
+"""The studies apart from the report: a study's section is found by the registry (a new study is a module, no
+list), the study the sweep ran leads, and the modern section takes what the jobs recorded — a pruning policy or
+an arm no code knows gets its rows, and the compute-matched partner is the one the study's design names."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+
+import pytest
+
+from selpres.registry import Registry
+from selpres.report import build
+from selpres.report.build import Report
+from selpres.report.compare import Options
+from selpres.report.context import Context, Section, experiment_of
+from selpres.run.stats import holm, t_test
+from selpres.run.train import train
+from selpres.studies import modern
+
+from conftest import cfg_of
+
+COMMON = ["optim=adam_minibatch", "model.activation=relu", "replicas=3", "schedule.budget=3006", "schedule.epochs=null"]
+NEW = ("seta", "dynamic_random")  # pruning policies no code of the report knows (issue 31's SeTa and its control)
+
+
+@pytest.fixture(scope="module")
+def real(tmp_path_factory):
+    """A small real sweep: the partner and one rival, trained."""
+    s = tmp_path_factory.mktemp("real")
+    for name in ("matched", "infobatch"):
+        train(cfg_of(f"schedule={name}", *COMMON), s / name)
+    return s
+
+
+def _copy(real, sweep, src: str, dst: str, method: str | None = None, arm: str | None = None, shift: float = 0.0):
+    """A copy of a real job folder, its recorded schedule name (and arm) renamed, its final RMS shifted by
+    ``shift`` x (seed + 1) so the paired differences are not all equal."""
+    shutil.copytree(real / src, sweep / dst)
+    res = json.loads((sweep / dst / "results.json").read_text())
+    if method:
+        res["schedule"]["name"] = res["config"]["schedule"]["name"] = method
+    if arm:
+        res["config"]["robot"]["name"] = arm
+    for rep in res["replica_results"]:
+        rep["final"]["heldout"]["nm"]["overall"] += shift * (rep["seed"] + 1)
+    (sweep / dst / "results.json").write_text(json.dumps(res))
+    return {r["seed"]: r["final"]["heldout"]["nm"]["overall"] for r in res["replica_results"]}
+
+
+@pytest.fixture(scope="module")
+def sweep(real, tmp_path_factory):
+    """The real jobs, the rival copied as two methods no code knows, and the lot again on an arm no code knows."""
+    s = tmp_path_factory.mktemp("studies")
+    rms = {}
+    for arm in ("two_link", "hexapod_leg"):
+        rms[arm, "matched"] = _copy(real, s, "matched", f"{arm}_matched", arm=arm)
+        rms[arm, "infobatch"] = _copy(real, s, "infobatch", f"{arm}_infobatch", arm=arm)
+        for k, method in enumerate(NEW):
+            rms[arm, method] = _copy(real, s, "infobatch", f"{arm}_{method}", method, arm, shift=0.01 * (k + 1))
+    return s, rms
+
+
+def test_a_pruning_policy_and_an_arm_no_code_knows_get_their_rows(sweep):
+    s, rms = sweep
+    ctx = Context.load(s, Options())
+    rows = modern.summary_rows(modern.cells(ctx))
+    # the design's listed methods in its order, the new ones after them by name; each arm as the config names it
+    assert [(r["arm"], r["method"]) for r in rows] == [
+        (arm, m) for arm in ("hexapod_leg", "two-link") for m in ("matched", "infobatch", "dynamic_random", "seta")
+    ]
+    seta = next(r for r in rows if r["method"] == "seta" and r["arm"] == "hexapod_leg")
+    assert seta["rms_mean"] == pytest.approx(sum(rms["hexapod_leg", "seta"].values()) / 3, rel=1e-12)
+    assert seta["rms_n"] == 3
+
+    verdicts = modern.verdict_rows(modern.cells(ctx), ctx.options)
+    assert [r["comparison"] for r in verdicts] == [
+        f"{m} − matched" for _ in range(2) for m in ("infobatch", "dynamic_random", "seta")
+    ]
+    # Δ by hand, paired by seed; Holm over the whole family of six comparisons
+    ps = []
+    for r, arm, m in zip(verdicts, ["hexapod_leg"] * 3 + ["two_link"] * 3, ("infobatch", "dynamic_random", "seta") * 2):
+        d = [rms[arm, m][seed] - rms[arm, "matched"][seed] for seed in sorted(rms[arm, "matched"])]
+        assert r["rms_diff_mean"] == pytest.approx(sum(d) / len(d), abs=1e-15)
+        assert r["rms_family_size"] == 6
+        ps.append(t_test(d)["p"] if len(set(d)) > 1 else None)
+    tested = [(r, p) for r, p in zip(verdicts, ps) if p is not None]
+    for (r, _), p in zip(tested, holm([p for _, p in tested])):
+        assert r["rms_p_holm"] == pytest.approx(p)
+
+    md = Report.build(s, Options()).markdown
+    assert "| hexapod_leg |" in md and "| seta |" in md and "seta − matched" in md
+
+
+def test_the_partner_is_the_one_the_studys_design_names(sweep):
+    s, _ = sweep
+    ctx = Context.load(s, Options())
+    design = modern.Design(reference="conventional", partner="infobatch", order=("infobatch", "matched"))
+    rows = modern.verdict_rows(modern.cells(ctx, design), ctx.options, design)
+    assert [r["comparison"] for r in rows][:3] == [f"{m} − infobatch" for m in ("matched", "dynamic_random", "seta")]
+    assert "The partner `infobatch`" in modern.note(ctx.options, design)
+    # the design file the study ships names matched
+    assert modern.Design.load().partner == "matched" and modern.DESIGN.reference == "conventional"
+
+
+def test_the_figure_keeps_each_methods_colour_and_draws_new_ones(sweep, tmp_path):
+    s, _ = sweep
+    files = Report.build(s, Options()).write(tmp_path)
+    assert "modern_error_cost.png" in files and (tmp_path / "modern_error_cost.png").stat().st_size > 10_000
+
+
+def test_the_experiment_a_sweep_ran_is_read_from_its_multirun_yaml(tmp_path):
+    assert experiment_of(tmp_path) is None  # folders gathered by hand
+    (tmp_path / "multirun.yaml").write_text("hydra:\n  runtime:\n    choices:\n      experiment: modern\n")
+    assert experiment_of(tmp_path) == "modern"
+    (tmp_path / "multirun.yaml").write_text("hydra:\n  runtime:\n    choices:\n      optim: sgd\n")
+    assert experiment_of(tmp_path) is None
+
+
+def test_a_new_study_is_one_module_found_by_the_registry_and_the_sweeps_own_leads(tmp_path, monkeypatch):
+    """Studies in a package of our own: each module's SECTION, no list; the study the sweep ran first, the others
+    by name; one that does not apply (None) left out; one may give several sections."""
+    pkg = tmp_path / "mystudies"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    for name, body in {
+        "alpha": "Section('alpha', [])",
+        "beta": "[Section('beta', []), Section('beta plane', [])]",
+        "gamma": "None",
+        "_helper": "Section('helper', [])",
+    }.items():
+        (pkg / f"{name}.py").write_text(f"from selpres.report.context import Section\n\nSECTION = lambda ctx: {body}\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(build, "STUDIES", Registry("report.study", "mystudies", "SECTION"))
+    ctx = Context(tmp_path, [], {}, [], [], experiment=None)
+    assert [s.title for s in build.study_sections(ctx)] == ["alpha", "beta", "beta plane"]
+    ctx.experiment = "beta"
+    assert [s.title for s in build.study_sections(ctx)] == ["beta", "beta plane", "alpha"]
+    assert isinstance(build.study_sections(ctx)[0], Section)
+    sys.modules.pop("mystudies", None)
