@@ -94,11 +94,14 @@ def test_a_pruning_policy_and_an_arm_no_code_knows_get_their_rows(sweep):
 
 
 def test_the_partner_is_the_one_the_studys_design_names(sweep):
-    s, _ = sweep
+    s, rms = sweep
     ctx = Context.load(s, Options())
     design = modern.Design(reference="conventional", partner="infobatch", order=("infobatch", "matched"))
     rows = modern.verdict_rows(modern.cells(ctx, design), ctx.options, design)
     assert [r["comparison"] for r in rows][:3] == [f"{m} − infobatch" for m in ("matched", "dynamic_random", "seta")]
+    seta, partner = rms["hexapod_leg", "seta"], rms["hexapod_leg", "infobatch"]
+    d = [seta[seed] - partner[seed] for seed in sorted(partner)]  # 0.01, 0.02, 0.03 by construction
+    assert rows[2]["rms_diff_mean"] == pytest.approx(sum(d) / 3, abs=1e-15) and sum(d) / 3 == pytest.approx(0.02)
     assert "The partner `infobatch`" in modern.note(ctx.options, design)
     # the design file the study ships names matched
     assert modern.Design.load().partner == "matched" and modern.DESIGN.reference == "conventional"
