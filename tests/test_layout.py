@@ -1,16 +1,19 @@
-"""The package's rooms follow the flow arm -> data -> presentation -> engines -> run -> report -> bench: a module
-imports only its own room, rooms before it and the foundation (errors, seeding, storage, native) — lazy imports
-inside functions included. Also: every room says what it owns and may import, and no module outgrows ~450 lines."""
+"""The package's rooms follow the flow arm -> data -> presentation -> engines -> run -> report -> studies -> bench: a
+module imports only its own room, rooms before it and the foundation (errors, seeding, storage, native) — lazy
+imports inside functions included. Also: every room says what it owns and may import, no module outgrows ~450
+lines, and the library works without the studies (nothing imports them; the report finds them by a registry)."""
 
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 from conftest import REPO
 
 FOUNDATION = ("selpres.errors", "selpres.registry", "selpres.seeding", "selpres.storage", "selpres.native")
-ROOMS = ("arms", "data", "presentation", "engines", "run", "report", "bench")
+ROOMS = ("arms", "data", "presentation", "engines", "run", "report", "studies", "bench")
 MAX_LINES = 450
 
 
@@ -86,3 +89,31 @@ def test_every_room_says_what_it_owns_and_may_import():
 def test_no_module_over_450_lines():
     long = {str(p.relative_to(REPO)): n for p, _ in modules() if (n := len(p.read_text().splitlines())) > MAX_LINES}
     assert long == {}
+
+
+def test_nothing_in_the_library_imports_the_studies():
+    """The studies sit after the report, and no module outside them names them (bench included): the report
+    reaches a study's section only through the registry report.build.STUDIES, by name."""
+    found = [
+        f"{path.relative_to(REPO)}:{line} imports {target}"
+        for path, module in modules()
+        if not module.startswith("selpres.studies")
+        for line, target in imported_modules(path.read_text(), module)
+        if target.startswith("selpres.studies")
+    ]
+    assert found == []
+    # and the check sees one
+    assert imported_modules("from selpres.studies import modern\n", "selpres.report") == [(1, "selpres.studies")]
+
+
+def test_the_core_and_the_report_import_without_the_studies():
+    """import selpres, the core's rooms and the report's blocks load no study module."""
+    code = (
+        "import sys, selpres, selpres.arms, selpres.data, selpres.presentation, selpres.engines, selpres.run.train, "
+        "selpres.report, selpres.report.build, selpres.report.__main__; "
+        "print(sorted(m for m in sys.modules if m.startswith('selpres.studies'))); "
+        "from selpres.report.build import STUDIES; assert 'modern' in STUDIES.names; "  # lists, imports no study
+        "print(sorted(m for m in sys.modules if m.startswith('selpres.studies.')))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["[]", "[]"]
