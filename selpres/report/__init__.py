@@ -1,5 +1,5 @@
 """Table 1 of the paper from a sweep's ``results.json`` files: tables, verdicts, time-to-target, plots;
-and, when the sweep has them, the sensitivity study, the error–cost plane and the selection verdict.
+and, when the sweep is one, a study's sections (:mod:`selpres.studies`: modern, selection, sensitivity).
 
     python -m selpres.report outputs/sweeps/table1 [--out DIR]     (default DIR = <sweep>/report)
     python -m selpres.report outputs/sweeps/table1 --readme README.md   (also its Table 1 block)
@@ -13,10 +13,12 @@ The package reads in the data's direction, one concern per module:
 - ``families``  a method with its parameters swept (schedule kind × optimizer), the sensitivity unit;
 - ``compare``   paired differences by seed and their readings, mean curves, time to target;
 - ``markdown``  number formats, Markdown tables and CSV text;
-- ``sections/`` one module per section of the report, each ``section(ctx) -> Section`` (Markdown, CSV
-  rows, figures; None when the sweep lacks what it needs): a new section is a new module added to
-  ``build.SECTIONS``;
-- ``build``     the report: its sections in order, written to the output folder;
+- ``context``   what every section reads (the sweep loaded once, the experiment it ran) and gives back;
+- ``sections/`` the generic sections, one module each, ``section(ctx) -> Section`` (Markdown, CSV rows,
+  figures; None when the sweep lacks what it needs): Table 1's grid, verdicts, time to target, plots, runs,
+  the error–cost plane;
+- ``build``     the report: the sections of the studies that apply (found in :mod:`selpres.studies` by a
+  registry, never imported here), then the generic ones, written to the output folder;
 - ``readme``    the README's Table 1 block (between ``<!-- table1:begin/end -->``), from the report;
 - ``__main__``  the command line.
 
@@ -26,8 +28,11 @@ from :mod:`selpres.run.stats`; a verdict reads *better/worse*, *equivalent withi
 detectable difference*, three different things.
 
 The report is the last stage of arm -> data -> presentation -> engine -> loop -> results -> report: it reads job
-folders, never trains. May import: ``selpres.run`` (stats, the names of a job folder's files) and the foundation;
-matplotlib only inside the plotting sections, so the command line starts without it.
+folders, never trains. A study's own section (modern, selection, sensitivity) lives in :mod:`selpres.studies`, the
+room after this one, and composes the blocks here; nothing here names a study's arms or methods.
+May import: ``selpres.run`` (stats, the names of a job folder's files) and the foundation, never
+``selpres.studies`` (the registry ``build.STUDIES`` finds them by name); matplotlib only inside the plotting
+sections, so the command line starts without it.
 """
 
 from selpres.report.build import write_report

@@ -1,4 +1,5 @@
-"""The report's sections, one module each; every module has ``section(ctx: Context) -> Section``.
+"""The report's generic sections, one module each; every module has ``section(ctx: Context) -> Section``.
 
-The order they appear in lives in :data:`selpres.report.build.SECTIONS`.
+They read any sweep; a study's own section is a module of :mod:`selpres.studies`. The order they appear in lives
+in :mod:`selpres.report.build`.
 """
