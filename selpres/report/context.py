@@ -43,14 +43,20 @@ class Context:
         return [w for g in self.groups.values() for w in g.warnings]
 
 
-def experiment_of(sweep: Path) -> str | None:
-    """The experiment a sweep ran, as Hydra recorded its choice in the sweep's ``multirun.yaml``
-    (``hydra.runtime.choices.experiment``); None for folders gathered by hand or a sweep without one."""
+def multirun_hydra(sweep: Path):
+    """The ``hydra`` node of the sweep's ``multirun.yaml`` (what Hydra recorded of the sweep), or None for folders
+    gathered by hand (or an unreadable file)."""
     try:
-        hydra = OmegaConf.load(sweep / "multirun.yaml").hydra
-    except Exception:  # none, or unreadable: the sweep names no study
+        return OmegaConf.load(sweep / "multirun.yaml").hydra
+    except Exception:
         return None
-    name = OmegaConf.select(hydra, "runtime.choices.experiment")
+
+
+def experiment_of(sweep: Path) -> str | None:
+    """The experiment a sweep ran, as Hydra recorded its choice (``hydra.runtime.choices.experiment``); None for
+    folders gathered by hand or a sweep without one."""
+    hydra = multirun_hydra(sweep)
+    name = None if hydra is None else OmegaConf.select(hydra, "runtime.choices.experiment")
     return str(name) if name else None
 
 

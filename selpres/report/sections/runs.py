@@ -11,7 +11,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from selpres.report.context import Context, Section
+from selpres.report.context import Context, Section, multirun_hydra
 from selpres.report.groups import method_rank, topology_rank
 from selpres.report.jobs import Job
 from selpres.report.markdown import engine_text, fmt, table
@@ -23,9 +23,8 @@ def _diverged_epoch(rep: dict):
 
 def crossed(sweep: Path) -> bool:
     """Whether the sweep is a grid (see the module's docstring)."""
-    try:
-        hydra = OmegaConf.load(sweep / "multirun.yaml").hydra
-    except Exception:  # none (folders gathered by hand) or unreadable: every cell is expected, as before
+    hydra = multirun_hydra(sweep)
+    if hydra is None:  # folders gathered by hand (or unreadable): every cell is expected, as before
         return True
     swept = set((OmegaConf.select(hydra, "sweeper.params") or {}).keys())
     for o in OmegaConf.select(hydra, "overrides.task") or []:
