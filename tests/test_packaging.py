@@ -1,6 +1,9 @@
-"""selpres installs as a package: a wheel built from this checkout, installed (not editable) into a fresh virtualenv,
-runs a training job (``selpres-train``) and an export (``selpres-export``) from a folder outside the checkout, on
-the configs and kernel sources the wheel ships.
+"""selpres installs as a package, and its front page stays short and whole.
+
+The slow tests: a wheel built from this checkout, installed (not editable) into a fresh virtualenv, runs a training
+job (``selpres-train``) and an export (``selpres-export``) from a folder outside the checkout, on the configs and
+kernel sources the wheel ships. The fast ones: README.md is at most 300 lines, keeps the one Table 1 block the
+report rewrites, links one page per study under docs/studies/, and every relative link in it and in docs/ resolves.
 
 Isolation, and why this way. The new venv must see the wheel's selpres and nothing of the development install, but
 re-installing torch, Hydra and the rest from the package index would take minutes. So the venv is made without
@@ -19,6 +22,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -28,8 +32,6 @@ from pathlib import Path
 import pytest
 
 from conftest import REPO, run_python
-
-pytestmark = pytest.mark.slow
 
 OWN = ("selpres", "selpres_search", "__editable__")  # the development install's entries (and the plugin's)
 JOB = ["replicas=2", "data.heldout=300", "eval.heldout_curve=300", "logging.progress=false"]
@@ -102,6 +104,7 @@ def _run(installed, *cmd: str) -> subprocess.CompletedProcess:
     return done
 
 
+@pytest.mark.slow
 def test_the_installed_selpres_is_the_wheels(installed):
     purelib = installed[3]
     code = "import sys, selpres, selpres.run.config as c; print(selpres.__file__); print(c.CONFIG_DIR); print(sys.path)"
@@ -113,6 +116,7 @@ def test_the_installed_selpres_is_the_wheels(installed):
     assert {p.name for p in (REPO / "selpres" / "native" / "kernels").glob("*.[ch]")} <= kernels
 
 
+@pytest.mark.slow
 def test_selpres_train_runs_a_job_from_any_folder(installed, tmp_path):
     work, purelib = installed[1], installed[3]
     _run(installed, "selpres-train", *JOB)
@@ -129,6 +133,7 @@ def test_selpres_train_runs_a_job_from_any_folder(installed, tmp_path):
         assert wheel[key] == checkout[key], key
 
 
+@pytest.mark.slow
 def test_selpres_export_and_the_other_commands_find_their_configs(installed):
     work, purelib = installed[1], installed[3]
     out = _run(installed, "selpres-export").stdout
@@ -139,3 +144,35 @@ def test_selpres_export_and_the_other_commands_find_their_configs(installed):
     assert str(purelib / "selpres" / "configs") in bench.replace("\n", "").replace(" ", "")
     assert "--readme" in _run(installed, "selpres-report", "--help").stdout
     assert "Config groups" in _run(installed, "selpres-train", "--help").stdout
+
+
+# ------------------------------------------------------------------------------------------------ the front page
+STUDIES = ("sensitivity", "selection", "modern", "large")  # issue 25: one page each, one paragraph in the README
+LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
+
+
+def broken_links(text: str, base: Path) -> list[str]:
+    """The relative Markdown links in ``text`` whose file (``#fragment`` dropped) does not exist under ``base``."""
+    targets = [t.split("#")[0] for t in LINK.findall(text) if not re.match(r"[a-z]+:|#", t)]
+    return [t for t in targets if not (base / t).exists()]
+
+
+def pages() -> list[Path]:
+    return [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
+
+
+def test_relative_links_in_the_readme_and_docs_resolve():
+    assert broken_links("[a](docs/nowhere.md) [b](README.md#x) [c](https://x.org/y.md)", REPO) == ["docs/nowhere.md"]
+    found = {str(p.relative_to(REPO)): broken for p in pages() if (broken := broken_links(p.read_text(), p.parent))}
+    assert found == {}
+
+
+def test_the_readme_is_short_keeps_its_table1_block_and_links_every_study():
+    from selpres.report.readme import read_readme
+
+    text = read_readme(REPO / "README.md")  # exactly one table1:begin/end pair, as `selpres-report --readme` needs
+    assert len(text.splitlines()) <= 300
+    for study in STUDIES:
+        assert (REPO / "docs" / "studies" / f"{study}.md").is_file(), study
+        assert f"](docs/studies/{study}.md)" in text, study
+    assert "selpres-train" in text and ".whl" in text
