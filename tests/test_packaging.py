@@ -8,8 +8,8 @@ report rewrites, links one page per study under docs/studies/, and every relativ
 Isolation, and why this way. The new venv must see the wheel's selpres and nothing of the development install, but
 re-installing torch, Hydra and the rest from the package index would take minutes. So the venv is made without
 ``--system-site-packages`` (the base interpreter may hold anything) and the wheel is installed with ``--no-deps``;
-the dependencies come from the running interpreter's site-packages through a folder of symbolic links to each of
-its entries *except* selpres's own (``selpres/``, ``selpres-*.dist-info``, the editable install's
+the dependencies come from the running interpreter's site-packages folders through a folder of symbolic links to
+each of their entries *except* selpres's own (``selpres/``, ``selpres-*.dist-info``, the editable install's
 ``__editable__*`` finder and ``.pth`` files, ``hydra_plugins/selpres_search``) and except every ``.pth`` file (a path
 line in the venv's ``.pth`` adds that folder to ``sys.path`` without running the ``.pth`` files inside it, and the
 editable install is exactly such a file). That folder comes after the venv's own site-packages on ``sys.path``.
@@ -42,21 +42,30 @@ def _own(name: str) -> bool:
     return name.endswith(".pth") or name.split("-")[0].split(".")[0] in OWN or name.startswith("__editable__")
 
 
-def dependencies_without_selpres(site: Path, dest: Path) -> Path:
-    """``dest``: symbolic links to every entry of ``site`` but selpres's own and the .pth files; namespace folders
-    that selpres shares with others (``hydra_plugins``) are linked entry by entry."""
+def dependencies_without_selpres(sites: list[Path], dest: Path) -> Path:
+    """``dest``: symbolic links to every entry of the ``sites`` (the first of a name wins, as on ``sys.path``) but
+    selpres's own and the .pth files; namespace folders that selpres shares with others (``hydra_plugins``) are
+    linked entry by entry."""
     dest.mkdir()
-    for entry in site.iterdir():
-        if _own(entry.name):
-            continue
-        if entry.name == "hydra_plugins" and entry.is_dir():
-            (dest / entry.name).mkdir()
-            for sub in entry.iterdir():
-                if not _own(sub.name):
-                    (dest / entry.name / sub.name).symlink_to(sub)
-        else:
-            (dest / entry.name).symlink_to(entry)
+    for site in sites:
+        for entry in site.iterdir():
+            if _own(entry.name):
+                continue
+            if entry.name == "hydra_plugins" and entry.is_dir():
+                (dest / entry.name).mkdir(exist_ok=True)
+                for sub in entry.iterdir():
+                    if not _own(sub.name) and not (dest / entry.name / sub.name).exists():
+                        (dest / entry.name / sub.name).symlink_to(sub)
+            elif not (dest / entry.name).exists():
+                (dest / entry.name).symlink_to(entry)
     return dest
+
+
+def site_packages() -> list[Path]:
+    """The running interpreter's site-packages folders in ``sys.path`` order (a venv's, then with
+    ``--system-site-packages`` the base interpreter's)."""
+    found = [Path(p) for p in sys.path if Path(p).name in ("site-packages", "dist-packages") and Path(p).is_dir()]
+    return list(dict.fromkeys(found)) or [Path(sysconfig.get_paths()["purelib"])]
 
 
 def _copy_source(dest: Path) -> Path:
@@ -85,7 +94,7 @@ def installed(tmp_path_factory):
     purelib = Path(
         subprocess.run([py, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], **quiet).stdout.strip()
     )
-    deps = dependencies_without_selpres(Path(sysconfig.get_paths()["purelib"]), tmp / "deps")
+    deps = dependencies_without_selpres(site_packages(), tmp / "deps")
     (purelib / "zz_selpres_test_deps.pth").write_text(f"{deps}\n")
     work = tmp / "elsewhere"
     work.mkdir()
