@@ -138,7 +138,7 @@ def test_selpres_train_runs_a_job_from_any_folder(installed, tmp_path):
     done = run_python("train.py", *JOB, f"hydra.run.dir={tmp_path / 'checkout'}")
     assert done.returncode == 0, done.stderr[-3000:]
     checkout = json.loads((tmp_path / "checkout" / "results.json").read_text())
-    for key in ("summary", "replica_results", "schedule", "config_hash"):
+    for key in ("summary", "replica_results", "schedule", "config_hash", "engine"):
         assert wheel[key] == checkout[key], key
 
 
