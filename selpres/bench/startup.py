@@ -19,12 +19,14 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]  # train.py and configs/ of a source checkout
+REPO = Path(__file__).resolve().parents[2]  # a source checkout's root, holding train.py
+# what the user types: a checkout's train.py, else (a wheel) the module behind selpres-train, the same job
+TRAIN = [str(REPO / "train.py")] if (REPO / "train.py").is_file() else ["-m", "selpres.run.main"]
 
 
 def _wall(cmd: list[str]) -> float:
     t = time.perf_counter()
-    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)
+    done = subprocess.run(cmd, capture_output=True, text=True)
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed:\n{done.stderr[-2000:]}")
     return time.perf_counter() - t
@@ -41,8 +43,8 @@ def measure(rounds: int = 5) -> dict[str, list[float]]:
         for r in range(rounds):
             out[TORCH].append(_wall([py, "-c", "import torch"]))
             out[FROZEN].append(_wall([py, "-c", "import gc, torch; gc.freeze()"]))
-            out["python train.py"].append(_wall([py, "train.py", f"hydra.run.dir={tmp}/job{r}"]))
-            out["python train.py --help"].append(_wall([py, "train.py", "--help"]))
+            out["python train.py"].append(_wall([py, *TRAIN, f"hydra.run.dir={tmp}/job{r}"]))
+            out["python train.py --help"].append(_wall([py, *TRAIN, "--help"]))
     return out
 
 

@@ -7,8 +7,9 @@ sweep workers that stop with their sweep (``orphan``); what a config determines 
 (``problem``: prepare, job_engine); the loop (``train``: start (resume) -> run_epoch ... -> finish);
 checkpoints and the append-only history (``checkpoint``); TensorBoard (``tracking``); results.json and a job's
 identity (``results``) with the seed statistics (``stats``) and the task's floor (``floor``); the guard that
-train.py imports before Hydra starts (``guard``: lock, what a refusal removes, Ctrl-C), the task function around
-``train()`` (``cli``) and ``selpres-export`` (``export``).
+train.py imports before Hydra starts (``guard``: lock, what a refusal removes, Ctrl-C), Hydra's main on the
+package's configs (``main``: ``selpres-train``, which train.py calls), the task function around ``train()``
+(``cli``) and ``selpres-export`` (``export``).
 
 May import: every stage above it (``engines``, ``presentation``, ``data``, ``arms``) and the foundation.
 """
