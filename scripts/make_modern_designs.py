@@ -8,6 +8,7 @@ a budget b scaled to b n / 1002), so the budget-form methods cost what selective
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 OUT = Path(__file__).resolve().parents[1] / "selpres" / "configs" / "design" / "modern"
@@ -81,14 +82,14 @@ def design(arm: str, regime: str, method: str) -> str:
     )
 
 
-def main() -> None:
-    OUT.mkdir(parents=True, exist_ok=True)
+def main(out: Path = OUT) -> None:
+    out.mkdir(parents=True, exist_ok=True)
     for arm in ARMS:
         for regime in ("paper", "adam"):
             for method in METHODS:
-                (OUT / f"{arm}_{regime}_{method}.yaml").write_text(design(arm, regime, method))
-    print(f"wrote {len(ARMS) * 2 * len(METHODS)} files into {OUT}")
+                (out / f"{arm}_{regime}_{method}.yaml").write_text(design(arm, regime, method))
+    print(f"wrote {len(ARMS) * 2 * len(METHODS)} files into {out}")
 
 
 if __name__ == "__main__":
-    main()
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else OUT)

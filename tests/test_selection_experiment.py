@@ -11,6 +11,7 @@ import re
 
 import pytest
 from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.core.override_parser.types import Glob
 from omegaconf import OmegaConf
 
 from selpres.presentation.selection import planned_charge
@@ -40,6 +41,8 @@ def swept_points() -> list[str]:
     """The design points the experiment sweeps, as Hydra's override parser reads its list."""
     value = OmegaConf.load(EXPERIMENT).hydra.sweeper.params["design/selection"]
     override = OverridesParser.create().parse_overrides([f"design/selection={value}"])[0]
+    if isinstance(override.value(), Glob):  # Hydra sweeps the group's options the glob matches
+        return list(override.value().filter(point_files()))
     return list(override.sweep_string_iterator())
 
 
