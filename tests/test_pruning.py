@@ -79,7 +79,7 @@ def test_selective_backprop_selection_follows_the_percentile_rule():
     assert float(pr.charged[0]) == pytest.approx(draws * 6 / 3)  # every candidate's forward pass charged
 
 
-@pytest.mark.parametrize("schedule", ["infobatch", "selective_backprop"])
+@pytest.mark.parametrize("schedule", ["infobatch", "selective_backprop", "seta"])
 def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
     from selpres.run.train import train
 
