@@ -20,9 +20,12 @@ from selpres.registry import Registry
 REGISTRY = Registry("schedule.pruning._target_", "selpres.presentation.pruning", "POLICY")
 
 
+PUBLIC = ("Policy", "EpochChoice", "Param", "Annealing")  # what a policy of your own builds from (``_policy``)
+
+
 def __getattr__(name: str):
-    """``Policy`` and ``EpochChoice`` for a user's own policy, imported only when asked for (torch)."""
-    if name in ("Policy", "EpochChoice"):
+    """The pieces of ``_policy`` a user's own policy builds from, imported only when asked for (torch)."""
+    if name in PUBLIC:
         from selpres.presentation.pruning import _policy
 
         return getattr(_policy, name)
