@@ -53,13 +53,12 @@ def _layer(prev: np.ndarray, prefix: tuple[np.ndarray, ...], k: int, d: int) -> 
         hi = np.minimum(j_hi, mid - 1)
         lens = hi - j_lo + 1  # >= 1: j_lo <= i_lo - 1 <= mid - 1 throughout
         starts = np.concatenate(([0], np.cumsum(lens)[:-1]))
-        owner = np.repeat(np.arange(len(tasks)), lens)
-        j = j_lo[owner] + np.arange(int(lens.sum())) - starts[owner]
+        j = np.repeat(j_lo - starts, lens) + np.arange(int(lens.sum()))  # each task's candidate splits
         W, S, Q = prefix  # the SSE of distinct values j..mid-1: (Q - S^2 / W) over that range
         ws, ss = np.repeat(W[mid], lens) - W[j], np.repeat(S[mid], lens) - S[j]
         vals = prev[j] + ((np.repeat(Q[mid], lens) - Q[j]) - ss * ss / ws)
         best = np.minimum.reduceat(vals, starts)
-        first = np.minimum.reduceat(np.where(vals == best[owner], np.arange(len(vals)), len(vals)), starts)
+        first = np.minimum.reduceat(np.where(vals == np.repeat(best, lens), np.arange(len(vals)), len(vals)), starts)
         opt = j[first]
         D[mid], arg[mid] = best, opt
         left = np.stack([i_lo, mid - 1, j_lo, opt], 1)[mid - 1 >= i_lo]
