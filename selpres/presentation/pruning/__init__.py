@@ -20,7 +20,8 @@ from selpres.registry import Registry
 REGISTRY = Registry("schedule.pruning._target_", "selpres.presentation.pruning", "POLICY")
 
 
-PUBLIC = ("Policy", "EpochChoice", "Param", "Annealing")  # what a policy of your own builds from (``_policy``)
+# what a policy of your own builds from (``_policy``)
+PUBLIC = ("Policy", "ScoredByLoss", "EpochChoice", "Param", "Annealing")
 
 
 def __getattr__(name: str):

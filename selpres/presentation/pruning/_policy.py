@@ -165,3 +165,17 @@ class Policy:
     def describe(self) -> dict:
         """results.json's ``pruning`` parameters."""
         return dict(self.params)
+
+
+class ScoredByLoss(Policy):
+    """A policy whose score of a pattern is its latest training loss (InfoBatch, SeTa): ``INITIAL_SCORE`` until it
+    is first presented, then its loss in the epoch's training passes (nothing charged: no extra forward pass)."""
+
+    def __init__(self, params: dict, ledger: Ledger):
+        super().__init__(params, ledger)
+        self.scores = torch.full((len(ledger.seeds), ledger.n), INITIAL_SCORE, dtype=torch.float64)
+
+    def finish(self, choice: EpochChoice, losses: torch.Tensor) -> None:
+        for r in range(len(self.ledger.seeds)):
+            k = int(choice.counts[r])
+            self.scores[r, choice.order[r, :k]] = losses[r, :k]

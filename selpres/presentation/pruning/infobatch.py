@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import torch
 
-from selpres.presentation.pruning._policy import INITIAL_SCORE, Annealing, EpochChoice, Param, Policy, pad
+from selpres.presentation.pruning._policy import Annealing, EpochChoice, Param, ScoredByLoss, pad
 from selpres.seeding import generator
 
 
@@ -38,7 +38,7 @@ def infobatch_keep(scores: torch.Tensor, ratio: float, gen: torch.Generator) -> 
     return kept, weight
 
 
-class InfoBatch(Policy):
+class InfoBatch(ScoredByLoss):
     PARAMS = {
         "prune_ratio": Param(float, lambda v: 0 <= v < 1, "a share in [0, 1) (Qin et al.: 0.5)"),
         "delta": Param(float, lambda v: 0 < v <= 1, "a share of the epochs in (0, 1] (Qin et al.: 0.875)"),
@@ -47,7 +47,6 @@ class InfoBatch(Policy):
     def __init__(self, params: dict, ledger):
         super().__init__(params, ledger)
         self.ratio, self.delta = float(params["prune_ratio"]), float(params["delta"])
-        self.scores = torch.full((len(ledger.seeds), ledger.n), INITIAL_SCORE, dtype=torch.float64)
         self.annealing = Annealing(self.delta, len(ledger.seeds))
 
     @classmethod
@@ -70,11 +69,6 @@ class InfoBatch(Policy):
             weights.append(w)
             counts.append(led.affordable(r, len(kept)))
         return EpochChoice(pad(rows, 0), pad(weights, 0.0), torch.tensor(counts, dtype=torch.int64))
-
-    def finish(self, choice: EpochChoice, losses: torch.Tensor) -> None:
-        for r in range(len(self.ledger.seeds)):
-            k = int(choice.counts[r])
-            self.scores[r, choice.order[r, :k]] = losses[r, :k]
 
 
 POLICY = InfoBatch

@@ -38,7 +38,7 @@ import numpy as np
 import torch
 
 from selpres.errors import ConfigError
-from selpres.presentation.pruning._policy import INITIAL_SCORE, KEY, Annealing, EpochChoice, Param, Policy, pad
+from selpres.presentation.pruning._policy import KEY, Annealing, EpochChoice, Param, ScoredByLoss, pad
 from selpres.seeding import generator
 
 
@@ -115,7 +115,7 @@ def window_of(n_groups: int, epoch: int, window_scale: float) -> range:
     return range(start, start + window)
 
 
-class SeTa(Policy):
+class SeTa(ScoredByLoss):
     PARAMS = {
         "prune_ratio": Param(float, lambda v: 0 <= v <= 0.9, "a share in [0, 0.9] (the published code keeps >= 10%)"),
         "groups": Param(int, lambda v: v >= 1, "a whole number of k-means groups >= 1 (Zhou et al.: 5)"),
@@ -135,7 +135,6 @@ class SeTa(Policy):
         super().__init__(params, ledger)
         self.keep = 1.0 - params["prune_ratio"]
         self.groups, self.window_scale = params["groups"], params["window_scale"]
-        self.scores = torch.full((len(ledger.seeds), ledger.n), INITIAL_SCORE, dtype=torch.float64)
         self.annealing = Annealing(params["delta"], len(ledger.seeds))
 
     @classmethod
@@ -165,11 +164,6 @@ class SeTa(Policy):
             rows.append(kept)
             counts.append(led.affordable(r, len(kept)))
         return EpochChoice(pad(rows, 0), None, torch.tensor(counts, dtype=torch.int64))
-
-    def finish(self, choice: EpochChoice, losses: torch.Tensor) -> None:
-        for r in range(len(self.ledger.seeds)):
-            k = int(choice.counts[r])
-            self.scores[r, choice.order[r, :k]] = losses[r, :k]
 
 
 POLICY = SeTa
