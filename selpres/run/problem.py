@@ -50,7 +50,7 @@ class Problem:
     selection: StageSelection | None = None  # loss_high/loss_low/reselect: A_k chosen at each stage start
     task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
     schedule_note: str | None = None  # how a named schedule's counts were applied to this n (None: as given)
-    pruning: Pruning | None = None  # infobatch / selective_backprop: each epoch's patterns chosen by loss
+    pruning: Pruning | None = None  # a pruning policy (schedule.pruning): each epoch's patterns chosen by loss
     budget: float | None = None  # the run's own planned cost (presentations): the cosine schedule's horizon
 
     @functools.cached_property
