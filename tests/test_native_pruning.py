@@ -166,7 +166,7 @@ def test_bad_counts_and_weights_are_rejected():
 
 # ---------------------------------------------------------------- which engine a pruning job gets
 @requires_native
-@pytest.mark.parametrize("schedule", ["infobatch", "selective_backprop"])
+@pytest.mark.parametrize("schedule", ["infobatch", "selective_backprop", "seta"])
 def test_a_paper_regime_pruning_job_runs_on_the_native_kernel_and_agrees_with_the_reference(schedule):
     """Sigmoid units, online SGD at a constant rate: the native kernel (recorded, no fallback), stopped at its
     budget, with the reference engine's numbers (the same patterns chosen, the same updates)."""

@@ -8,7 +8,9 @@ import pytest
 import torch
 
 from selpres.engines.model import BPN, init_replica_params, load_into
-from selpres.presentation.pruning import backprop_probability, infobatch_keep, percentile
+from selpres.presentation.pruning._policy import percentile
+from selpres.presentation.pruning.infobatch import infobatch_keep
+from selpres.presentation.pruning.selective_backprop import backprop_probability
 
 from conftest import cfg_of
 
@@ -63,16 +65,13 @@ def test_selective_backprop_selection_follows_the_percentile_rule():
     beta = 2.0
     P = backprop_probability(losses, beta)[0]
     assert P.tolist() == pytest.approx([f**beta for f in by_hand])
-    from omegaconf import OmegaConf
+    from selpres.presentation.pruning._job import Pruning
 
-    from selpres.presentation.pruning import Pruning
-
-    sch = OmegaConf.create({"selection_cost": 1 / 3, "beta": beta})
-    pr = Pruning("selective_backprop", sch, 6, [7], None, 10)
+    pr = Pruning("selective_backprop", {"beta": beta}, 6, [7], None, 10, 1 / 3)
     draws, hits = 4000, torch.zeros(6)
     order = torch.arange(6).unsqueeze(0)
     for e in range(draws):
-        choice = pr._selective_backprop(e, order, losses)
+        choice = pr.policy.choose(e, order, losses)
         hits[choice.order[0, : int(choice.counts[0])]] += 1
     freq = hits / draws
     sd = (P * (1 - P) / draws).sqrt()
@@ -80,7 +79,7 @@ def test_selective_backprop_selection_follows_the_percentile_rule():
     assert float(pr.charged[0]) == pytest.approx(draws * 6 / 3)  # every candidate's forward pass charged
 
 
-@pytest.mark.parametrize("schedule", ["infobatch", "selective_backprop"])
+@pytest.mark.parametrize("schedule", ["infobatch", "selective_backprop", "seta"])
 def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
     from selpres.run.train import train
 
@@ -127,3 +126,68 @@ def test_a_finished_job_of_another_update_is_run_again(tmp_path, caplog):
     assert finished(paper, "minibatch") is None and "running it again" in caplog.text
     assert finished(paper, "native") is not None and finished(paper, "reference") is not None
     assert finished(adam, "minibatch") is not None and finished(adam, "native") is None
+
+
+# ------------------------------------------------------------------ the policy node: schedule.pruning: {_target_, ...}
+
+
+@pytest.mark.parametrize(
+    "overrides, key, allowed",
+    [
+        (["schedule=infobatch", "schedule.pruning.prune_ratio=1.5"], "schedule.pruning.prune_ratio", r"\[0, 1\)"),
+        (["schedule=infobatch", "schedule.pruning.delta=0"], "schedule.pruning.delta", r"\(0, 1\]"),
+        (["schedule=infobatch", "schedule.pruning.delta=null"], "schedule.pruning.delta", "a value: InfoBatch"),
+        (["schedule=infobatch", "+schedule.pruning.beta=1"], "schedule.pruning.beta", "InfoBatch reads prune_ratio"),
+        (["schedule=selective_backprop", "schedule.pruning.beta=-1"], "schedule.pruning.beta", ">= 0"),
+        (["schedule=infobatch", "schedule.pruning.prune_ratio=true"], "schedule.pruning.prune_ratio", r"\[0, 1\)"),
+        (["schedule=infobatch", "schedule.pruning._target_=nope"], "schedule.pruning._target_", "infobatch, select"),
+        (["schedule=infobatch", "schedule.pruning._target_=no_such_mod.P"], "schedule.pruning._target_", "importable"),
+        (
+            ["schedule=infobatch", "schedule.pruning._target_=collections.OrderedDict"],
+            "schedule.pruning._target_",
+            "Policy",
+        ),
+        (["schedule.pruning=infobatch"], "schedule.pruning", "schedule.pruning._target_=infobatch"),
+        (["schedule=infobatch", "schedule.order=stratified"], "schedule.order", "random"),
+        (["schedule=infobatch", "schedule.sizes=[0.5,1.0]"], "schedule.sizes", r"\[1.0\]"),
+        (["schedule=infobatch", "schedule.budget=1000"], "schedule.budget", "either a budget or"),
+        (["schedule=infobatch", "optim.batch_size=0"], "optim.batch_size", "_target_=infobatch"),
+        (
+            ["schedule=selective_backprop", "schedule.epochs=null", "schedule.budget=100", "schedule.selection_cost=0"],
+            "schedule.selection_cost",
+            "forward passes must cost",
+        ),
+    ],
+)
+def test_a_policy_checks_its_own_parameters_naming_the_key(overrides, key, allowed):
+    from selpres.errors import ConfigError
+    from selpres.run.checks import validate
+
+    with pytest.raises(ConfigError, match=allowed) as e:
+        validate(cfg_of(*overrides))
+    assert e.value.key == key
+
+
+def test_the_old_flat_spellings_are_refused_in_one_line_naming_the_new(tmp_path):
+    from conftest import run_python
+
+    for old, new in [
+        ("schedule.prune_ratio=0.3", "schedule.pruning.prune_ratio=0.3"),
+        ("schedule.delta=0.5", "schedule.pruning.delta=0.5"),
+        ("schedule.beta=2", "schedule.pruning.beta=2"),
+    ]:
+        out = tmp_path / "run"
+        p = run_python("train.py", "schedule=infobatch", old, f"hydra.run.dir={out}", timeout=120)
+        assert p.returncode == 2, p.stderr
+        lines = p.stderr.strip().splitlines()
+        assert len(lines) == 1 and old in lines[0] and new in lines[0], p.stderr
+        assert not out.exists()  # refused before Hydra wrote anything
+
+
+def test_results_record_the_policy_that_ran():
+    from selpres.run.train import train
+
+    res = train(cfg_of("schedule=infobatch", "schedule.epochs=[2]", "replicas=2"))
+    assert res["pruning"]["kind"] == "infobatch"
+    assert res["pruning"]["policy"] == "selpres.presentation.pruning.infobatch.InfoBatch"
+    assert res["pruning"]["prune_ratio"] == 0.5 and res["pruning"]["delta"] == 0.875

@@ -60,7 +60,10 @@ def test_named_schedules_are_the_config_files():
     """NAMED (for callers without configs/) holds what configs/schedule/*.yaml hold, with train.yaml's defaults."""
     files = {p.stem: OmegaConf.to_container(OmegaConf.load(p)) for p in (CONFIGS / "schedule").glob("*.yaml")}
     pruning = {name for name, f in files.items() if f.get("pruning")}  # chosen by loss: the CLI's, not a sampler's
-    assert pruning == {"infobatch", "selective_backprop"}
+    assert {"infobatch", "selective_backprop"} <= pruning
+    from selpres.presentation.pruning import REGISTRY
+
+    assert all(files[name]["pruning"]["_target_"] in REGISTRY.names for name in pruning)  # each a built-in policy
     files = {name: f for name, f in files.items() if name not in pruning}
     assert set(files) == set(NAMED)
     with pytest.raises(ValueError, match="losses.*python train.py schedule=infobatch"):

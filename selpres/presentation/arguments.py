@@ -66,9 +66,9 @@ def schedule_of(n: int, sizes, epochs, budget, schedule) -> tuple[Schedule, str 
             return schedule, None, None
         if not isinstance(schedule, str):
             raise TypeError(f"schedule={schedule!r}: expected a name ({', '.join(NAMED)}) or a Schedule")
-        from selpres.presentation.pruning import PRUNINGS  # (pruning imports the sampler, which imports this)
+        from selpres.presentation.pruning import REGISTRY as PRUNING  # its light __init__: the policies' names
 
-        if schedule in PRUNINGS:  # configs/schedule/ has them, but they choose each epoch's patterns by loss
+        if schedule in PRUNING.names:  # configs/schedule/ has them, but they choose each epoch's patterns by loss
             raise ValueError(
                 f"schedule={schedule!r} chooses each epoch's patterns from the network's losses, which a sampler "
                 f"does not see: run it with python train.py schedule={schedule}; "

@@ -22,7 +22,8 @@ from selpres.engines.batch import check_batch_options
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.engines.optim import HPARAM_KEYS, checked_hparams
 from selpres.errors import ConfigError
-from selpres.presentation.pruning import check_pruning
+from selpres.presentation.pruning import REGISTRY as PRUNING
+from selpres.presentation.pruning._job import check_pruning
 from selpres.run.estimate import refuse_before_task
 from selpres.storage import to_container
 
@@ -98,10 +99,21 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         )
     if batch_mode(o) and o.lr_schedule.value != "constant":
         raise ConfigError("optim.lr_schedule", o.lr_schedule.value, "constant in batch mode (optim.batch_size=0)")
-    if check_pruning(cfg.schedule) is not None and batch_mode(o):
-        raise ConfigError(
-            "optim.batch_size", o.batch_size, f"a mini-batch >= 1 with schedule.pruning={cfg.schedule.pruning.value}"
+    pruning = pruning_spec(cfg.schedule)
+    if pruning is not None:
+        s = cfg.schedule
+        epochs = None if s.epochs is None else list(s.epochs)
+        check_pruning(
+            *pruning,
+            sizes=list(s.sizes),
+            order=s.order.value,
+            budget=s.budget,
+            epochs=epochs,
+            selection_cost=s.selection_cost,
         )
+        if batch_mode(o):
+            why = f"a mini-batch >= 1 with schedule.pruning._target_={pruning[0]}"
+            raise ConfigError("optim.batch_size", o.batch_size, why)
     if minibatch_reason(cfg) and cfg.engine.value not in ("fast", "torch"):
         raise ConfigError(
             "engine", cfg.engine.value, f"fast or torch: {minibatch_reason(cfg)} (the mini-batch torch engine)"
@@ -137,6 +149,26 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
             "(0 = choosing is free; default 1/3, a forward pass of forward + backward)",
         )
     return check_topology(cfg.topology.layers, check_task(cfg))
+
+
+def pruning_spec(s: DictConfig) -> tuple[str, dict] | None:
+    """``schedule.pruning`` as the plain spec the pruning room takes: (the policy's name or import path, its
+    parameters), or None (no pruning). The old spelling ``schedule.pruning=infobatch`` is refused naming the new."""
+    node = s.pruning
+    if node is None:
+        return None
+    if not isinstance(node, DictConfig):
+        raise ConfigError(
+            "schedule.pruning",
+            node,
+            f"null or a node {{_target_: <policy>, <its parameters>}}: schedule={node} sets one, or "
+            f"schedule.pruning._target_={node} (policies: {PRUNING.allowed()})",
+        )
+    params = to_container(node)
+    target = params.pop("_target_", None)
+    if target is None:
+        raise ConfigError("schedule.pruning._target_", None, PRUNING.allowed())
+    return PRUNING.check(target), params
 
 
 def check_seed(cfg: DictConfig) -> None:

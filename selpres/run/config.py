@@ -48,11 +48,6 @@ class LrSchedule(Enum):
     cosine = "cosine"  # lr * (1 + cos(pi c / C)) / 2 over the run's own budget C (presentations)
 
 
-class Pruning(Enum):
-    infobatch = "infobatch"  # Qin et al. 2024 (selpres.presentation.pruning)
-    selective_backprop = "selective_backprop"  # Jiang et al. 2019
-
-
 class Reduction(Enum):
     sum = "sum"  # the epoch's error E = ½Σe², as Fahlman and Jacobs published their rules
     mean = "mean"  # mse_loss over the epoch, the online engines' per-pattern loss
@@ -171,10 +166,9 @@ class ScheduleConfig:
     order: Order = MISSING
     strata_bins: int = MISSING
     selection_cost: float = MISSING  # presentations charged per candidate scored (selpres.presentation.selection)
-    pruning: Optional[Pruning] = None  # data pruning every epoch (selpres.presentation.pruning); null: none
-    prune_ratio: Optional[float] = None  # infobatch: share of the well-learned patterns left out
-    delta: Optional[float] = None  # infobatch: share of the epochs pruned before training on all
-    beta: Optional[float] = None  # selective_backprop: selectivity, P = percentile(loss)^beta
+    # data pruning every epoch, null: none; else an open node {_target_: a policy of selpres.presentation.pruning
+    # (its registry) or an import path, <the policy's parameters>}, which the policy checks itself
+    pruning: Optional[Any] = None
 
 
 @dataclass
@@ -249,6 +243,24 @@ class TrainConfig:
     threads: int = MISSING
     overwrite: bool = MISSING
     name: str = MISSING
+
+
+# Spellings users typed that the schema no longer has -> the new spelling (refused in one line by
+# selpres.run.guard before Hydra composes: Hydra's own refusal of an unknown key does not name the new one)
+RETIRED = {
+    "schedule.prune_ratio": "schedule.pruning.prune_ratio",
+    "schedule.delta": "schedule.pruning.delta",
+    "schedule.beta": "schedule.pruning.beta",
+}
+
+
+def retired(overrides: list[str]) -> str | None:
+    """The one-line refusal of the first override in ``overrides`` that uses a retired spelling, or None."""
+    for arg in overrides:
+        key, eq, value = arg.lstrip("+~").partition("=")
+        if key in RETIRED:
+            return f"{key}{eq}{value} is no longer a key: use {RETIRED[key]}{eq}{value} (the pruning policy's node)"
+    return None
 
 
 def _dirname(overrides: str) -> str:

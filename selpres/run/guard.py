@@ -18,6 +18,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from selpres.run import lock, orphan
+from selpres.run.config import retired
 
 
 @dataclass
@@ -106,7 +107,12 @@ def undo(out: Path) -> None:
 
 def guarded(main) -> None:
     """``python train.py``'s outermost frame: a Ctrl-C outside the job (while Hydra composes, creates the
-    folder, writes ``.hydra/``) prints one line and exits 130, removing only what this run created."""
+    folder, writes ``.hydra/``) prints one line and exits 130, removing only what this run created. A retired
+    spelling (``schedule.prune_ratio=0.3``) is refused in one line naming the new one, before anything is written."""
+    refusal = retired(sys.argv[1:])
+    if refusal is not None:
+        print(f"error: {refusal}", file=sys.stderr)
+        sys.exit(2)
     try:
         main()
     except KeyboardInterrupt:

@@ -22,11 +22,11 @@ from selpres.engines.online import make_engine
 from selpres.errors import ConfigError
 from selpres.presentation.orders import priority_orders
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
-from selpres.presentation.pruning import Pruning, pruning_plan
+from selpres.presentation.pruning._job import Pruning, pruning_plan
 from selpres.presentation.sampler import SelectivePresentation
 from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
 from selpres.presentation.selection import StageSelection, initial_kind, planned_charge, stage_selection
-from selpres.run.checks import batch_mode, minibatch_reason, optim_hparams, validate
+from selpres.run.checks import batch_mode, minibatch_reason, optim_hparams, pruning_spec, validate
 from selpres.run.estimate import refuse_job
 from selpres.seeding import derive_seed, generator
 from selpres.storage import to_container
@@ -50,7 +50,7 @@ class Problem:
     selection: StageSelection | None = None  # loss_high/loss_low/reselect: A_k chosen at each stage start
     task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
     schedule_note: str | None = None  # how a named schedule's counts were applied to this n (None: as given)
-    pruning: Pruning | None = None  # infobatch / selective_backprop: each epoch's patterns chosen by loss
+    pruning: Pruning | None = None  # a pruning policy (schedule.pruning): each epoch's patterns chosen by loss
     budget: float | None = None  # the run's own planned cost (presentations): the cosine schedule's horizon
 
     @functools.cached_property
@@ -96,10 +96,11 @@ def prepare(cfg: DictConfig) -> Problem:
     samplers = [SelectivePresentation(order=order, schedule=schedule, seed=s) for order, s in zip(orders, seeds)]
     X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
     pruning, budget = None, schedule.presentations + planned_charge(kind, schedule.sizes, cfg.schedule.selection_cost)
-    if cfg.schedule.pruning is not None:
+    spec = pruning_spec(cfg.schedule)
+    if spec is not None:
         fitted = fit_schedule(cfg.schedule.sizes, cfg.schedule.budget, task.n)[1]
         epochs = None if cfg.schedule.epochs is None else int(cfg.schedule.epochs[0])
-        pruning = Pruning(cfg.schedule.pruning.value, cfg.schedule, task.n, seeds, fitted, epochs)
+        pruning = Pruning(*spec, task.n, seeds, fitted, epochs, float(cfg.schedule.selection_cost))
         budget = fitted if fitted is not None else task.n * epochs
     return Problem(
         sizes=sizes,
@@ -129,8 +130,10 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
     sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
     if note:
         log.info(note)
-    if cfg.schedule.pruning is not None:  # checked in validate: sizes [1.0], a budget or one epoch count
-        return pruning_plan(cfg.schedule.pruning.value, cfg.schedule, task.n, budget), note
+    spec = pruning_spec(cfg.schedule)
+    if spec is not None:  # checked in validate: sizes [1.0], a budget or one epoch count
+        epochs = None if sch["epochs"] is None else int(sch["epochs"][0])
+        return pruning_plan(*spec, task.n, budget, epochs, float(cfg.schedule.selection_cost)), note
     try:
         return build_schedule(sizes, sch["epochs"], task.n, budget), note
     except ConfigError as e:

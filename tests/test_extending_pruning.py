@@ -1,0 +1,39 @@
+"""A user's own pruning policy from outside the package (examples/extending/my_pruning.py), named by its import path
+on the command line: it runs, checks its own parameters, and results.json records its class path."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+from conftest import REPO
+
+CMD = ["train.py", "schedule=infobatch", "schedule.pruning._target_=my_pruning.UniformPruning"]
+
+
+def _run(*args: str):
+    path = os.pathsep.join([str(REPO / "examples" / "extending"), str(REPO), os.environ.get("PYTHONPATH", "")])
+    env = {**{k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}, "PYTHONPATH": path}
+    return subprocess.run([sys.executable, *CMD, *args], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+
+
+def test_a_users_pruning_policy_runs_from_the_command_line(tmp_path):
+    p = _run("schedule.epochs=[3]", "replicas=2", f"hydra.run.dir={tmp_path}")
+    assert p.returncode == 0, p.stderr[-2000:]
+    res = json.loads((tmp_path / "results.json").read_text())
+    pr = res["pruning"]
+    assert pr["policy"] == "my_pruning.UniformPruning" and pr["kind"] == "my_pruning.UniformPruning"
+    assert res["schedule"]["sizes"] == [1002]  # the paper's exemplar set
+    # by hand: all 3 epochs before delta * 3 = 2.625, each keeping int(0.5 * 1002) = 501 patterns, leaving out 501
+    assert pr["trained_presentations"] == [3 * 501.0] * 2 and pr["left_out"] == [3 * 501.0] * 2
+    assert res["status"] == "complete"
+
+
+def test_a_users_policy_checks_its_own_parameters(tmp_path):
+    p = _run("schedule.epochs=[3]", "schedule.pruning.prune_ratio=1.5", f"hydra.run.dir={tmp_path / 'x'}")
+    assert p.returncode == 2
+    assert p.stderr.strip().splitlines() == [
+        "error: schedule.pruning.prune_ratio=1.5 is not allowed: expected a share of the patterns in [0, 1)"
+    ]
