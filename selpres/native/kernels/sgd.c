@@ -47,16 +47,7 @@ static const int64_t S[NL + 1] = {SIZES};
 
 #include "exp4.h"
 
-/* Where layer l's weights (woff) and biases (boff) start among a replica's parameters, and where the
-   activations of layer l's units start (aoff; layer 0 = the inputs). */
-static inline void layer_offsets(int64_t *woff, int64_t *boff, int64_t *aoff)
-{
-    int64_t off = 0, tot = 0;
-    for (int l = 0; l < NL; l++) {
-        woff[l] = off; off += S[l + 1] * S[l]; boff[l] = off; off += S[l + 1];
-    }
-    for (int l = 0; l <= NL; l++) { aoff[l] = tot; tot += S[l]; }
-}
+#include "layout.h"
 
 #define WORK_DOUBLES ((TOT_UNITS + 2 * MAXW) * 4)  /* one group's work arrays */
 
