@@ -102,9 +102,11 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         raise ConfigError(
             "optim.batch_size", o.batch_size, f"a mini-batch >= 1 with schedule.pruning={cfg.schedule.pruning.value}"
         )
-    if minibatch_reason(cfg) and cfg.engine.value not in ("fast", "torch"):
+    if minibatch_reason(cfg) and cfg.engine.value not in ("fast", "native", "torch"):
         raise ConfigError(
-            "engine", cfg.engine.value, f"fast or torch: {minibatch_reason(cfg)} (the mini-batch torch engine)"
+            "engine",
+            cfg.engine.value,
+            f"fast, native or torch: {minibatch_reason(cfg)} (the mini-batch engines: native kernel or torch)",
         )
     if batch_mode(o) and cfg.engine.value not in ("fast", "torch"):
         raise ConfigError(
