@@ -11,10 +11,11 @@ import math
 import pytest
 import torch
 
-from conftest import cfg_of, requires_native
 from selpres.engines.minibatch import MiniBatchEngine
 from selpres.engines.model import BPN, init_replica_params, load_into
 from selpres.engines.native_minibatch import NativeMiniBatchEngine, make_minibatch_engine, native_reason
+
+from conftest import cfg_of, requires_native
 
 SIZES = (6, 5, 4, 2)
 N, M, B, EPOCHS = 40, 23, 4, 3  # 23 = 5 batches of 4 and an uneven last one of 3

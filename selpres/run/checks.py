@@ -52,9 +52,10 @@ def batch_mode(o: DictConfig) -> bool:
 
 
 def minibatch_reason(cfg: DictConfig) -> str | None:
-    """Why a job needs the mini-batch torch engine (selpres.engines.minibatch) rather than the online SGD
-    engines (native kernel / torch / reference), or None: the native kernel runs sigmoid units and SGD with
-    momentum at a constant rate, nothing else (pruned epochs too: per-replica counts, weighted patterns)."""
+    """Why a job needs a mini-batch engine (the native mini-batch kernel, selpres.engines.native_minibatch, or the
+    torch one, selpres.engines.minibatch) rather than the online SGD engines (native kernel / torch / reference),
+    or None: the online kernel runs sigmoid units and SGD with momentum at a constant rate, nothing else (pruned
+    epochs too: per-replica counts, weighted patterns)."""
     o = cfg.optim
     if batch_mode(o):
         return None
