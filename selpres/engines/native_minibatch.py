@@ -165,37 +165,21 @@ class NativeMiniBatchEngine(MiniBatchEngine):
         self.spent = state["spent"].clone()
 
 
-def make_minibatch_engine(
-    name: str,
-    sizes,
-    params,
-    rule: str,
-    hparams: dict,
-    batch_size: int,
-    activation: str = "sigmoid",
-    lr_schedule: str = "constant",
-    horizon: float = 1.0,
-    reduction: str = "mean",
-    threads: int | None = None,
-) -> MiniBatchEngine:
+def make_minibatch_engine(name: str, *args, threads: int | None = None) -> MiniBatchEngine:
     """``name``: ``torch`` (the torch mini-batch engine), ``native`` (the kernel; raises
     :class:`KernelUnavailable` where it cannot run) or ``fast`` (the kernel, else the torch engine with
-    ``fallback_reason`` set and one warning logged)."""
-    torch_engine = lambda: MiniBatchEngine(  # noqa: E731
-        sizes, params, rule, dict(hparams), batch_size, activation, lr_schedule, horizon, reduction
-    )
+    ``fallback_reason`` set and one warning logged). ``args``: both engines' (sizes, params, rule, hparams,
+    batch_size, activation, lr_schedule, horizon, reduction); ``threads``: the kernel's."""
     if name == "torch":
-        return torch_engine()
+        return MiniBatchEngine(*args)
     if name not in ("native", "fast"):
         raise ValueError(f"engine {name!r} for a mini-batch job: one of fast, native, torch")
     try:
-        return NativeMiniBatchEngine(
-            sizes, params, rule, hparams, batch_size, activation, lr_schedule, horizon, reduction, threads
-        )
+        return NativeMiniBatchEngine(*args, threads=threads)
     except KernelUnavailable as exc:
         if name == "native":
             raise
-        engine = torch_engine()
+        engine = MiniBatchEngine(*args)
         engine.fallback_reason = f"native mini-batch kernel unavailable: {' '.join(str(exc).split())[:400]}"
         log.warning("engine 'fast' runs the mini-batch torch engine: %s", engine.fallback_reason)
         return engine
