@@ -232,3 +232,28 @@ def test_engine_native_where_the_kernel_cannot_run_is_a_config_error(monkeypatch
     cfg = cfg_of(*JOB, "engine=native")
     with pytest.raises(ConfigError, match="disabled by SELPRES_NO_NATIVE"):
         job_engine(cfg, prepare(cfg))
+
+
+@requires_native
+def test_a_key_left_unset_gets_the_registrys_default_on_both_engines():
+    """``optim.weight_decay=null`` with AdamW: the registry's default (0.01) on both engines, so they still agree."""
+    from selpres.run.problem import job_engine, prepare
+
+    engines = []
+    order = torch.randint(0, 300, (3, 64), generator=torch.Generator().manual_seed(0))
+    for engine in ("native", "torch"):
+        cfg = cfg_of(*JOB, "optim.name=adamw", "optim.weight_decay=null", f"engine={engine}")
+        prob = prepare(cfg)
+        eng = job_engine(cfg, prob)
+        eng.train_epoch(prob.X, prob.Y, order)
+        engines.append(eng)
+    assert [e.name for e in engines] == ["minibatch-native", "minibatch"]
+    for a, b in zip(*(e.params() for e in engines)):
+        assert _close(a, b) <= TOL
+    o = cfg.optim
+    for wd, same in ((0.01, True), (0.0, False)):
+        hp = {"lr": o.lr, "beta1": o.beta1, "beta2": o.beta2, "eps": o.eps, "weight_decay": wd}
+        args = (prob.sizes, prob.init_params, "adamw", hp, o.batch_size, "relu", o.lr_schedule.value, prob.budget)
+        explicit = NativeMiniBatchEngine(*args)
+        explicit.train_epoch(prob.X, prob.Y, order)
+        assert all(torch.equal(a, b) for a, b in zip(explicit.params(), engines[0].params())) == same

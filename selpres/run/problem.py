@@ -20,6 +20,7 @@ from selpres.engines.model import init_replica_params
 from selpres.engines.native_minibatch import NAME as NATIVE_MINIBATCH
 from selpres.engines.native_minibatch import make_minibatch_engine
 from selpres.engines.online import make_engine
+from selpres.engines.optim import checked_hparams
 from selpres.errors import ConfigError
 from selpres.presentation.orders import priority_orders
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
@@ -177,7 +178,7 @@ def job_engine(cfg: DictConfig, prob: Problem):
                 prob.sizes,
                 prob.init_params,
                 o.name.value,
-                {k: v for k, v in optim_hparams(o).items() if v is not None},
+                checked_hparams(o.name.value, optim_hparams(o)),  # the registry's defaults for unset keys, for both
                 o.batch_size,
                 cfg.model.activation.value,
                 o.lr_schedule.value,
