@@ -1,19 +1,19 @@
 """Mini-batch training of many replicas, side by side in one run: the native kernel, the torch mini-batch engine, and
 what a PyTorch user would write for many models at once (``torch.func.stack_module_state`` + ``vmap``, eager and
-``torch.compile``d).
+``torch.compile``d), the variants in turn round after round.
 
 For each Adam design of ``experiment=modern`` (``configs/design/modern/<arm>_adam_conventional.yaml``: its topology,
 n, units, rate, batch and cosine schedule; 12 replicas), every variant trains the same 12 replicas on random data
-in the design's shapes (float64, each replica its own order), and the row gives presentations per second (median
-of the repeats) and the native kernel's ratio to each. The kernel runs a whole epoch per call, the others a
-stretch of mini-batches (their speed per mini-batch does not depend on how many). The vmap variants are a user's
-code: one ``nn.Sequential`` per replica stacked, the forward pass vmapped over replicas, the sum of the replicas'
-mse backpropagated, ``torch.optim.Adam`` on the stacked weights with a cosine ``LambdaLR`` (one step count for
-all replicas: no pruning here). The compiled one compiles that loss (forward and backward, AOTAutograd); the step
-stays eager (a compiled step recompiles as the rate changes). Compilation is timed apart and excluded from the
-rate. Every variant runs at one thread, so that they compare like with like on this shared 2-core machine (the
-kernel also at torch's thread count). Target (issue 28): native >= 10x the torch engine and ahead of both vmap variants.
-``python -m selpres.bench.minibatch [--quick]``.
+in the design's shapes (float64, each replica its own order). The row gives presentations per second (median of
+the rounds) and the native kernel's ratio to each (median of the rounds' ratios). The kernel runs a whole epoch
+per call, the others a stretch of mini-batches (their speed per mini-batch does not depend on how many). The vmap
+variants are a user's code: one ``nn.Sequential`` per replica stacked, the forward pass vmapped over replicas, the
+sum of the replicas' mse backpropagated, ``torch.optim.Adam`` on the stacked weights with a cosine ``LambdaLR``
+(one step count for all replicas: no pruning here). The compiled one compiles that loss (forward and backward,
+AOTAutograd); the step stays eager (a compiled step recompiles as the rate changes). Its first call, which
+compiles, is timed apart and not counted. Every variant runs at one thread, so that they compare like with like
+on this shared 2-core machine (the kernel also at torch's thread count). Target (issue 28): native >= 10x the
+torch engine and ahead of both vmap variants. ``python -m selpres.bench.minibatch [--quick]``.
 """
 
 from __future__ import annotations
@@ -56,21 +56,8 @@ def _data(d: dict, m: int):
     return X, Y, order
 
 
-def _rate(fn, presentations: int, repeats: int) -> tuple[float, float]:
-    """Presentations per second of ``fn``: (wall, CPU time of the calling thread), medians of ``repeats`` timed
-    calls after one untimed. On a shared machine the CPU time is the steadier figure: it leaves out the time the
-    thread waited for a core (at one thread, every variant runs in the calling thread)."""
-    fn()
-    wall, cpu = [], []
-    for _ in range(repeats):
-        t, c = time.perf_counter(), time.thread_time()
-        fn()
-        cpu.append(time.thread_time() - c)
-        wall.append(time.perf_counter() - t)
-    return presentations / statistics.median(wall), presentations / statistics.median(cpu)
-
-
-def engine_rate(d: dict, native: bool, m: int, repeats: int, threads: int | None = None) -> float:
+def engine_stretch(d: dict, native: bool, m: int, threads: int | None = None):
+    """An epoch of ``m`` patterns per replica on the native kernel or the torch mini-batch engine (a callable)."""
     from selpres.engines.minibatch import MiniBatchEngine
     from selpres.engines.model import init_replica_params
     from selpres.engines.native_minibatch import NativeMiniBatchEngine
@@ -81,11 +68,12 @@ def engine_rate(d: dict, native: bool, m: int, repeats: int, threads: int | None
     eng = (
         NativeMiniBatchEngine(*args, d["horizon"], threads=threads) if native else MiniBatchEngine(*args, d["horizon"])
     )
-    return _rate(lambda: eng.train_epoch(X, Y, order), R * m, repeats)
+    return lambda: eng.train_epoch(X, Y, order)
 
 
-def vmap_rate(d: dict, compiled: bool, m: int, repeats: int) -> tuple[tuple[float, float], float]:
-    """(:func:`_rate`'s pair, seconds compiling) of the stacked-models loop a PyTorch user would write."""
+def vmap_stretch(d: dict, compiled: bool, m: int):
+    """(a callable training ``m`` patterns per replica, seconds its first call took): the stacked-models loop a
+    PyTorch user would write; the first call compiles (and warms up)."""
     from torch import nn
     from torch.func import functional_call, stack_module_state, vmap
 
@@ -124,48 +112,68 @@ def vmap_rate(d: dict, compiled: bool, m: int, repeats: int) -> tuple[tuple[floa
             sched.step()
 
     t = time.perf_counter()
-    stretch()  # compiles (and warms up) once
-    compiling = time.perf_counter() - t
-    return _rate(stretch, R * m, repeats), compiling if compiled else 0.0
+    stretch()
+    return stretch, time.perf_counter() - t
+
+
+def measure(variants: dict, rounds: int) -> dict[str, list[tuple[float, float]]]:
+    """Per variant ``(callable, presentations)``, per round (the variants in turn, so that a busy machine slows all
+    alike) its presentations per second: (wall, CPU time of the calling thread). On a shared machine CPU time is
+    the steadier figure: it leaves out the time the thread waited for a core (at one thread every variant runs in
+    the calling thread)."""
+    out = {k: [] for k in variants}
+    for fn, _ in variants.values():
+        fn()  # warm: the first epoch of an engine, the caches
+    for _ in range(rounds):
+        for name, (fn, presentations) in variants.items():
+            t, c = time.perf_counter(), time.thread_time()
+            fn()
+            cpu, wall = time.thread_time() - c, time.perf_counter() - t
+            out[name].append((presentations / wall, presentations / max(cpu, 1e-9)))
+    return out
 
 
 def rows(quick: bool = False) -> list[str]:
     """Lines for selpres-bench: per design, presentations/s of each variant and native's ratio to it."""
     from selpres.native import KernelUnavailable
 
-    reps, threads = (2 if quick else 3), torch.get_num_threads()
+    rounds, threads = (3 if quick else 5), torch.get_num_threads()
     lines = [
-        f"mini-batch training, {R} replicas, the modern Adam designs: M presentations/s (median of {reps}), wall and "
-        "CPU time of the calling thread; every variant at 1 thread (torch's and the kernel's), the kernel also at "
-        f"{threads}; x = native at 1 thread / that, by wall (by CPU time)"
+        f"mini-batch training, {R} replicas, the modern Adam designs: M presentations/s, median of {rounds} rounds "
+        "(each round every variant in turn), by wall and by CPU time of the calling thread; every variant at 1 thread "
+        f"(torch's and the kernel's), the kernel also at {threads} (wall only); x = native / that, the median of the "
+        "rounds' ratios, by wall (by CPU time)"
     ]
     torch.set_num_threads(1)
     try:
         for name in DESIGNS:
             d = design(name)
             m_native, m_slow = min(d["n"], 10_000 if quick else 20_000), (16 if quick else 32) * d["batch"]
-            rates, note = {}, ""
+            variants, note = {}, ""
             try:
-                rates["native"] = engine_rate(d, True, m_native, reps, threads=1)
+                variants["native"] = (engine_stretch(d, True, m_native, threads=1), R * m_native)
                 if threads > 1:
-                    rates[f"native, {threads} threads"] = engine_rate(d, True, m_native, reps, threads=threads)
+                    variants[f"native, {threads} threads"] = (engine_stretch(d, True, m_native, threads), R * m_native)
             except KernelUnavailable as exc:
                 note = f" (native kernel unavailable: {exc})"
-            rates["torch engine"] = engine_rate(d, False, m_slow, reps)
-            rates["vmap eager"] = vmap_rate(d, False, m_slow, reps)[0]
+            variants["torch engine"] = (engine_stretch(d, False, m_slow), R * m_slow)
+            variants["vmap eager"] = (vmap_stretch(d, False, m_slow)[0], R * m_slow)
             try:
-                rates["vmap compiled"], compiling = vmap_rate(d, True, m_slow, reps)
-                note += f" (torch.compile took {compiling:.1f} s, not counted)"
+                fn, compiling = vmap_stretch(d, True, m_slow)
+                variants["vmap compiled"] = (fn, R * m_slow)
+                note += f" (torch.compile's first call took {compiling:.1f} s, not counted)"
             except Exception as exc:  # noqa: BLE001 - e.g. an inductor without a C++ compiler: say so, go on
                 note += f" (torch.compile cannot run here: {' '.join(str(exc).split())[:160]})"
+            rates = measure(variants, rounds)
             shape = f"{'-'.join(map(str, d['sizes']))} {d['activation']}, batch {d['batch']}, lr {d['hparams']['lr']}"
             lines.append(f"  {name} ({shape}){note}:")
-            base = rates.get("native")
-            for label, (wall, cpu) in rates.items():
+            for label, per_round in rates.items():
+                wall, cpu = (statistics.median(r[k] for r in per_round) for k in (0, 1))
                 cpu_text = f"{cpu / 1e6:8.3f}" if not label.startswith("native,") else "       -"
                 ratio = ""
-                if base and not label.startswith("native"):
-                    ratio = f"  x{base[0] / wall:6.1f} (x{base[1] / cpu:.1f})"
+                if "native" in rates and not label.startswith("native"):
+                    by = [statistics.median(n[k] / r[k] for n, r in zip(rates["native"], per_round)) for k in (0, 1)]
+                    ratio = f"  x{by[0]:6.1f} (x{by[1]:.1f})"
                 lines.append(f"    {label:<20} wall {wall / 1e6:8.3f}  cpu {cpu_text}{ratio}")
     finally:
         torch.set_num_threads(threads)
@@ -174,7 +182,7 @@ def rows(quick: bool = False) -> list[str]:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="shorter stretches, 2 repeats")
+    ap.add_argument("--quick", action="store_true", help="shorter stretches, 3 rounds")
     print("\n".join(rows(ap.parse_args(argv).quick)))
 
 
