@@ -42,7 +42,7 @@ def _epochs(R: int):
     return X, Y, out
 
 
-def _per_replica_loop(params, r, rule, hp, activation, X, Y, epochs, horizon, reduction):
+def _per_replica_loop(params, r, rule, hp, activation, X, Y, epochs, horizon, reduction, batch=B):
     """Replica r as a PyTorch user trains it: a BPN, torch.optim, autograd, the cosine rate set per step."""
     model = load_into(BPN(SIZES, activation=activation), params, r)
     wd = hp["weight_decay"]
@@ -55,8 +55,8 @@ def _per_replica_loop(params, r, rule, hp, activation, X, Y, epochs, horizon, re
     for order, w, counts in epochs:
         c = order.shape[1] if counts is None else int(counts[r])
         per_pattern = torch.full((order.shape[1],), math.nan, dtype=torch.float64)
-        for s in range(0, c, B):
-            idx = order[r, s : min(s + B, c)]
+        for s in range(0, c, batch):
+            idx = order[r, s : min(s + batch, c)]
             for group in opt.param_groups:
                 group["lr"] = hp["lr"] * 0.5 * (1 + math.cos(math.pi * min(spent / horizon, 1.0)))
             sq = (model(X[idx]) - Y[idx]).square()
@@ -109,6 +109,22 @@ def test_native_equals_per_replica_torch_optim_and_the_torch_engine(activation, 
     assert worst <= TOL
     moved = max(_close(a, b) for a, b in zip(native.params(), params))
     assert moved > 1e-3  # it trained (a kernel that did nothing would fail above, but say it plainly)
+
+
+@requires_native
+@pytest.mark.parametrize("batch", [1, 2 * M])  # online (a step per pattern), and one mini-batch an epoch
+@pytest.mark.parametrize("activation, rule", [("relu", "adam"), ("sigmoid", "sgd"), ("silu", "adamw")])
+def test_native_equals_per_replica_torch_optim_at_batch_1_and_a_whole_epoch(activation, rule, batch):
+    R = 3
+    X, Y, epochs = _epochs(R)
+    params = init_replica_params(SIZES, [10 + r for r in range(R)])
+    hp = _hparams(rule)
+    native = NativeMiniBatchEngine(SIZES, params, rule, dict(hp), batch, activation, "cosine", 2.5 * M)
+    for order, w, counts in epochs:
+        native.train_epoch(X, Y, order, weights=w, counts=counts)
+    for r in range(R):
+        ref, _ = _per_replica_loop(params, r, rule, hp, activation, X, Y, epochs, 2.5 * M, "mean", batch)
+        assert max(_close(got[r], want) for got, want in zip(native.params(), ref)) <= TOL
 
 
 @requires_native
