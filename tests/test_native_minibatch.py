@@ -184,6 +184,28 @@ def test_a_checkpoint_resumes_exactly():
     assert torch.equal(straight.spent, resumed.spent)
 
 
+@requires_native
+@pytest.mark.parametrize("rule", ["sgd", "adam"])
+def test_a_checkpoint_of_the_torch_engine_resumes_on_the_kernel(rule):
+    """A job checkpointed on the torch mini-batch engine (engine=fast before the kernel) goes on here alike."""
+    X, Y, epochs = _epochs(3)
+    params = init_replica_params(SIZES, [0, 1, 2])
+    args = (SIZES, params, rule, _hparams(rule), B, "relu", "cosine", 3 * M)
+    on_torch, resumed = MiniBatchEngine(*args), NativeMiniBatchEngine(*args)
+    on_torch.train_epoch(X, Y, epochs[0][0])
+    on_torch.spent.fill_(M)  # (the loop sets the clock before each epoch)
+    saved = on_torch.state_dict()
+    forgetful = NativeMiniBatchEngine(*args)  # the weights without the optimizer's state: the test sees it matter
+    resumed.load_state_dict(saved)
+    forgetful.load_state_dict({**saved, "optimizer": {"state": {}}})
+    for eng in (on_torch, resumed, forgetful):
+        for order, w, counts in epochs[1:]:
+            eng.train_epoch(X, Y, order, weights=w, counts=counts)
+    for a, b in zip(resumed.params(), on_torch.params()):
+        assert _close(a, b) <= TOL
+    assert max(_close(a, b) for a, b in zip(forgetful.params(), on_torch.params())) > 1e-6
+
+
 def test_what_the_kernel_cannot_run_is_named():
     assert native_reason("adam", "relu", "cosine", "mean", {"lr": 0.1, "beta1": 0.9}) is None
     assert "optim.name=rprop" in native_reason("rprop", "relu", "cosine", "mean", {})
