@@ -4,7 +4,9 @@
     selpres-bench --quick       # short version (about a minute: fewer epochs and repeats)
     python -m selpres.bench     # the same, without the console entry point
 
-Sections: the training engines alone; the whole job (``selpres.run.train.train`` end to end at R = 1, 30, 1000
+Sections: the training engines alone; mini-batch training of the modern Adam designs (``selpres.bench.minibatch``:
+the native kernel against the torch mini-batch engine and torch.func's stacked models, eager and compiled); the
+whole job (``selpres.run.train.train`` end to end at R = 1, 30, 1000
 beside the engine alone at the same R); the per-epoch shuffles (the native bucket sort against numpy's argsort
 of the same hashes); the priority orders' selection cost; the stage-wise orders' cost of choosing
 (``selpres.presentation.selection``: one enlargement batched against a per-replica loop, and whole jobs' "select"
@@ -34,6 +36,7 @@ from selpres.bench.build import bench_compile, bench_exemplar_generation
 from selpres.bench.common import EPOCHS, SIZES, EngineTable, N
 from selpres.bench.engines import bench_batch_engines, bench_engines
 from selpres.bench.jobs import bench_jobs
+from selpres.bench.minibatch import rows as minibatch_rows
 from selpres.bench.presentation import bench_orders, bench_selection, bench_shuffles
 from selpres.bench.sampler import bench_sampler
 from selpres.bench.startup import rows as startup_rows
@@ -95,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0 if bench_jobs(table, q, args.configs.resolve(), args.job_repeats) else 1
     bench_engines(table, q, native)
     bench_batch_engines(table, q, args.configs.resolve())
+    print("\n" + "\n".join(minibatch_rows(q)))  # mini-batch Adam: native kernel, torch engine, vmap (issue 28)
     jobs_ok = bench_jobs(table, q, args.configs.resolve(), args.job_repeats)
     bench_shuffles(q)
     bench_sampler(q)  # the Sampler in a DataLoader loop against RandomSampler (a row, not a pass or fail)

@@ -3,7 +3,9 @@ engine -> loop -> results -> report).
 
 Owns the BPN module, topology parsing and the replica weight layout (``model``), the online-SGD engines
 (``online``: ``reference``, the executable definition of correct; ``torch``; ``native``, the C kernel; what
-they all take, pruned epochs included, checked in ``inputs``), batch-mode
+they all take, pruned epochs included, checked in ``inputs``), mini-batch training with today's units and
+optimizers (``minibatch``: eager torch; ``native_minibatch``: the native mini-batch kernel, and which of the two a
+job gets), batch-mode
 training with the speed-up methods of the paper's section 2 (``batch``) and those methods as
 ``torch.optim.Optimizer`` classes (``optim``). An engine takes an epoch's order of pattern indices and updates
 its replicas; it does not choose the order.

@@ -1,8 +1,9 @@
 """Native: the C code, compiled on first use and cached (part of the foundation every stage may import).
 
-Owns the build, cache and ctypes binding of ``kernels/sgd.c`` (online SGD and scoring for the ``native`` engine)
-and ``kernels/shuffle.c`` (the per-epoch shuffles of ``selpres.presentation.sampler``). It stands below both of
-its users, so neither has to import the other; without a compiler or AVX2/FMA, ``KernelUnavailable`` says why
+Owns the build, cache and ctypes binding of ``kernels/sgd.c`` (online SGD and scoring for the ``native`` engine),
+``kernels/minibatch.c`` (mini-batch SGD/Adam/AdamW for ``selpres.engines.native_minibatch``; ``minibatch.py``,
+``load_minibatch`` there) and ``kernels/shuffle.c`` (the per-epoch shuffles of ``selpres.presentation.sampler``).
+It stands below its users, so none has to import another; without a compiler or AVX2/FMA, ``KernelUnavailable`` says why
 and the callers fall back to torch.
 
 What callers use, all from here: ``from selpres.native import KernelUnavailable, cpu_flags, load, load_shuffle``.

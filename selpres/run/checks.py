@@ -53,9 +53,10 @@ def batch_mode(o: DictConfig) -> bool:
 
 
 def minibatch_reason(cfg: DictConfig) -> str | None:
-    """Why a job needs the mini-batch torch engine (selpres.engines.minibatch) rather than the online SGD
-    engines (native kernel / torch / reference), or None: the native kernel runs sigmoid units and SGD with
-    momentum at a constant rate, nothing else (pruned epochs too: per-replica counts, weighted patterns)."""
+    """Why a job needs a mini-batch engine (the native mini-batch kernel, selpres.engines.native_minibatch, or the
+    torch one, selpres.engines.minibatch) rather than the online SGD engines (native kernel / torch / reference),
+    or None: the online kernel runs sigmoid units and SGD with momentum at a constant rate, nothing else (pruned
+    epochs too: per-replica counts, weighted patterns)."""
     o = cfg.optim
     if batch_mode(o):
         return None
@@ -114,9 +115,11 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         if batch_mode(o):
             why = f"a mini-batch >= 1 with schedule.pruning._target_={pruning[0]}"
             raise ConfigError("optim.batch_size", o.batch_size, why)
-    if minibatch_reason(cfg) and cfg.engine.value not in ("fast", "torch"):
+    if minibatch_reason(cfg) and cfg.engine.value not in ("fast", "native", "torch"):
         raise ConfigError(
-            "engine", cfg.engine.value, f"fast or torch: {minibatch_reason(cfg)} (the mini-batch torch engine)"
+            "engine",
+            cfg.engine.value,
+            f"fast, native or torch: {minibatch_reason(cfg)} (the mini-batch engines: native kernel or torch)",
         )
     if batch_mode(o) and cfg.engine.value not in ("fast", "torch"):
         raise ConfigError(

@@ -16,9 +16,11 @@ from selpres.data import paper as D
 from selpres.data.file import DataFileError
 from selpres.data.task import Task, load_task
 from selpres.engines.batch import BatchEngine
-from selpres.engines.minibatch import MiniBatchEngine
 from selpres.engines.model import init_replica_params
+from selpres.engines.native_minibatch import NAME as NATIVE_MINIBATCH
+from selpres.engines.native_minibatch import make_minibatch_engine
 from selpres.engines.online import make_engine
+from selpres.engines.optim import checked_hparams
 from selpres.errors import ConfigError
 from selpres.presentation.orders import priority_orders
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
@@ -159,6 +161,8 @@ def engine_kind(cfg: DictConfig) -> str:
 
 def kind_of(engine_name: str | None) -> str:
     """:func:`engine_kind` of an engine that ran (results.json ``engine``; records older than it name none)."""
+    if engine_name == NATIVE_MINIBATCH:  # the mini-batch update, run by the native kernel
+        return "minibatch"
     return engine_name if engine_name in ("minibatch", "batch") else "online"
 
 
@@ -169,21 +173,25 @@ def job_engine(cfg: DictConfig, prob: Problem):
 
     o = cfg.optim
     kind = engine_kind(cfg)
-    if kind == "minibatch":
-        reason = minibatch_reason(cfg)
-        log.warning("engine %s runs the mini-batch torch engine: %s", cfg.engine.value, reason)
-        return MiniBatchEngine(
-            prob.sizes,
-            prob.init_params,
-            o.name.value,
-            {k: v for k, v in optim_hparams(o).items() if v is not None},
-            o.batch_size,
-            cfg.model.activation.value,
-            o.lr_schedule.value,
-            prob.budget,
-            o.reduction.value,
-            fallback_reason=reason,
-        )
+    if kind == "minibatch":  # the native mini-batch kernel (fast, native) or the torch mini-batch engine (torch)
+        log.info("engine %s runs a mini-batch engine: %s", cfg.engine.value, minibatch_reason(cfg))
+        try:
+            return make_minibatch_engine(
+                cfg.engine.value,
+                prob.sizes,
+                prob.init_params,
+                o.name.value,
+                checked_hparams(o.name.value, optim_hparams(o)),  # the registry's defaults for unset keys, for both
+                o.batch_size,
+                cfg.model.activation.value,
+                o.lr_schedule.value,
+                prob.budget,
+                o.reduction.value,
+            )
+        except KernelUnavailable as exc:
+            raise ConfigError(
+                "engine", "native", f"fast or torch: the native mini-batch kernel cannot run this job ({exc})"
+            ) from None
     if kind == "batch":
         return BatchEngine(
             prob.sizes,
