@@ -271,11 +271,16 @@ def test_presentation_counters(X):
     _loop(one, n)
     assert one.presentations == sum(size * e for size, e in zip(sizes, EPOCHS)) == one.schedule.presentations
     fresh = SelectivePresentation(X, sizes=FRACTIONS, epochs=EPOCHS, seed=1)
-    fresh.set_epoch(4)  # a resumed loop: the counter needs nothing but the epoch
-    assert fresh.presentations == 50 * 2 + 100 + 401  # epochs 0-1 on A1, 2 on A2, 3 on A3
+    fresh.set_epoch(4)  # jumping to an epoch presents nothing by itself: the counter says what was handed out
+    assert fresh.presentations == 0
     it = iter(fresh)
     [next(it) for _ in range(10)]
-    assert fresh.presentations == 50 * 2 + 100 + 401 + 10  # mid-epoch: what was handed out so far
+    assert fresh.presentations == 10
+    resumed = SelectivePresentation(X, sizes=FRACTIONS, epochs=EPOCHS, seed=1)
+    resumed.load_state_dict({"epoch": 4, "position": 10, "rank_presentations": 50 * 2 + 100 + 401 + 10})
+    assert resumed.presentations == 50 * 2 + 100 + 401 + 10  # a resumed run's count comes with its state
+    resumed.set_epoch(4)
+    assert len(list(resumed)) == 401 - 10 and resumed.presentations == 50 * 2 + 100 + 401 + 401  # epoch 4: A3
 
 
 def test_without_a_process_group_it_is_one_rank(X):
