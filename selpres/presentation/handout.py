@@ -230,9 +230,7 @@ class Handout:
         """The schedule's last epoch has no set_epoch after it: its pass is checked when the sampler goes."""
         if self.epoch != self.num_epochs - 1:
             return
-        self._last.update(
-            {"pass": self._pass, "epoch": self.epoch, "base": self._base, "world": self.num_replicas}
-        )
+        self._last.update({"pass": self._pass, "epoch": self.epoch, "base": self._base, "world": self.num_replicas})
         if self.stop_cause:
             self._last["cause"] = self.stop_cause
         if self._finalizer is None:
@@ -248,4 +246,3 @@ class Handout:
         if what not in self._warned:  # once per sampler and kind
             self._warned.add(what)
             warnings.warn(message, SelectivePresentationWarning, stacklevel=stacklevel)
-

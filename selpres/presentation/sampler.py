@@ -26,7 +26,8 @@ import torch.distributed as dist
 from torch.utils.data.distributed import DistributedSampler
 
 from selpres.presentation import arguments as A
-from selpres.presentation.handout import Handout, SelectivePresentationWarning
+from selpres.presentation.handout import Handout
+from selpres.presentation.handout import SelectivePresentationWarning as SelectivePresentationWarning  # its home
 from selpres.presentation.schedule import Schedule
 from selpres.seeding import derive_seed
 
