@@ -95,6 +95,23 @@ def test_budget_and_orders(X):
     assert SelectivePresentation(n=40, order="random", sizes=[10, 40], epochs=[1, 1]).schedule.n == 40
 
 
+def test_sizes_from_any_sequence_or_1d_array_round_half_up_and_at_least_one():
+    """n = 1002 by hand: 0.0004 n = 0.4008 rounds half up to 0, so it is 1 (at least one pattern); 0.25 n = 250.5
+    is 251 half up (Python's round() would give 250); 0.4 n = 400.8 is 401; 1.0 is the whole set."""
+    want = [1, 251, 401, 1002]
+    fractions = [0.0004, 0.25, 0.4, 1.0]
+    for sizes in (fractions, tuple(fractions), np.array(fractions), torch.tensor(fractions, dtype=torch.float64)):
+        s = SelectivePresentation(n=1002, order="random", sizes=sizes, epochs=np.array([1, 2, 1, 1]))
+        assert s.schedule.sizes == want and s.schedule.epochs == [1, 2, 1, 1], type(sizes)
+    for counts in (np.array([50, 100, 1002]), torch.tensor([50, 100, 1002]), range(50, 1003, 476)):
+        s = SelectivePresentation(n=1002, order="random", sizes=counts, epochs=[1, 1, 1])
+        assert s.schedule.sizes == list(np.asarray(list(counts))), type(counts)  # counts stay counts
+    with pytest.raises(TypeError, match=r"sizes: expected a sequence or 1-D array .* got shape \[1, 2\]"):
+        SelectivePresentation(n=1002, order="random", sizes=np.array([[0.1, 1.0]]), epochs=[1, 1])
+    with pytest.raises(TypeError, match="True is a bool"):
+        SelectivePresentation(n=1002, order="random", sizes=np.array([True, True]), epochs=[1, 1])
+
+
 @pytest.mark.parametrize(
     "kw, error, words",
     [

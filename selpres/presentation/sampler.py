@@ -151,7 +151,8 @@ class SelectivePresentation(Handout, DistributedSampler):
             sampler.set_epoch(epoch)
             for batch in loader: ...
 
-    The schedule: ``sizes`` (ints are counts n_i, floats fractions of n, the last the whole set: ``1.0`` or n),
+    The schedule: ``sizes`` (any sequence or 1-D array; ints are counts n_i, floats fractions of n rounded half up
+    and at least 1, the last the whole set: ``1.0`` or n),
     ``epochs`` N_i per stage, or ``budget`` presentations of one conventional stage (the compute-matched
     baseline), or ``schedule=`` a name of ``configs/schedule/`` ("selective", "matched", "random_growth", …).
     ``order`` grows the nested sets A1 ⊂ … ⊂ U: "stratified" (the paper's uniform sampling of the input space X),
