@@ -150,3 +150,108 @@ def test_two_gloo_processes_resume_each_rank_from_its_own_state(tmp_path):
     for e, size in enumerate(sizes):  # the ranks' shares: disjoint, together the epoch (odd sizes padded by one)
         union = shares[0][e] + shares[1][e]
         assert len(set(union)) == size and len(union) == 2 * math.ceil(size / 2)
+
+
+# ------------------------------------------------------------------------------------------ the counter
+
+
+def test_the_counter_counts_what_was_handed_out():
+    """A loop sized by the first epoch's len(loader) (3 batches of 8: 24, then 20 in A1's epochs), passes without
+    set_epoch, a stopped last epoch: the counter is the number of indices the loader received, by hand."""
+    s = _sampler()
+    loader = DataLoader(DATA, batch_size=8, sampler=s)
+    batches, handed = len(loader), 0  # 3: A1's 20 patterns
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SelectivePresentationWarning)
+        for epoch in range(s.num_epochs):
+            s.set_epoch(epoch)
+            handed += sum(b.numel() for _, (b,) in zip(range(batches), loader))
+    assert handed == 20 + 20 + 24 + 24 + 24 and s.presentations == handed == 112
+
+    s = _sampler()  # no set_epoch: six passes over A1
+    loader = DataLoader(DATA, batch_size=8, sampler=s)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SelectivePresentationWarning)
+        handed = sum(b.numel() for _ in range(6) for (b,) in loader)
+    assert handed == 120 and s.presentations == 120
+
+    s = _sampler(num_replicas=2, rank=1)  # two ranks: this rank's count, and world x it
+    for epoch in range(s.num_epochs):
+        s.set_epoch(epoch)
+        it = iter(s)
+        [next(it) for _ in range(3 if epoch == s.num_epochs - 1 else len(s))]  # the last epoch stopped after 3
+    assert s.rank_presentations == 10 + 10 + 25 + 50 + 3 and s.presentations == 2 * 98
+    s.finish()  # (its warning is tested below)
+
+
+@pytest.mark.parametrize("loader_kind", [DataLoader, StatefulDataLoader])
+def test_a_stage_that_would_present_nothing_is_an_error(loader_kind):
+    """A1 = 20 patterns and DataLoader(batch_size=64, drop_last=True): no batch of A1 is ever formed."""
+    loader = loader_kind(DATA, batch_size=64, sampler=_sampler(), drop_last=True)
+    with pytest.raises(ValueError, match=r"A_1 presents 20 patterns .*batch_size=64, drop_last=True.*batch_size <= 20"):
+        list(loader)
+    two = loader_kind(DATA, batch_size=16, sampler=_sampler(num_replicas=2, rank=0), drop_last=True)
+    with pytest.raises(ValueError, match=r"A_1 presents 20 patterns an epoch \(10 per rank of 2\).*batch_size=16"):
+        list(two)
+    assert len([b for (b,) in loader_kind(DATA, batch_size=16, sampler=_sampler(), drop_last=True)]) == 1  # 20 // 16
+
+
+# ------------------------------------------------------------------------------------------ warnings name their cause
+
+
+def _one_warning(action) -> str:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        action()
+    mine = [str(w.message) for w in caught if issubclass(w.category, SelectivePresentationWarning)]
+    assert len(mine) == 1, mine
+    return mine[0]
+
+
+def test_a_repeated_set_epoch_is_named_as_such():
+    s = _sampler()
+    loader = DataLoader(DATA, batch_size=8, sampler=s)
+
+    def twice():
+        for _ in range(2):
+            s.set_epoch(1)
+            list(loader)
+
+    msg = _one_warning(twice)
+    assert "set_epoch(1) was called again after its pass" in msg and "without set_epoch" not in msg
+    s2 = _sampler()
+    msg = _one_warning(lambda: [list(DataLoader(DATA, batch_size=8, sampler=s2)) for _ in range(2)])
+    assert "without set_epoch" in msg
+
+
+def test_a_resume_that_moves_on_too_early_is_named():
+    s = _sampler()
+    s.load_state_dict({"epoch": 2, "position": 8, "rank_presentations": 48})
+    msg = _one_warning(lambda: s.set_epoch(3))
+    assert "epoch 2 was resumed at pattern 8 of its 50 (load_state_dict) but set_epoch(3)" in msg
+    assert "range(2, sampler.num_epochs)" in msg and s.presentations == 48  # nothing more was handed out
+
+
+def test_a_stopped_last_epoch_warns_when_the_sampler_goes():
+    s = _sampler()
+    for epoch in range(s.num_epochs):
+        s.set_epoch(epoch)
+        list(DataLoader(DATA, batch_size=8, sampler=s)) if epoch < 4 else [b for _, b in zip(range(2), s)]
+
+    def collect():
+        nonlocal s
+        del s
+        gc.collect()
+
+    msg = _one_warning(collect)
+    assert msg.startswith("epoch 4, the schedule's last, presented 2 of its 100 patterns: the loop stopped")
+    assert "counts the 192 handed out" in msg  # 20 + 20 + 50 + 100 + 2
+    done = _sampler()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SelectivePresentationWarning)
+        for epoch in range(done.num_epochs):
+            done.set_epoch(epoch)
+            list(DataLoader(DATA, batch_size=8, sampler=done))
+        done.finish()
+        del done
+        gc.collect()

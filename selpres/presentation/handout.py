@@ -165,9 +165,14 @@ class Handout:
 
     def _check_batches(self, frame) -> None:
         """A ``BatchSampler(drop_last=True)`` (a DataLoader's) larger than a stage's share presents nothing of it."""
-        owner = frame.f_locals.get("self") if frame is not None else None
-        bs, world = getattr(owner, "batch_size", None), self.num_replicas
-        if getattr(owner, "sampler", None) is not self or getattr(owner, "drop_last", None) is not True:
+        if frame is None or frame.f_code.co_name not in ("__iter__", "__init__"):  # f_locals of any other frame
+            return  # would keep a snapshot of its variables alive (this sampler among them)
+        local = frame.f_locals
+        owner = local.get("self")  # torch's BatchSampler.__iter__, or torchdata's iterator while it is made
+        if getattr(owner, "sampler", None) is not self:
+            return
+        bs, world = getattr(owner, "batch_size", local.get("batch_size")), self.num_replicas
+        if getattr(owner, "drop_last", local.get("drop_last")) is not True:
             return
         if not isinstance(bs, int) or (bs, world) in self._batches_checked:
             return
