@@ -20,7 +20,7 @@ def load(tb_dir) -> EventAccumulator:
 
 def test_curves_by_epoch_and_by_presentations(tmp_path):
     res = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=3", "eval.every=1"), tmp_path)
-    acc = load(tmp_path / "tb")
+    acc = load(tmp_path)  # the job folder: TensorBoard names the run by it
     tags = set(acc.Tags()["scalars"])
     for metric in ("train_mse", "test10_rms_nm", "heldout_rms_nm"):
         for stat in ("mean", "min", "max"):
@@ -35,7 +35,7 @@ def test_curves_by_epoch_and_by_presentations(tmp_path):
     assert [int(e.value) for e in stages] == [1, 1, 2, 3, 4, 5, 5]
 
     # add_hparams wrote into the job's own folder (run_name="."), not a timestamped sub-folder
-    assert [p for p in (tmp_path / "tb").iterdir() if p.is_dir()] == []
+    assert [p for p in tmp_path.iterdir() if p.is_dir()] == []
     content = acc.PluginTagToContent("hparams")
     start = plugin_data_pb2.HParamsPluginData.FromString(content["_hparams_/session_start_info"]).session_start_info
     assert {"schedule", "topology", "seed", "lr", "momentum", "sizes", "epochs"} <= set(start.hparams)
@@ -86,7 +86,7 @@ def test_event_files_are_what_tensorboards_record_writer_writes(tmp_path):
     assert (tmp_path / "ours").read_bytes() == theirs._writer.getvalue()
 
     train(cfg_of("schedule.epochs=[1,1,1,1,1]", "replicas=2"), tmp_path / "job")
-    assert len(load(tmp_path / "job" / "tb").Scalars("heldout_rms_nm/mean/by_presentations")) == 6  # read back
+    assert len(load(tmp_path / "job").Scalars("heldout_rms_nm/mean/by_presentations")) == 6  # read back
 
 
 def test_the_text_summary_is_tensorboards():
