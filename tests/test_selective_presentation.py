@@ -390,11 +390,12 @@ def test_two_gloo_processes_share_every_epoch(tmp_path, drop_last):
 
 @pytest.mark.slow
 def test_examples_run(tmp_path):
-    """The three examples, as README shows them, on the exported two-link data with 2 epochs per stage."""
+    """The four examples, as README shows them, on the exported two-link data with 2 epochs per stage; the resume
+    example killed (SIGKILL) mid-epoch and run again ends on the uninterrupted run's weights."""
     done = run_python("-m", "selpres.run.export", "--out", str(tmp_path / "twolink"))
     assert done.returncode == 0, done.stderr[-3000:]
     data = str(tmp_path / "twolink.npz")
-    for f in ("plain_loop.py", "ddp_torchrun.py", "lightning_fit.py", "twolink.py"):
+    for f in ("plain_loop.py", "ddp_torchrun.py", "lightning_fit.py", "resume_loop.py", "twolink.py"):
         shutil.copy(REPO / "examples" / f, tmp_path / f)  # as a user's copy, outside the repository
     plain = run_python(str(tmp_path / "plain_loop.py"), "--data", data, "--epochs", "2", cwd=tmp_path)
     assert plain.returncode == 0, plain.stderr[-3000:]
@@ -406,6 +407,19 @@ def test_examples_run(tmp_path):
     light = run_python(str(tmp_path / "lightning_fit.py"), "--data", data, "--epochs", "2", cwd=tmp_path)
     assert light.returncode == 0, light.stderr[-3000:]
     assert "10 epochs, 4,710 presentations (the schedule's 4,710)" in light.stdout
+
+    def resume_loop(*args):
+        return run_python(str(tmp_path / "resume_loop.py"), "--data", data, "--epochs", "2", *args, cwd=tmp_path)
+
+    full = resume_loop("--ckpt", "full.pt")
+    assert full.returncode == 0, full.stderr[-3000:]
+    killed = resume_loop("--ckpt", "run.pt", "--kill-in", "5")  # epoch 5: A3, 401 patterns, 13 batches of 32
+    assert killed.returncode == -9 and killed.stdout.strip() == "killed in epoch 5 after pattern 160"
+    resumed = resume_loop("--ckpt", "run.pt")
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert resumed.stdout.splitlines()[0] == "resumed in epoch 5 at pattern 160 of 401"
+    last = full.stdout.splitlines()[-1]
+    assert resumed.stdout.splitlines()[-1] == last and last.startswith("4,710 presentations, held-out RMS")
 
 
 def test_the_bench_row_runs(capsys):
