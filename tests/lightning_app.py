@@ -62,6 +62,7 @@ def fit(
     num_workers: int = 0,
     ckpt_path=None,
     callbacks_extra=(),
+    loader=DataLoader,
     **trainer_kw,
 ) -> tuple[Recorder, SelectivePresentation]:
     X, ds = data()
@@ -76,7 +77,7 @@ def fit(
         callbacks=([SelectivePresentationCallback(sampler)] if callback else []) + list(callbacks_extra),
         **trainer_kw,
     )
-    loader = DataLoader(ds, batch_size=batch_size, sampler=sampler, num_workers=num_workers)
+    loader = loader(ds, batch_size=batch_size, sampler=sampler, num_workers=num_workers)  # or torchdata's
     trainer.fit(model, loader, ckpt_path=ckpt_path)
     return model, sampler
 

@@ -11,6 +11,7 @@ import pytest
 pytest.importorskip("lightning")
 
 import lightning_app as app  # noqa: E402
+from torch.utils.data import DataLoader  # noqa: E402
 
 from selpres.presentation.sampler import SelectivePresentationWarning  # noqa: E402
 
@@ -62,24 +63,24 @@ def test_the_callback_refuses_a_trainer_that_would_not_recount():
 @pytest.mark.slow
 def test_ddp_mid_epoch_checkpoints_resume_exactly(tmp_path):
     """strategy="ddp" on 2 CPU processes, ModelCheckpoint(every_n_train_steps=3): a fit resumed from a checkpoint
-    inside epoch 4 presents per epoch, with what came before the checkpoint, the uninterrupted fit's indices:
-    the ranks' union is the epoch's, none twice beyond DistributedSampler's padding."""
+    inside epoch 4, or at its last batch, presents per epoch, with what came before the checkpoint, the
+    uninterrupted fit's indices: the ranks' union is the epoch's, none twice beyond DistributedSampler's padding."""
     full = tmp_path / "full.json"
     args = ("--devices", "2", "--every", "3", "--ckpt-dir", str(tmp_path / "ckpt"))
     done = run_python(str(REPO / "tests" / "lightning_app.py"), str(full), *args, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
     full = json.loads(full.read_text())["epochs"]
-    name = "epoch=4-step=9.ckpt"  # per rank 1, 1, 2, 4 batches before epoch 4: its first batch done
-    assert (tmp_path / "ckpt" / name).exists(), sorted(p.name for p in (tmp_path / "ckpt").iterdir())
-    out = tmp_path / "resumed.json"
-    resume = ("--devices", "2", "--resume", str(tmp_path / "ckpt" / name))
-    done = run_python(str(REPO / "tests" / "lightning_app.py"), str(out), *resume, cwd=tmp_path)
-    assert done.returncode == 0, done.stderr[-3000:]
-    got = _resumed_epochs(full, json.loads(out.read_text())["epochs"], name, app.BATCH)
-    assert got == [rec["indices"] for rec in full]
-    for ranks, size in zip(got, [s for s, e in zip(app.SIZES, app.EPOCHS) for _ in range(e)]):
-        union = ranks[0] + ranks[1]
-        assert len(set(union)) == size and len(union) == 2 * -(-size // 2)  # none twice but the padding
+    # per rank 1, 1, 2, 4, 4, 6 batches: step 9 is epoch 4's first batch, step 12 its last
+    for name in ("epoch=4-step=9.ckpt", "epoch=4-step=12.ckpt"):
+        out = tmp_path / "resumed.json"
+        resume = ("--devices", "2", "--resume", str(tmp_path / "ckpt" / name))
+        done = run_python(str(REPO / "tests" / "lightning_app.py"), str(out), *resume, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr[-3000:]
+        got = _resumed_epochs(full, json.loads(out.read_text())["epochs"], name, app.BATCH)
+        assert got == [rec["indices"] for rec in full], name
+        for ranks, size in zip(got, [s for s, e in zip(app.SIZES, app.EPOCHS) for _ in range(e)]):
+            union = ranks[0] + ranks[1]
+            assert len(set(union)) == size and len(union) == 2 * -(-size // 2)  # none twice but the padding
 
 
 @pytest.mark.slow
@@ -114,32 +115,37 @@ def test_loader_workers_are_not_a_repeated_epoch():
 
 def _resumed_epochs(full: list, resumed: list, ckpt_name: str, per_step: int) -> list:
     """Each epoch's indices of the interrupted run, rank by rank: the uninterrupted run's first k batches of the
-    checkpoint's epoch (k from the checkpoint's step), then what the resumed fit presented."""
+    checkpoint's epoch (k from the checkpoint's step), then what the resumed fit presented (from the next epoch when
+    the checkpoint was at the epoch's last batch)."""
     epoch, step = (int(part.split("=")[1]) for part in ckpt_name.removesuffix(".ckpt").split("-"))
-    steps_before = sum(
-        len(rec["indices"][0]) // per_step + (len(rec["indices"][0]) % per_step > 0) for rec in full[:epoch]
-    )
-    k = step - steps_before
-    assert 0 < k, ckpt_name
+    batches = [-(-len(rec["indices"][0]) // per_step) for rec in full]
+    k = step - sum(batches[:epoch])
+    assert 0 < k <= batches[epoch], ckpt_name
+    if k == batches[epoch]:
+        return [rec["indices"] for rec in full[: epoch + 1]] + [rec["indices"] for rec in resumed]
     head = [ranks[: k * per_step] for ranks in full[epoch]["indices"]]
     first = [h + r for h, r in zip(head, resumed[0]["indices"])]
     return [rec["indices"] for rec in full[:epoch]] + [first] + [rec["indices"] for rec in resumed[1:]]
 
 
-@pytest.mark.parametrize("workers", [0, 2])
-def test_a_mid_epoch_checkpoint_resumes_exactly(tmp_path, workers):
-    """ModelCheckpoint(every_n_train_steps=5) in a full fit; fits resumed from checkpoints inside epochs 2, 3 and 5
-    present, with the batches trained before each checkpoint, exactly the full fit's epochs, in order."""
+@pytest.mark.parametrize("loader, workers", [("DataLoader", 0), ("DataLoader", 2), ("StatefulDataLoader", 2)])
+def test_a_mid_epoch_checkpoint_resumes_exactly(tmp_path, loader, workers):
+    """ModelCheckpoint(every_n_train_steps=4) in a full fit (epochs of 2, 2, 4, 8, 8, 12 batches); fits resumed from
+    checkpoints inside epochs 3 and 5 and at the last batches of epochs 2 and 3 (where Lightning itself would cut
+    the larger next stage) present, with the batches trained before, exactly the full fit's epochs, in order."""
     from lightning.pytorch.callbacks import ModelCheckpoint
 
-    ckpt = ModelCheckpoint(dirpath=tmp_path, every_n_train_steps=5, save_top_k=-1)
-    full, _ = app.fit(devices=1, num_workers=workers, enable_checkpointing=True, callbacks_extra=[ckpt])
-    names = sorted(p.name for p in tmp_path.glob("*.ckpt"))
-    assert "epoch=2-step=5.ckpt" in names and "epoch=5-step=35.ckpt" in names
-    for name in ("epoch=2-step=5.ckpt", "epoch=3-step=15.ckpt", "epoch=5-step=35.ckpt"):
+    kind = (
+        DataLoader
+        if loader == "DataLoader"
+        else pytest.importorskip("torchdata.stateful_dataloader").StatefulDataLoader
+    )
+    ckpt = ModelCheckpoint(dirpath=tmp_path, every_n_train_steps=4, save_top_k=-1)
+    full, _ = app.fit(loader=kind, num_workers=workers, devices=1, enable_checkpointing=True, callbacks_extra=[ckpt])
+    for name in ("epoch=2-step=8.ckpt", "epoch=3-step=12.ckpt", "epoch=3-step=16.ckpt", "epoch=5-step=28.ckpt"):
         with warnings.catch_warnings():
             warnings.simplefilter("error", SelectivePresentationWarning)
-            model, sampler = app.fit(devices=1, num_workers=workers, ckpt_path=str(tmp_path / name))
+            model, sampler = app.fit(loader=kind, num_workers=workers, devices=1, ckpt_path=str(tmp_path / name))
         got = _resumed_epochs(full.epochs, model.epochs, name, app.BATCH)
         assert got == [rec["indices"] for rec in full.epochs], name
         assert sampler.presentations == sampler.schedule.presentations

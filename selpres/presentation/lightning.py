@@ -116,12 +116,24 @@ class SelectivePresentationCallback(pl.Callback):
     def on_load_checkpoint(self, trainer: pl.Trainer, pl_module: pl.LightningModule, checkpoint: dict) -> None:
         """A resumed fit from a checkpoint without the callback's state: the sampler starts at the epoch Lightning
         resumes, before Lightning counts batches."""
+        batches = checkpoint.get("loops", {}).get("fit_loop", {}).get("epoch_loop.batch_progress", {})
+        current = batches.get("current", {})
+        if batches.get("is_last_batch") and current.get("completed") == current.get("processed", 0) - 1:
+            # saved at an epoch's last batch: Lightning resumes the next epoch, but checks the saved epoch's finished
+            # batches against the *next* epoch's count, and a larger stage would run only the difference; finished
+            # batches beyond any count make it start that epoch at its first batch, as an end-of-epoch save does
+            current.update(ready=1 << 30, started=1 << 30, processed=1 << 30, completed=(1 << 30) - 1)
         if checkpoint.get("callbacks", {}).get(self.state_key):
             return  # load_state_dict restores the exact place
         progress = checkpoint.get("loops", {}).get("fit_loop", {}).get("epoch_progress", {}).get("current", {})
         epoch = progress.get("processed")
         if isinstance(epoch, int) and 0 <= epoch < self.sampler.num_epochs:
             self.sampler.set_epoch(epoch)
+
+    def on_train_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
+        """A resumed fit that moved to the next epoch recounts (a second iterator) after its first one prefetched:
+        that first pass is abandoned, not repeated."""
+        self.sampler.expect_new_pass()
 
     def on_train_epoch_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
         s = self.sampler
