@@ -14,7 +14,7 @@ import sys
 import warnings
 import weakref
 
-_LIGHTNING = ("lightning", "lightning_fabric", "pytorch_lightning")
+LIGHTNING = ("lightning", "pytorch_lightning")  # module prefixes of a Trainer (lightning_fabric included)
 
 
 class SelectivePresentationWarning(UserWarning):
@@ -120,6 +120,9 @@ class Handout:
             self._again = self._pass is not None
             self._chosen = True
             return
+        if self._pass is None and not self._resume_at:  # nothing handed out (the CLI's samplers): only the epoch
+            self.epoch, self._chosen, self._another_pass, self._resumed = epoch, True, False, False
+            return
         done, p = self._position(), self._pass
         share = p[2] if p is not None else self.num_samples
         if 0 < done < share:
@@ -187,9 +190,6 @@ class Handout:
                     f"would present nothing. Use drop_last=False or batch_size <= {share}"
                 )
         self._batches_checked.add((bs, world))
-
-    def _caller_is_lightning(self, frame) -> bool:
-        return not self._lightning and frame.f_globals.get("__name__", "").split(".")[0] in _LIGHTNING
 
     def _warn_repeat(self) -> None:
         e = self.epoch

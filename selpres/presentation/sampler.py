@@ -26,7 +26,7 @@ import torch.distributed as dist
 from torch.utils.data.distributed import DistributedSampler
 
 from selpres.presentation import arguments as A
-from selpres.presentation.handout import Handout
+from selpres.presentation.handout import LIGHTNING, Handout
 from selpres.presentation.handout import SelectivePresentationWarning as SelectivePresentationWarning  # its home
 from selpres.presentation.schedule import Schedule
 from selpres.seeding import derive_seed
@@ -239,7 +239,7 @@ class SelectivePresentation(Handout, DistributedSampler):
                 f"epoch={epoch} is outside the schedule's {len(self._plan)} epochs (0 .. {len(self._plan) - 1}):"
                 " stop after sampler.num_epochs epochs (Lightning: SelectivePresentationCallback sets max_epochs)"
             )
-        if self._caller_is_lightning(sys._getframe(1)):
+        if not self._lightning and sys._getframe(1).f_globals.get("__name__", "").startswith(LIGHTNING):
             raise RuntimeError(
                 "SelectivePresentation in a Lightning Trainer needs its callback: Trainer(callbacks="
                 "[SelectivePresentationCallback(sampler)]) (from selpres import SelectivePresentationCallback); "
