@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from selpres.presentation.lightning import SelectivePresentationCallback  # noqa: E402
 from selpres.presentation.sampler import SelectivePresentation  # noqa: E402
 
-N, SIZES, EPOCHS = 90, [15, 31, 60, 90], [2, 1, 2, 1]  # odd sizes: DDP pads them to a multiple of 2
+N, SIZES, EPOCHS, BATCH = 90, [15, 31, 60, 90], [2, 1, 2, 1], 8  # odd sizes: DDP pads them to a multiple of 2
 
 
 class Recorder(pl.LightningModule):
@@ -57,7 +57,13 @@ def data():
 
 
 def fit(
-    callback: bool = True, batch_size: int = 8, num_workers: int = 0, ckpt_path=None, callbacks_extra=(), **trainer_kw
+    callback: bool = True,
+    batch_size: int = BATCH,
+    num_workers: int = 0,
+    ckpt_path=None,
+    callbacks_extra=(),
+    loader=DataLoader,
+    **trainer_kw,
 ) -> tuple[Recorder, SelectivePresentation]:
     X, ds = data()
     sampler = SelectivePresentation(X, sizes=SIZES, epochs=EPOCHS, seed=3)
@@ -71,7 +77,7 @@ def fit(
         callbacks=([SelectivePresentationCallback(sampler)] if callback else []) + list(callbacks_extra),
         **trainer_kw,
     )
-    loader = DataLoader(ds, batch_size=batch_size, sampler=sampler, num_workers=num_workers)
+    loader = loader(ds, batch_size=batch_size, sampler=sampler, num_workers=num_workers)  # or torchdata's
     trainer.fit(model, loader, ckpt_path=ckpt_path)
     return model, sampler
 
@@ -80,8 +86,17 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
     ap.add_argument("--devices", type=int, default=2)
+    ap.add_argument("--every", type=int, default=0, help="ModelCheckpoint(every_n_train_steps) into --ckpt-dir")
+    ap.add_argument("--ckpt-dir")
+    ap.add_argument("--resume", help="a checkpoint to resume from")
     a = ap.parse_args()
-    model, sampler = fit(devices=a.devices, strategy="ddp")
+    kw = {}
+    if a.every:
+        from lightning.pytorch.callbacks import ModelCheckpoint
+
+        ckpt = ModelCheckpoint(dirpath=a.ckpt_dir, every_n_train_steps=a.every, save_top_k=-1)
+        kw = {"enable_checkpointing": True, "callbacks_extra": [ckpt]}
+    model, sampler = fit(devices=a.devices, strategy="ddp", ckpt_path=a.resume, **kw)
     if model.global_rank == 0:
         Path(a.out).write_text(
             json.dumps({"epochs": model.epochs, "order": sampler.order.tolist(), "world": sampler.num_replicas})

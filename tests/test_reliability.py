@@ -373,7 +373,9 @@ def test_a_kill_during_the_final_writes_is_cleaned_up_by_the_rerun(tmp_path, mon
     assert (out / "checkpoint.pt").exists() and (out / "history.pkl").exists()
     before = (out / "results.json").read_bytes()
     cli._run_locked(cfg, out, multirun=False)
-    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "results.json", "tb", "weights.pt"]
+    names = sorted(p.name for p in out.iterdir())
+    assert [n for n in names if not n.startswith("events.out.tfevents.")] == ["notes.txt", "results.json", "weights.pt"]
+    assert len(names) == 4  # and the job's one TensorBoard event file
     assert (out / "results.json").read_bytes() == before  # found done, not redone
 
 

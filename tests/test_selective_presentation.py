@@ -98,6 +98,23 @@ def test_budget_and_orders(X):
     assert SelectivePresentation(n=40, order="random", sizes=[10, 40], epochs=[1, 1]).schedule.n == 40
 
 
+def test_sizes_from_any_sequence_or_1d_array_round_half_up_and_at_least_one():
+    """n = 1002 by hand: 0.0004 n = 0.4008 rounds half up to 0, so it is 1 (at least one pattern); 0.25 n = 250.5
+    is 251 half up (Python's round() would give 250); 0.4 n = 400.8 is 401; 1.0 is the whole set."""
+    want = [1, 251, 401, 1002]
+    fractions = [0.0004, 0.25, 0.4, 1.0]
+    for sizes in (fractions, tuple(fractions), np.array(fractions), torch.tensor(fractions, dtype=torch.float64)):
+        s = SelectivePresentation(n=1002, order="random", sizes=sizes, epochs=np.array([1, 2, 1, 1]))
+        assert s.schedule.sizes == want and s.schedule.epochs == [1, 2, 1, 1], type(sizes)
+    for counts in (np.array([50, 100, 1002]), torch.tensor([50, 100, 1002]), range(50, 1003, 476)):
+        s = SelectivePresentation(n=1002, order="random", sizes=counts, epochs=[1, 1, 1])
+        assert s.schedule.sizes == list(np.asarray(list(counts))), type(counts)  # counts stay counts
+    with pytest.raises(TypeError, match=r"sizes: expected a sequence or 1-D array .* got shape \[1, 2\]"):
+        SelectivePresentation(n=1002, order="random", sizes=np.array([[0.1, 1.0]]), epochs=[1, 1])
+    with pytest.raises(TypeError, match="True is a bool"):
+        SelectivePresentation(n=1002, order="random", sizes=np.array([True, True]), epochs=[1, 1])
+
+
 @pytest.mark.parametrize(
     "kw, error, words",
     [
@@ -274,11 +291,16 @@ def test_presentation_counters(X):
     _loop(one, n)
     assert one.presentations == sum(size * e for size, e in zip(sizes, EPOCHS)) == one.schedule.presentations
     fresh = SelectivePresentation(X, sizes=FRACTIONS, epochs=EPOCHS, seed=1)
-    fresh.set_epoch(4)  # a resumed loop: the counter needs nothing but the epoch
-    assert fresh.presentations == 50 * 2 + 100 + 401  # epochs 0-1 on A1, 2 on A2, 3 on A3
+    fresh.set_epoch(4)  # jumping to an epoch presents nothing by itself: the counter says what was handed out
+    assert fresh.presentations == 0
     it = iter(fresh)
     [next(it) for _ in range(10)]
-    assert fresh.presentations == 50 * 2 + 100 + 401 + 10  # mid-epoch: what was handed out so far
+    assert fresh.presentations == 10
+    resumed = SelectivePresentation(X, sizes=FRACTIONS, epochs=EPOCHS, seed=1)
+    resumed.load_state_dict({"epoch": 4, "position": 10, "rank_presentations": 50 * 2 + 100 + 401 + 10})
+    assert resumed.presentations == 50 * 2 + 100 + 401 + 10  # a resumed run's count comes with its state
+    resumed.set_epoch(4)
+    assert len(list(resumed)) == 401 - 10 and resumed.presentations == 50 * 2 + 100 + 401 + 401  # epoch 4: A3
 
 
 def test_without_a_process_group_it_is_one_rank(X):
@@ -371,11 +393,12 @@ def test_two_gloo_processes_share_every_epoch(tmp_path, drop_last):
 
 @pytest.mark.slow
 def test_examples_run(tmp_path):
-    """The three examples, as README shows them, on the exported two-link data with 2 epochs per stage."""
+    """The four examples, as README shows them, on the exported two-link data with 2 epochs per stage; the resume
+    example killed (SIGKILL) mid-epoch and run again ends on the uninterrupted run's weights."""
     done = run_python("-m", "selpres.run.export", "--out", str(tmp_path / "twolink"))
     assert done.returncode == 0, done.stderr[-3000:]
     data = str(tmp_path / "twolink.npz")
-    for f in ("plain_loop.py", "ddp_torchrun.py", "lightning_fit.py", "twolink.py"):
+    for f in ("plain_loop.py", "ddp_torchrun.py", "lightning_fit.py", "resume_loop.py", "twolink.py"):
         shutil.copy(REPO / "examples" / f, tmp_path / f)  # as a user's copy, outside the repository
     plain = run_python(str(tmp_path / "plain_loop.py"), "--data", data, "--epochs", "2", cwd=tmp_path)
     assert plain.returncode == 0, plain.stderr[-3000:]
@@ -387,6 +410,19 @@ def test_examples_run(tmp_path):
     light = run_python(str(tmp_path / "lightning_fit.py"), "--data", data, "--epochs", "2", cwd=tmp_path)
     assert light.returncode == 0, light.stderr[-3000:]
     assert "10 epochs, 4,710 presentations (the schedule's 4,710)" in light.stdout
+
+    def resume_loop(*args):
+        return run_python(str(tmp_path / "resume_loop.py"), "--data", data, "--epochs", "2", *args, cwd=tmp_path)
+
+    full = resume_loop("--ckpt", "full.pt")
+    assert full.returncode == 0, full.stderr[-3000:]
+    killed = resume_loop("--ckpt", "run.pt", "--kill-in", "5")  # epoch 5: A3, 401 patterns, 13 batches of 32
+    assert killed.returncode == -9 and killed.stdout.strip() == "killed in epoch 5 after pattern 160"
+    resumed = resume_loop("--ckpt", "run.pt")
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert resumed.stdout.splitlines()[0] == "resumed in epoch 5 at pattern 160 of 401"
+    last = full.stdout.splitlines()[-1]
+    assert resumed.stdout.splitlines()[-1] == last and last.startswith("4,710 presentations, held-out RMS")
 
 
 def test_the_bench_row_runs(capsys):

@@ -55,10 +55,11 @@ def test_one_failing_job_does_not_take_the_sweep_down_and_rerun_fills_in(tmp_pat
 def test_a_crash_leaves_its_traceback_in_the_job_log(tmp_path):
     sweep = tmp_path / "sweep"
     assert multirun(sweep, "seed=0,1").returncode == 0
-    job = job_dir(sweep, "seed=1")  # make it look unfinished, with a file where its TensorBoard folder goes
+    job = job_dir(sweep, "seed=1")  # make it look unfinished, with a folder where its TensorBoard event file goes
     (job / "results.json").unlink()
-    (job / "tb").rename(job / "tb.moved")
-    (job / "tb").write_text("a file where a folder belongs: the job crashes when it opens its log")
+    (events,) = job.glob("events.out.tfevents.*")
+    events.unlink()
+    events.mkdir()  # a folder where a file belongs: the job crashes when it replaces its log
     out = multirun(sweep, "seed=0,1")
     assert out.returncode != 0
     res = results(sweep, "seed")

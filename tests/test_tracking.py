@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensorboard.plugins.hparams import plugin_data_pb2
 
@@ -18,7 +20,7 @@ def load(tb_dir) -> EventAccumulator:
 
 def test_curves_by_epoch_and_by_presentations(tmp_path):
     res = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=3", "eval.every=1"), tmp_path)
-    acc = load(tmp_path / "tb")
+    acc = load(tmp_path)  # the job folder: TensorBoard names the run by it
     tags = set(acc.Tags()["scalars"])
     for metric in ("train_mse", "test10_rms_nm", "heldout_rms_nm"):
         for stat in ("mean", "min", "max"):
@@ -33,14 +35,28 @@ def test_curves_by_epoch_and_by_presentations(tmp_path):
     assert [int(e.value) for e in stages] == [1, 1, 2, 3, 4, 5, 5]
 
     # add_hparams wrote into the job's own folder (run_name="."), not a timestamped sub-folder
-    assert [p for p in (tmp_path / "tb").iterdir() if p.is_dir()] == []
+    assert [p for p in tmp_path.iterdir() if p.is_dir()] == []
     content = acc.PluginTagToContent("hparams")
     start = plugin_data_pb2.HParamsPluginData.FromString(content["_hparams_/session_start_info"]).session_start_info
     assert {"schedule", "topology", "seed", "lr", "momentum", "sizes", "epochs"} <= set(start.hparams)
     assert start.hparams["topology"].string_value == "6-13-2"
     assert start.hparams["sizes"].string_value == "[50, 100, 400, 800, 1002]"  # lists flattened to strings
     experiment = plugin_data_pb2.HParamsPluginData.FromString(content["_hparams_/experiment"]).experiment
-    assert "final/heldout_rms_nm_overall" in {m.name.tag for m in experiment.metric_infos}
+    curves = [f"{m}/mean/by_epoch" for m in ("train_mse", "test10_rms_nm", "heldout_rms_nm")]
+    assert sorted(m.name.tag for m in experiment.metric_infos) == sorted(curves)  # HParams: each one's last value
+
+    # final metrics are single values: a Markdown table in the Text tab, never a one-point scalar chart
+    assert not [t for t in tags if t.startswith("final")]
+    assert all(len(acc.Scalars(t)) > 1 for t in tags), [t for t in tags if len(acc.Scalars(t)) == 1]
+    assert acc.PluginTagToContent("text") == {"final": b""}
+    (table,) = acc.Tensors("final")
+    rows = dict(
+        line.strip("|").replace(" ", "").split("|")
+        for line in table.tensor_proto.string_val[0].decode().splitlines()[2:]
+    )
+    want = res["summary"]["heldout_rms_nm_overall"]["mean"]
+    assert math.isclose(float(rows["final/heldout_rms_nm_overall"]), want, rel_tol=1e-5)
+    assert len(rows) >= 20  # every final metric, per joint and overall
 
 
 def test_event_files_are_what_tensorboards_record_writer_writes(tmp_path):
@@ -70,7 +86,41 @@ def test_event_files_are_what_tensorboards_record_writer_writes(tmp_path):
     assert (tmp_path / "ours").read_bytes() == theirs._writer.getvalue()
 
     train(cfg_of("schedule.epochs=[1,1,1,1,1]", "replicas=2"), tmp_path / "job")
-    assert len(load(tmp_path / "job" / "tb").Scalars("heldout_rms_nm/mean/by_presentations")) == 6  # read back
+    assert len(load(tmp_path / "job").Scalars("heldout_rms_nm/mean/by_presentations")) == 6  # read back
+
+
+def test_the_text_summary_is_tensorboards():
+    from tensorboard.plugins.text.summary_v2 import text_pb
+
+    from selpres.run.tracking import metrics_table, text_summary
+
+    table = metrics_table({"final/heldout_rms_nm_overall": 0.2123456789, "final/ü": 3})
+    assert table.splitlines()[2:] == ["| final/heldout_rms_nm_overall | 0.212346 |", "| final/ü | 3 |"]
+    assert text_summary("final", table).SerializeToString() == text_pb("final", table).SerializeToString()
+
+
+def test_runs_are_named_by_the_folder_given_and_only_the_writers_own_files_are_replaced(tmp_path):
+    """A Tracker given a job's own folder writes its event file there (TensorBoard names the run by that folder,
+    its overrides), and a resumed job replaces only its own event file, nothing else in the folder."""
+    from tensorboard.backend.event_processing.plugin_event_multiplexer import EventMultiplexer
+
+    from selpres.run.tracking import Tracker
+
+    rec = {"epoch": 0, "stage": 0, "size": 50, "presentations": 50, "train_mse": [0.5], "heldout_rms_nm": [0.3]}
+    sweep = tmp_path / "sweep"
+    for name in ("seed=0", "seed=1"):
+        job = sweep / name
+        job.mkdir(parents=True)
+        (job / "notes.txt").write_text("the user's")
+        for _ in range(2):  # the second: a resumed job rebuilding its log
+            t = Tracker(job)
+            t.replay([rec, {**rec, "epoch": 1, "presentations": 100}])
+            t.close({"seed": 0}, {"final/heldout_rms_nm_overall": 0.3})
+        assert len(list(job.glob("events.out.tfevents.*"))) == 1 and (job / "notes.txt").read_text() == "the user's"
+    mux = EventMultiplexer().AddRunsFromDirectory(str(sweep))
+    mux.Reload()
+    assert sorted(mux.Runs()) == ["seed=0", "seed=1"]  # no "/tb" suffix
+    assert "heldout_rms_nm/mean/by_epoch" in mux.PluginRunToTagToContent("scalars")["seed=0"]
 
 
 def test_hparams_summaries_are_torchs():

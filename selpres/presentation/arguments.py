@@ -9,6 +9,7 @@ argument (``sizes=[0.05, 0.1, 1]: …``). One validator, two wordings.
 from __future__ import annotations
 
 import operator
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -28,8 +29,13 @@ def argument_error(e: ConfigError) -> ValueError:
 
 
 def _number_list(name: str, value, kinds: tuple[type, ...], what: str) -> list:
-    if not isinstance(value, (list, tuple)):
-        raise TypeError(f"{name}={value!r}: expected a list of {what}")
+    """Any sequence or 1-D array (numpy, torch) of numbers, as a list of its Python numbers."""
+    if isinstance(value, (np.ndarray, torch.Tensor)):
+        if value.ndim != 1:
+            raise TypeError(f"{name}: expected a sequence or 1-D array of {what}, got shape {list(value.shape)}")
+        value = value.tolist()  # numpy's and torch's ints and floats as Python's; bools stay bools (refused)
+    elif isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+        raise TypeError(f"{name}={value!r}: expected a sequence of {what}")
     for v in value:
         if isinstance(v, bool) or not isinstance(v, kinds):
             raise TypeError(f"{name}={list(value)!r}: expected a list of {what}; {v!r} is a {type(v).__name__}")

@@ -9,16 +9,16 @@ each stage start; the sampler itself never changes it.
 
 Within an epoch the current set is reshuffled; ``set_epoch(e)`` picks the epoch (and so the stage),
 following ``DistributedSampler``'s convention. The shuffle of epoch e is a counter-based hash of
-(seed, e), so a resumed run needs no sampler state beyond the epoch number (and a stage-wise order, which
-the checkpoint keeps), and the shuffles of all replicas of a job are computed in one vectorised step
+(seed, e), so a resumed run needs no sampler state beyond the epoch, the position within it and the count
+(``state_dict``, kept by ``selpres.presentation.handout`` with the passes and warnings; the CLI's checkpoint keeps
+a stage-wise order), and the shuffles of all replicas of a job are computed in one vectorised step
 (``epoch_orders``).
 """
 
 from __future__ import annotations
 
 import functools
-import warnings
-from collections.abc import Iterator
+import sys
 
 import numpy as np
 import torch
@@ -26,6 +26,8 @@ import torch.distributed as dist
 from torch.utils.data.distributed import DistributedSampler
 
 from selpres.presentation import arguments as A
+from selpres.presentation.handout import LIGHTNING, Handout
+from selpres.presentation.handout import SelectivePresentationWarning as SelectivePresentationWarning  # its home
 from selpres.presentation.schedule import Schedule
 from selpres.seeding import derive_seed
 
@@ -140,21 +142,7 @@ def epoch_orders(samplers: list[SelectivePresentationSampler], buffer: torch.Ten
     return out
 
 
-class SelectivePresentationWarning(UserWarning):
-    """A loop that presents something other than the schedule (an epoch repeated, or cut short)."""
-
-
-@functools.lru_cache(maxsize=64)
-def _stage_firsts(stages: tuple) -> tuple[int, ...]:
-    """Index of each stage's first epoch."""
-    firsts, e = [], 0
-    for st in stages:
-        firsts.append(e)
-        e += st.epochs + (1 if st.extra else 0)
-    return tuple(firsts)
-
-
-class SelectivePresentation(DistributedSampler):
+class SelectivePresentation(Handout, DistributedSampler):
     """Selective presentation for any PyTorch loop: each epoch yields the current training set A_i, reshuffled.
 
         sampler = SelectivePresentation(X, sizes=[0.05, 0.1, 0.4, 0.8, 1.0], epochs=[30] * 5, seed=0)
@@ -163,7 +151,8 @@ class SelectivePresentation(DistributedSampler):
             sampler.set_epoch(epoch)
             for batch in loader: ...
 
-    The schedule: ``sizes`` (ints are counts n_i, floats fractions of n, the last the whole set: ``1.0`` or n),
+    The schedule: ``sizes`` (any sequence or 1-D array; ints are counts n_i, floats fractions of n rounded half up
+    and at least 1, the last the whole set: ``1.0`` or n),
     ``epochs`` N_i per stage, or ``budget`` presentations of one conventional stage (the compute-matched
     baseline), or ``schedule=`` a name of ``configs/schedule/`` ("selective", "matched", "random_growth", …).
     ``order`` grows the nested sets A1 ⊂ … ⊂ U: "stratified" (the paper's uniform sampling of the input space X),
@@ -177,8 +166,10 @@ class SelectivePresentation(DistributedSampler):
     drops its tail. It *is* a DistributedSampler, so Lightning and other wrappers leave it unwrapped.
 
     Cost: ``presentations`` counts the patterns presented so far by all ranks together (the paper's T / t),
-    ``rank_presentations`` this rank's: the schedule's epochs before the current one, plus the indices the
-    current epoch has handed out (read it after an epoch for that epoch's total).
+    ``rank_presentations`` this rank's: every index handed to the loop (cut-short and repeated passes included; a
+    resumed run's earlier ones come with ``load_state_dict``). Resume: ``state_dict()``/``load_state_dict()`` hold
+    the epoch and the position in it (torchdata's ``StatefulDataLoader`` calls them); ``set_epoch`` with the saved
+    epoch keeps the position.
     """
 
     shuffle = True  # DistributedSampler's attribute: every epoch is a fresh shuffle
@@ -216,9 +207,7 @@ class SelectivePresentation(DistributedSampler):
         self._key = derive_seed(self.seed, "shuffle")
         self._plan = sched.plan()
         self.epoch = 0
-        self._passes: list = []  # (iterator, length) of every pass over the current epoch
-        self._another_pass = False  # the loop announced a fresh pass of this epoch (expect_new_pass)
-        self._warned: set[str] = set()
+        self._begin_handout()
 
     @property
     def order(self) -> torch.Tensor:
@@ -250,12 +239,14 @@ class SelectivePresentation(DistributedSampler):
                 f"epoch={epoch} is outside the schedule's {len(self._plan)} epochs (0 .. {len(self._plan) - 1}):"
                 " stop after sampler.num_epochs epochs (Lightning: SelectivePresentationCallback sets max_epochs)"
             )
-        if epoch != self.epoch:
-            if self._passes:  # (a loop that never iterates, as the CLI's, allocates nothing here)
-                self._check_finished(epoch)
-                self._passes = []
-            self._another_pass = False
-        self.epoch = epoch
+        if not self._lightning and sys._getframe(1).f_globals.get("__name__", "").startswith(LIGHTNING):
+            raise RuntimeError(
+                "SelectivePresentation in a Lightning Trainer needs its callback: Trainer(callbacks="
+                "[SelectivePresentationCallback(sampler)]) (from selpres import SelectivePresentationCallback); "
+                "without it Lightning cuts every epoch to A1's batch count and runs past the schedule's "
+                f"{len(self._plan)} epochs"
+            )
+        self._move_to(epoch)  # (a loop that never iterates, as the CLI's, allocates nothing here)
 
     @property
     def stage(self) -> int:
@@ -319,69 +310,8 @@ class SelectivePresentation(DistributedSampler):
             idx = idx.repeat(-(-total // idx.numel()))
         return idx[self.rank : total : world]
 
-    def __iter__(self) -> Iterator[int]:
-        if self._passes and not self._another_pass and self._handed_out() > 0:
-            self._warn(
-                "repeat",
-                f"epoch {self.epoch} is presented again: without set_epoch every pass presents the same training "
-                f"set A_{self.stage + 1} in the same order, for ever. Call sampler.set_epoch(epoch) before each "
-                "epoch: for epoch in range(sampler.num_epochs): sampler.set_epoch(epoch); ...",
-            )
-        self._another_pass = False
-        indices = self.rank_indices().tolist()
-        it = iter(indices)  # a plain list iterator: its length hint tells how far the loop got, at no cost
-        self._passes.append((it, len(indices)))
-        return it
-
     def __len__(self) -> int:
         return self.num_samples
-
-    def expect_new_pass(self) -> None:
-        """The loop is about to start a fresh pass over this epoch after an abandoned one (Lightning re-creates
-        its iterator after a worker prefetch): that pass is not a repeat."""
-        self._another_pass = True
-
-    def _handed_out(self) -> int:
-        """Indices of the current epoch handed to the loop so far (by its furthest pass)."""
-        return max((size - it.__length_hint__() for it, size in self._passes), default=0)
-
-    def _check_finished(self, next_epoch: int) -> None:
-        done, size = self._handed_out(), self._passes[-1][1]
-        if 0 < done < size:
-            self._warn(
-                "cut",
-                f"epoch {self.epoch} presented {done} of its {size} patterns before set_epoch({next_epoch}): the loop "
-                "stopped early. A loop that counts an epoch's batches once (Lightning does) cuts every larger "
-                "stage: with Lightning add selpres.presentation.lightning.SelectivePresentationCallback(sampler)",
-                stacklevel=5,  # the caller of set_epoch
-            )
-
-    def _warn(self, what: str, message: str, stacklevel: int = 3) -> None:
-        if what not in self._warned:  # once per sampler and kind
-            self._warned.add(what)
-            warnings.warn(message, SelectivePresentationWarning, stacklevel=stacklevel)
-
-    # ------------------------------------------------------------------------------------ cost
-
-    def _before(self, epoch: int, world: int) -> int:
-        """One rank's presentations in the schedule's epochs before ``epoch``."""
-        total = 0
-        for st, first in zip(self.schedule.stages, _stage_firsts(self.schedule.stages)):
-            full = min(max(epoch - first, 0), st.epochs)
-            total += full * self._share(st.size, world)
-            if st.extra and epoch > first + st.epochs:
-                total += self._share(st.extra, world)
-        return total
-
-    @property
-    def rank_presentations(self) -> int:
-        """This rank's presentations so far (epochs before the current one, plus what this epoch handed out)."""
-        return self._before(self.epoch, self.num_replicas) + self._handed_out()
-
-    @property
-    def presentations(self) -> int:
-        """All ranks' presentations so far: T / t, the cost axis (ranks present equal shares, padding included)."""
-        return self.rank_presentations * self.num_replicas
 
     def __repr__(self) -> str:
         return (

@@ -184,9 +184,8 @@ def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
         ckpts.discard()
     progress = ckpts.resume(engine, len(prob.seeds)) if ckpts else Progress.fresh(len(prob.seeds))
     clock.add(progress.seconds)
-    tracker = Tracker(
-        out / "tb" if out else Path("tb"), cfg.logging.tensorboard and out is not None, cfg.logging.per_replica
-    )
+    # the event file goes into the job's own folder: TensorBoard names the run by it (the overrides), not '…/tb'
+    tracker = Tracker(out if out else Path("tb"), cfg.logging.tensorboard and out is not None, cfg.logging.per_replica)
     tracker.replay(progress.history)
     job = Job(cfg, prob, engine, progress, chash, out, ckpts, tracker)
     if not progress.history:  # the untrained network: every curve starts at 0 presentations
