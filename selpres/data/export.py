@@ -5,6 +5,7 @@ config), and that hash itself, which also names a task in results.json.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from collections.abc import Mapping
@@ -15,9 +16,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from selpres.arms.two_link import cfg_get, make_arm
+from selpres.arms.sources import make_arm
+from selpres.arms.two_link import cfg_get
 from selpres.data.file import file_digest
 from selpres.data.paper import INPUT_NAMES, TARGET_NAMES, ExemplarSet, Patterns, TestSets
+from selpres.registry import Choice
 from selpres.storage import atomic_write, stable_hash
 
 
@@ -26,14 +29,12 @@ class DataMismatchError(ValueError):
 
 
 def _plain(cfg: Any) -> Any:
-    """Resolved plain container with ints folded into floats, so ``m2: 3`` and ``m2: 3.0`` hash alike."""
-    try:
-        from omegaconf import DictConfig, ListConfig, OmegaConf
-
-        if isinstance(cfg, (DictConfig, ListConfig)):
-            cfg = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
-    except ImportError:  # pragma: no cover
-        pass
+    """A spec (``DataSpec``, a robot ``Choice``) or plain container in its canonical form for hashing: ints folded
+    into floats, so ``m2: 3`` and ``m2: 3.0`` hash alike, enums by name."""
+    if isinstance(cfg, Choice):
+        cfg = {"_target_": cfg.target, **cfg.params}
+    elif dataclasses.is_dataclass(cfg) and not isinstance(cfg, type):
+        cfg = dataclasses.asdict(cfg)
     if isinstance(cfg, Mapping):
         return {str(k): _plain(v) for k, v in cfg.items()}
     if isinstance(cfg, (list, tuple)):

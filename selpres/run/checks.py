@@ -24,7 +24,7 @@ from selpres.engines.optim import HPARAM_KEYS, checked_hparams
 from selpres.errors import ConfigError
 from selpres.presentation.pruning import check_pruning
 from selpres.run.estimate import refuse_before_task
-from selpres.storage import to_container
+from selpres.run.specs import plain, task_specs
 
 MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
 MAX_SEED = 2**64 - 1  # torch.manual_seed's largest
@@ -77,7 +77,7 @@ def optim_hparams(o: DictConfig) -> dict:
 
 def validate(cfg: DictConfig) -> tuple[int, ...]:
     """Checks that need more than a type; returns the parsed topology. Raises ConfigError."""
-    for key, value in _walk(to_container(cfg)):
+    for key, value in _walk(plain(cfg)):
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
     o = cfg.optim
@@ -181,7 +181,7 @@ def check_task(cfg: DictConfig) -> Shape:
             raise ConfigError("data.n", d.n, f"a whole number of patterns in [1, {MAX_N:,}]")
         if isinstance(d.heldout, int) and d.heldout > MAX_N:
             raise ConfigError("data.heldout", d.heldout, f"at most {MAX_N:,} held-out patterns")
-    return task_shape(cfg.robot, d)
+    return task_shape(*task_specs(cfg))
 
 
 def _check_grid(d: DictConfig) -> None:
