@@ -15,6 +15,7 @@ from selpres.report.context import Context
 from selpres.report.sections import modern
 from selpres.run.stats import holm, t_test
 from selpres.run.train import train
+from selpres.run.specs import data_spec, robot_spec
 
 from conftest import cfg_of
 
@@ -68,7 +69,7 @@ def test_nmse_is_mse_over_the_heldout_targets_variance(sweep):
     cfg = job.results["config"]
     from omegaconf import OmegaConf
 
-    Y = load_task(OmegaConf.create(cfg["robot"]), OmegaConf.create(cfg["data"])).tests.heldout.Y
+    Y = load_task(robot_spec(cfg["robot"]), data_spec(cfg["data"])).tests.heldout.Y
     var = ((Y - Y.mean(0)) ** 2).mean(0)  # by hand: the population variance
     t1, _ = _seeds(sweep, "matched", "tau1")
     t2, _ = _seeds(sweep, "matched", "tau2")

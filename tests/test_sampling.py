@@ -12,6 +12,7 @@ import torch
 from selpres.arms.two_link import make_arm
 from selpres.data.task import _task, load_task
 from selpres.errors import ConfigError
+from selpres.run.specs import task_specs
 
 from conftest import cfg_of
 
@@ -25,7 +26,7 @@ PAPER_BOX = [
 
 def task_of(*overrides: str):
     cfg = cfg_of("data=sampled", *overrides)
-    return load_task(cfg.robot, cfg.data), cfg
+    return load_task(*task_specs(cfg)), cfg
 
 
 def split(X: torch.Tensor, dof: int):

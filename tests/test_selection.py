@@ -17,6 +17,7 @@ from selpres.presentation.selection import enlarge_by_loss, pattern_errors, rese
 from selpres.run.checks import validate
 from selpres.run.train import Clock, run_epoch, start, train
 from selpres.seeding import generator
+from selpres.run.specs import task_specs
 
 from conftest import cfg_of, numbers
 
@@ -25,7 +26,7 @@ N = 1002
 
 
 def _raw_X(cfg) -> torch.Tensor:
-    return load_task(cfg.robot, cfg.data).exemplar.X
+    return load_task(*task_specs(cfg)).exemplar.X
 
 
 # ------------------------------------------------------------------------------------ the pure step

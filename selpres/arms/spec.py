@@ -1,4 +1,4 @@
-"""The YAML/dict spec of a serial arm (``robot.kind: serial``), read with errors naming ``robot.<key>``.
+"""The YAML/dict spec of a serial arm (``robot._target_: serial``), read with errors naming ``robot.<key>``.
 
 The spec (see ``selpres.arms.serial``'s docstring) becomes plain rows: ``parse_spec`` checks every key
 and value and each link's physics with this config's key names, and returns what ``SerialArm`` is built
@@ -69,11 +69,12 @@ def parse_spec(node: Any, prefix: str, cls: type) -> Any:
     top = _keys(
         node,
         prefix,
-        ("kind", "name", "gravity", "end_point", "base", "tip", "convention", "links"),
+        ("_target_", "kind", "name", "gravity", "end_point", "base", "tip", "convention", "links"),
         ("gravity", "links"),
     )
-    if top.get("kind", "serial") != "serial":
-        raise ConfigError(f"{prefix}.kind", top["kind"], "'serial' for selpres.arms.serial.SerialArm")
+    for k in ("_target_", "kind"):  # a robot node (configs/robot/*.yaml) or an arm's description (to_config)
+        if top.get(k, "serial") != "serial":
+            raise ConfigError(f"{prefix}.{k}", top[k], "'serial' for selpres.arms.serial.SerialArm")
     convention = top.get("convention", "urdf")
     if convention not in ("urdf", "dh"):
         raise ConfigError(f"{prefix}.convention", convention, "'urdf' (joint xyz/rpy/axis) or 'dh'")

@@ -295,7 +295,7 @@ def _file(robot: Choice, data_cfg: DataSpec) -> Task:
     ins, outs = F.check_columns(path, data_cfg.inputs, data_cfg.outputs)
     table = F.load_columns(path, [*ins, *outs])
     sc = data_cfg.scaling
-    squeezed = F.check_ranges(path, [*ins, *outs], table, len(outs), float(sc.margin), float(sc.lo), float(sc.hi))
+    squeezed = F.check_ranges(path, [*ins, *outs], table, len(outs), *(float(sc[k]) for k in ("margin", "lo", "hi")))
     for w in squeezed:
         log.warning("%s", w)
     rows = table.shape[0]
