@@ -48,7 +48,9 @@ def test_build_makes_the_class_from_the_node_and_names_a_bad_key():
         length: float = 1.0
 
     assert construct(Arm, {"mass": 2.0}, "robot") == Arm(2.0, 1.0)
-    with pytest.raises(ConfigError, match=r"robot.lenght=3 is not allowed: expected one of the keys \['mass', 'length'\]"):
+    with pytest.raises(
+        ConfigError, match=r"robot.lenght=3 is not allowed: expected one of the keys \['mass', 'length'\]"
+    ):
         construct(Arm, {"mass": 2.0, "lenght": 3}, "robot")
     with pytest.raises(ConfigError, match=r"robot.mass=None is not allowed: expected a value \(.*Arm requires it\)"):
         construct(Arm, {"length": 2.0}, "robot")

@@ -15,9 +15,9 @@ from selpres.errors import ConfigError
 from selpres.presentation.orders import priority_order, strata
 from selpres.presentation.selection import enlarge_by_loss, pattern_errors, reselected_orders, selection_charge
 from selpres.run.checks import validate
+from selpres.run.specs import task_specs
 from selpres.run.train import Clock, run_epoch, start, train
 from selpres.seeding import generator
-from selpres.run.specs import task_specs
 
 from conftest import cfg_of, numbers
 
