@@ -52,8 +52,8 @@ def user_files(tmp_path_factory):
     import numpy as np
 
     from selpres.arms.sources import make_arm
-    from selpres.run.specs import robot_spec
     from selpres.arms.urdf import to_urdf
+    from selpres.run.specs import robot_spec
 
     folder = tmp_path_factory.mktemp("user")
     to_urdf(make_arm(robot_spec(compose("robot=planar3", "topology.layers=9-13-3").robot)), folder / "arm.urdf")
