@@ -42,7 +42,10 @@ def as_choice(node: Mapping[str, Any], key: str = "robot") -> Choice:
     params = {str(k): v for k, v in node.items() if k not in ("_target_", "kind")}
     if "_target_" in node:
         if "kind" in node:
-            raise ConfigError(f"{key}.kind", node["kind"], f"unset: {key}._target_ names the arm source now")
+            kind = node["kind"]
+            raise ConfigError(
+                f"{key}.kind", kind, f"unset: the arm source is {key}._target_ now ({key}={kind} picks its node)"
+            )
         return Choice(node["_target_"], params)
     if "kind" in node:
         return Choice(node["kind"], {k: v for k, v in params.items() if v is not None})
