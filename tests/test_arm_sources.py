@@ -147,3 +147,12 @@ def test_a_users_arm_source_runs_from_the_command_line(tmp_path):
     bad = run("+robot.mass=3", f"hydra.run.dir={tmp_path / 'bad'}")
     assert bad.returncode == 2 and "error: robot.mass=3 is not allowed: expected one of the keys" in bad.stderr
     assert "Traceback" not in bad.stderr and not (tmp_path / "bad").exists()
+    old = subprocess.run(  # the spelling before issue 25, appended as Hydra's own refusal of robot.kind=urdf suggests
+        [sys.executable, "train.py", "+robot.kind=urdf", f"hydra.run.dir={tmp_path / 'old'}"],
+        cwd=REPO, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert (
+        old.returncode == 2
+        and "error: robot.kind='urdf' is not allowed: expected unset: the arm source is " in old.stderr
+    )
+    assert "robot._target_ now (robot=urdf picks its node)" in old.stderr and not (tmp_path / "old").exists()
