@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 from selpres.registry import construct
@@ -47,7 +46,3 @@ class DataSpec:
 
     def as_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
-
-    def reads_files(self) -> list[Path]:
-        """The files the data is read from: a data file's (the task's cache key holds their stamps)."""
-        return [Path(self.path).expanduser()] if self.kind == "file" and isinstance(self.path, str) else []

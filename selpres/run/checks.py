@@ -17,7 +17,7 @@ from omegaconf import DictConfig
 
 from selpres.data.paper import grid_points, heldout_count
 from selpres.data.sampled import MAX_N
-from selpres.data.task import DATA_KEYS, Shape, task_shape
+from selpres.data.task import Shape, route_keys, task_shape
 from selpres.engines.batch import check_batch_options
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.engines.optim import HPARAM_KEYS, checked_hparams
@@ -151,8 +151,9 @@ def check_task(cfg: DictConfig) -> Shape:
     the shape of the task (``selpres.data.task.task_shape``: builds the arm or reads a data file's header)."""
     d = cfg.data
     kind = d.kind.value
-    reads = DATA_KEYS[kind]
-    for other in DATA_KEYS.values():
+    keys = route_keys()
+    reads = keys[kind]
+    for other in keys.values():
         for k in other:
             if k not in reads and d[k] is not None:
                 raise ConfigError(f"data.{k}", d[k], f"unset (null) for data.kind={kind}, which reads {list(reads)}")
