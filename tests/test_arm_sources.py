@@ -156,3 +156,21 @@ def test_a_users_arm_source_runs_from_the_command_line(tmp_path):
         and "error: robot.kind='urdf' is not allowed: expected unset: the arm source is " in old.stderr
     )
     assert "robot._target_ now (robot=urdf picks its node)" in old.stderr and not (tmp_path / "old").exists()
+
+
+def test_data_routes_are_the_modules_and_say_what_they_read(tmp_path):
+    """The data routes (selpres.data.routes) the same way: the built-ins are the modules, each names the keys it
+    reads (what run.checks holds a config to) and the files it reads (a data file, not the arm's)."""
+    from selpres.data.routes import ROUTES
+
+    assert ROUTES.names == ("file", "grid", "sampled")
+    assert T.route_keys() == {
+        "file": ("path", "inputs", "outputs"),
+        "grid": ("theta", "dtheta", "tau1", "tau2", "accel_limit"),
+        "sampled": ("n", "route", "draw", "seed", "q", "dq", "tau", "wrench", "accel_limit"),
+    }
+    (tmp_path / "arm.dh").write_text("0.2 0 0 1 0 0 0 0 0 0\n")
+    robot = Choice("urdf", {"path": str(tmp_path / "arm.dh")})  # a file-reading source: read only when used
+    csv = tmp_path / "s.csv"
+    assert T.task_files(robot, data_spec(compose("data=file", f"data.path={csv}").data)) == [csv]
+    assert T.task_files(robot, data_spec(compose(*SMALL).data)) == [tmp_path / "arm.dh"]
