@@ -27,7 +27,7 @@ _EXPORTS = {
     # arms: the paper's two-link arm (eq. 6), any serial chain (eq. 4-5), URDF files in and out
     "TwoLinkArm": "selpres.arms.two_link",
     "SerialArm": "selpres.arms.serial",
-    "make_arm": "selpres.arms.two_link",
+    "make_arm": "selpres.arms.sources",
     "load_urdf": "selpres.arms.urdf",
     "to_urdf": "selpres.arms.urdf",
     # data: a config's task (exemplar set, test sets, scaler), exported files read back

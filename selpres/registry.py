@@ -13,9 +13,12 @@ class (``mylion.Lion``, ``torch.optim.NAdam``): a dotted name is always an impor
 from __future__ import annotations
 
 import importlib
+import inspect
 import pkgutil
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 from selpres.errors import ConfigError
 
@@ -52,6 +55,10 @@ class Registry:
             return locate(self.key, name)
         return getattr(importlib.import_module(f"{self.package}.{name}"), self.entry)
 
+    def build(self, name: str, params: Mapping[str, Any]):
+        """An instance of the class ``name`` resolves to, made from the node's other keys (:func:`construct`)."""
+        return construct(self.get(name), params, self.key.rpartition(".")[0] or self.key)
+
     def path_of(self, name: str) -> str:
         """The import path of what ``name`` resolves to (results.json records it)."""
         obj = self.get(name)
@@ -75,3 +82,31 @@ def locate(key: str, path: str):
         return getattr(mod, attr)
     except AttributeError:
         raise ConfigError(key, path, f"a name defined in module {module} (it has no {attr!r})") from None
+
+
+@dataclass(frozen=True)
+class Choice:
+    """A node that names a choice, as plain Python (what ``selpres.run`` hands a room): ``target``, the value of
+    its ``_target_`` (a built-in name or an import path), and ``params``, its other keys (plain values)."""
+
+    target: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+
+def construct(cls, params: Mapping[str, Any], node: str):
+    """``cls(**params)``, with a key the class does not take, or a required one missing, refused as a ConfigError
+    naming ``<node>.<key>`` (a class that takes ``**kwargs`` checks its own keys)."""
+    try:
+        sig = inspect.signature(cls)
+    except (TypeError, ValueError):  # a builtin without a signature: let it say what it takes
+        return cls(**params)
+    named = [p for p in sig.parameters.values() if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    where = f"{getattr(cls, '__module__', '?')}.{getattr(cls, '__qualname__', cls)}"
+    if not any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+        for k, v in params.items():
+            if k not in {p.name for p in named}:
+                raise ConfigError(f"{node}.{k}", v, f"one of the keys {[p.name for p in named]} that {where} takes")
+    for p in named:
+        if p.default is p.empty and p.name not in params:
+            raise ConfigError(f"{node}.{p.name}", None, f"a value ({where} requires it)")
+    return cls(**params)

@@ -111,11 +111,3 @@ def stable_hash(obj: Any) -> str:
     """First 16 hex digits of the sha256 of a canonical JSON: the identity of a config or of data."""
     text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def to_container(cfg) -> dict:
-    """Plain, resolved values (enums as strings) of an OmegaConf config: what hashes, results.json and the data
-    stage take."""
-    from omegaconf import OmegaConf
-
-    return OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)

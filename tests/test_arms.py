@@ -1,4 +1,4 @@
-"""Arms as configs (robot=two_link|planar3|puma560|urdf): make_arm, canonical identity, URDF export that
+"""Arms as configs (robot=two_link|planar3|puma560|urdf): arm sources, canonical identity, URDF export that
 loads back as the same dynamics, exported CSVs that name their columns and carry the arm, and errors."""
 
 from __future__ import annotations
@@ -14,10 +14,12 @@ import pytest
 import torch
 
 from selpres.arms.serial import SerialArm
-from selpres.arms.two_link import TwoLinkArm, make_arm
+from selpres.arms.sources import make_arm
+from selpres.arms.two_link import TwoLinkArm
 from selpres.arms.urdf import UrdfError, load_urdf, to_urdf
 from selpres.data.export import config_hash, load_csv, load_exported
 from selpres.errors import ConfigError
+from selpres.run.specs import data_spec, robot_spec
 
 from conftest import cfg_of, load_group, run_python
 
@@ -34,7 +36,7 @@ def states(dof: int, m: int = 64, seed: int = 0):
     "option, kind, dof", [("two_link", TwoLinkArm, 2), ("planar3", SerialArm, 3), ("puma560", SerialArm, 6)]
 )
 def test_shipped_arms(option, kind, dof):
-    arm = make_arm(cfg_of(f"robot={option}").robot)  # the composed (typed) config: unset keys are None
+    arm = make_arm(robot_spec(cfg_of(f"robot={option}").robot))
     assert isinstance(arm, kind) and arm.dof == dof and arm.name == option
     again = make_arm(arm.to_config())
     assert again.to_config() == arm.to_config()
@@ -53,8 +55,8 @@ def test_two_link_config_is_the_closed_form_and_agrees_with_the_general_code():
     [
         (["robot.m1=null"], "robot.m1", "None"),
         (["robot.m2=-1"], "robot.m2", "-1"),
-        (["robot.links=[]"], "robot.links", "[]"),  # a two_link config that sets a serial key
-        (["robot=puma560", "robot.m1=1"], "robot.m1", "1"),
+        (["+robot.links=[]"], "robot.links", "[]"),  # a two_link config that sets a serial key
+        (["robot=puma560", "+robot.m1=1"], "robot.m1", "1"),
         (["robot=puma560", "robot.links.1.mass=-2"], "robot.links[1].mass", "-2"),
         (["robot=urdf"], "robot.path", "None"),
         (["robot=urdf", "robot.path=x.urdf", "robot.g=-9.81"], "robot.g", "-9.81"),
@@ -85,13 +87,14 @@ def test_a_bad_urdf_names_file_and_element(tmp_path):
 def test_identity_is_the_arm_not_the_file(tmp_path):
     """The same arm hashes alike from its YAML or from a URDF of it, wherever the file lies; another mass
     changes the hash."""
-    data = cfg_of("data=sampled").data
-    puma = cfg_of("robot=puma560").robot
+    data = data_spec(cfg_of("data=sampled").data)
+    puma = robot_spec(cfg_of("robot=puma560").robot)
     a, b = to_urdf(make_arm(puma), tmp_path / "a.urdf"), to_urdf(make_arm(puma), tmp_path / "sub" / "b.urdf")
-    from_a = cfg_of("robot=urdf", f"robot.path={a}").robot
-    from_b = cfg_of("robot=urdf", f"robot.path={b}").robot
+    from_a = robot_spec(cfg_of("robot=urdf", f"robot.path={a}").robot)
+    from_b = robot_spec(cfg_of("robot=urdf", f"robot.path={b}").robot)
     assert config_hash(puma, data) == config_hash(from_a, data) == config_hash(from_b, data)
-    assert config_hash(cfg_of("robot=puma560", "robot.links.2.mass=4.9").robot, data) != config_hash(puma, data)
+    heavier = robot_spec(cfg_of("robot=puma560", "robot.links.2.mass=4.9").robot)
+    assert config_hash(heavier, data) != config_hash(puma, data)
 
 
 def _export(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
@@ -115,7 +118,7 @@ def test_export_names_columns_carries_the_arm_and_writes_its_urdf(tmp_path):
     with open(tmp_path / "ex_exemplar.csv") as f:
         assert f.readline().startswith("# config_hash=")
         arm_line = f.readline()
-    arm = make_arm(cfg_of("robot=puma560").robot)
+    arm = make_arm(robot_spec(cfg_of("robot=puma560").robot))
     assert arm_line.startswith("# arm=") and json.loads(arm_line[6:]) == json.loads(json.dumps(arm.to_config()))
     _, names, table = load_csv(tmp_path / "ex_exemplar.csv")
     assert names == (
@@ -194,7 +197,7 @@ def test_train_refuses_a_bad_urdf_with_exit_2(tmp_path):
 def test_planar3_with_a_massless_hand_is_the_paper_arm():
     """m3 = 0: joints 1-2 carry the two-link arm's torques (eq. 6), joint 3 none."""
     cfg = cfg_of("robot=planar3", "robot.links.2.mass=0.0")
-    arm, paper = make_arm(cfg.robot), make_arm(load_group("robot", "two_link"))
+    arm, paper = make_arm(robot_spec(cfg.robot)), make_arm(load_group("robot", "two_link"))
     q, qd, qdd = states(3)
     tau = arm.inverse_dynamics(q, qd, qdd)
     assert torch.allclose(tau[:, :2], paper.inverse_dynamics(q[:, :2], qd[:, :2], qdd[:, :2]), atol=1e-12, rtol=0)
@@ -209,13 +212,14 @@ def test_urdf_chain_keys_from_the_command_line(tmp_path):
     path = tmp_path / "hand.urdf"
     path.write_text(HAND)
     base = ("robot=urdf", f"robot.path={path}")
-    arm = make_arm(cfg_of(*base, "robot.joints=[j1]", "robot.hold={j2: 0.25}").robot)
+    arm = make_arm(robot_spec(cfg_of(*base, "robot.joints=[j1]", "robot.hold={j2: 0.25}").robot))
     assert arm.source["held"] == {"j2": 0.25} and arm.dof == 1
-    assert make_arm(cfg_of(*base, "robot.gravity=null", "robot.g=3").robot).gravity_vector == (0.0, 0.0, -3.0)
+    flat = robot_spec(cfg_of(*base, "robot.gravity=null", "robot.g=3").robot)
+    assert make_arm(flat).gravity_vector == (0.0, 0.0, -3.0)
     for overrides, key in (
-        (("robot.g=3",), "robot.g=3.0 is not allowed: expected unset when robot.gravity is given"),
+        (("robot.g=3",), "robot.g=3 is not allowed: expected unset when robot.gravity is given"),
         (("robot.hold=3",), "robot.hold=3 is not allowed"),
-        (("robot.gravity=[0,1]",), "robot.gravity=[0.0, 1.0] is not allowed"),
+        (("robot.gravity=[0,1]",), "robot.gravity=[0, 1] is not allowed"),
     ):
         with pytest.raises(ConfigError, match=re.escape(key)):
-            make_arm(cfg_of(*base, *overrides).robot)
+            make_arm(robot_spec(cfg_of(*base, *overrides).robot))

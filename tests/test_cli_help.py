@@ -51,13 +51,12 @@ def test_name_refused_for_a_single_run(tmp_path):
 
 
 def test_export_default_names_the_task_not_exemplar_twice():
-    from omegaconf import OmegaConf
-
+    from selpres.registry import Choice
     from selpres.run.export import compose_data_config, default_stem
 
     robot, data = compose_data_config([])
     assert default_stem(robot, data).as_posix() == "outputs/data/two_link_grid"
     robot, data = compose_data_config(["robot=puma560"])
     assert default_stem(robot, data).as_posix() == "outputs/data/puma560_sampled"
-    urdf = OmegaConf.merge(robot, {"path": "/some/where/panda.urdf"})
+    urdf = Choice("urdf", {"path": "/some/where/panda.urdf"})
     assert default_stem(urdf, data).name == "panda_sampled"

@@ -52,11 +52,12 @@ def user_files(tmp_path_factory):
     """A URDF (planar3 exported) for robot=urdf and a small CSV for data=file."""
     import numpy as np
 
-    from selpres.arms.two_link import make_arm
+    from selpres.arms.sources import make_arm
     from selpres.arms.urdf import to_urdf
+    from selpres.run.specs import robot_spec
 
     folder = tmp_path_factory.mktemp("user")
-    to_urdf(make_arm(compose("robot=planar3", "topology.layers=9-13-3").robot), folder / "arm.urdf")
+    to_urdf(make_arm(robot_spec(compose("robot=planar3", "topology.layers=9-13-3").robot)), folder / "arm.urdf")
     rows = np.random.default_rng(0).uniform(-1, 1, (1500, 4))
     np.savetxt(folder / "data.csv", rows, delimiter=",", header="a,b,c,y", comments="")
     return {"urdf": folder / "arm.urdf", "csv": folder / "data.csv"}

@@ -54,9 +54,9 @@ def test_data_config_has_exactly_the_agreed_keys():
         "test_seed",
         "scaling",
     }
-    assert DATA_CFG.kind == "grid" and ROBOT_CFG.kind == "two_link"
+    assert DATA_CFG.kind == "grid" and ROBOT_CFG._target_ == "two_link"
     assert set(DATA_CFG.scaling.keys()) == {"mode", "margin", "lo", "hi"}
-    assert set(ROBOT_CFG.keys()) == {"kind", "m1", "m2", "l1", "l2", "g"}
+    assert set(ROBOT_CFG.keys()) == {"_target_", "m1", "m2", "l1", "l2", "g"}
 
 
 # ------------------------------------------------------------------------------------------ grid

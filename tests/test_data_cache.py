@@ -14,6 +14,7 @@ import torch
 
 import selpres.data.cache as C
 import selpres.data.task as T
+from selpres.run.specs import task_specs
 
 from conftest import REPO, cfg_of, compose, numbers
 
@@ -30,7 +31,7 @@ def cache(tmp_path, monkeypatch):
 def _load(*overrides):
     T._task.cache_clear()
     cfg = compose(*overrides)
-    return T.load_task(cfg.robot, cfg.data)
+    return T.load_task(*task_specs(cfg))
 
 
 def _same(a, b):
@@ -167,9 +168,10 @@ def test_files_named_from_home_are_read_again_when_edited(cache, tmp_path, monke
     and by the job's identity (selpres.run.results.job_hash)."""
     from test_datafile import INPUTS, OUTPUTS, file_cfg, sarcos_like, write_csv
 
-    from selpres.arms.two_link import make_arm
+    from selpres.arms.sources import make_arm
     from selpres.arms.urdf import to_urdf
     from selpres.run.results import job_hash
+    from selpres.run.specs import robot_spec
 
     monkeypatch.setenv("HOME", str(tmp_path))
     cfg = file_cfg("'~/s.csv'")
@@ -177,7 +179,7 @@ def test_files_named_from_home_are_read_again_when_edited(cache, tmp_path, monke
     for seed in (0, 1):
         write_csv(tmp_path / "s.csv", sarcos_like(200, seed), INPUTS + OUTPUTS)
         T._task.cache_clear()
-        task = T.load_task(cfg.robot, cfg.data)
+        task = T.load_task(*task_specs(cfg))
         sums.append(float(task.exemplar.X.sum()))
         hashes.append(job_hash(cfg))
         assert task.info["cache"].startswith("not stored")
@@ -185,10 +187,10 @@ def test_files_named_from_home_are_read_again_when_edited(cache, tmp_path, monke
     urdf = compose("robot=urdf", "robot.path='~/arm.urdf'", "topology.layers=9-5-3", "data.n=200", "data.heldout=50")
     means = []
     for mass in (0.42, 0.84):
-        arm = compose("robot=planar3", "topology.layers=9-5-3", f"robot.links.0.mass={mass}").robot
+        arm = robot_spec(compose("robot=planar3", "topology.layers=9-5-3", f"robot.links.0.mass={mass}").robot)
         to_urdf(make_arm(arm), tmp_path / "arm.urdf")
         T._task.cache_clear()
-        task = T.load_task(urdf.robot, urdf.data)
+        task = T.load_task(*task_specs(urdf))
         means.append(float(task.exemplar.Y.abs().mean()))
         assert task.info["cache"].startswith("not stored")
     assert means[0] != means[1] and not cache.exists()
@@ -218,7 +220,7 @@ def test_a_task_read_from_a_file_is_not_stored(cache, tmp_path):
 
     cfg = file_cfg(write_csv(tmp_path / "s.csv", sarcos_like(200), INPUTS + OUTPUTS))
     T._task.cache_clear()
-    task = T.load_task(cfg.robot, cfg.data)
+    task = T.load_task(*task_specs(cfg))
     assert task.info["cache"].startswith("not stored") and not cache.exists()
 
 
@@ -244,8 +246,9 @@ def test_only_the_least_recently_used_entries_beyond_keep_are_removed(cache, mon
 def test_two_processes_building_one_task_at_once_both_get_it(cache):
     code = (
         "import json, os; from selpres.run.config import compose_train; import selpres.data.task as T; "
+        "from selpres.run.specs import task_specs; "
         "c = compose_train(os.path.abspath('selpres/configs'), ['data.heldout=2000']); "
-        "t = T.load_task(c.robot, c.data); "
+        "t = T.load_task(*task_specs(c)); "
         "print(json.dumps([t.info['cache'].split()[0], float(t.tests.heldout.X.sum())]))"
     )
     env = {**os.environ, "SELPRES_DATA_CACHE": str(cache)}

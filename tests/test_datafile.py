@@ -13,6 +13,7 @@ from omegaconf import OmegaConf
 from selpres.data.file import DataFileError, load_columns
 from selpres.data.task import load_task
 from selpres.errors import ConfigError
+from selpres.run.specs import task_specs
 
 from conftest import CONFIGS, cfg_of, run_python
 
@@ -54,7 +55,7 @@ def file_cfg(path: Path, *overrides: str, inputs=INPUTS, outputs=OUTPUTS):
 
 def test_split_by_seed_and_test_patterns_from_the_heldout_rows(sarcos):
     cfg = file_cfg(sarcos)
-    task = load_task(cfg.robot, cfg.data)
+    task = load_task(*task_specs(cfg))
     table = torch.from_numpy(np.loadtxt(sarcos, delimiter=",", skiprows=1))
     assert len(task.tests.heldout) == 120 and task.n == 480  # data.heldout: 0.2 of 600 rows
     both = torch.cat((task.exemplar.X, task.tests.heldout.X))
@@ -70,7 +71,7 @@ def test_split_by_seed_and_test_patterns_from_the_heldout_rows(sarcos):
     assert task.input_names == tuple(INPUTS) and task.output_names == tuple(OUTPUTS)
     assert task.info["kind"] == "file" and len(task.info["sha256"]) == 64
     other = file_cfg(sarcos, "data.test_seed=1")
-    assert not torch.equal(load_task(other.robot, other.data).tests.heldout.X, task.tests.heldout.X)
+    assert not torch.equal(load_task(*task_specs(other)).tests.heldout.X, task.tests.heldout.X)
 
 
 def test_npz_columns_and_table_read_as_the_csv(sarcos, tmp_path):
@@ -81,7 +82,7 @@ def test_npz_columns_and_table_read_as_the_csv(sarcos, tmp_path):
     for name in ("cols.npz", "table.npz"):
         assert torch.equal(load_columns(tmp_path / name, ["tau3", "q1"]), want)
     cfg = file_cfg(tmp_path / "cols.npz")
-    a, b = load_task(cfg.robot, cfg.data), load_task(file_cfg(sarcos).robot, file_cfg(sarcos).data)
+    a, b = load_task(*task_specs(cfg)), load_task(*task_specs(file_cfg(sarcos)))
     assert torch.equal(a.exemplar.X, b.exemplar.X) and torch.equal(a.tests.heldout.Y, b.tests.heldout.Y)
 
 
@@ -93,7 +94,7 @@ def test_exported_csv_loads_as_user_data(tmp_path):
     export_data(tmp_path / "ex", robot, data)
     names = ["theta1", "dtheta1", "ddtheta1", "theta2", "dtheta2", "ddtheta2"]
     cfg = file_cfg(tmp_path / "ex_exemplar.csv", inputs=names, outputs=["tau1", "tau2"])
-    task = load_task(cfg.robot, cfg.data)
+    task = load_task(*task_specs(cfg))
     assert task.n + len(task.tests.heldout) == 1002
 
 
@@ -207,7 +208,7 @@ def test_config_errors_name_the_key(sarcos, overrides, key):
     cfg = file_cfg(sarcos, *overrides)
     with pytest.raises(ConfigError) as ei:
         validate(cfg)
-        load_task(cfg.robot, cfg.data)
+        load_task(*task_specs(cfg))
     assert ei.value.key == key, str(ei.value)
 
 

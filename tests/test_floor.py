@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from selpres.run import floor
+from selpres.run.specs import task_specs
 
 from conftest import REPO, compose, run_python
 
@@ -53,7 +54,7 @@ def test_a_real_job_records_floor_and_nmse_consistently(tmp_path):
     from selpres.data.task import load_task
 
     cfg = compose()  # the default job's config
-    task = load_task(cfg.robot, cfg.data)
+    task = load_task(*task_specs(cfg))
     var = task.tests.heldout.Y.var(0, unbiased=False)
     final = r["replica_results"][0]["final"]["heldout"]
     for k, joint in enumerate(("tau1", "tau2")):

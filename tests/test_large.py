@@ -17,7 +17,7 @@ from omegaconf import OmegaConf
 from selpres.report.groups import label_methods
 from selpres.report.jobs import Job
 from selpres.run.checks import validate
-from selpres.storage import to_container
+from selpres.run.specs import plain as to_container
 
 from conftest import compose, load_group
 
@@ -39,7 +39,7 @@ def swept_jobs(*command: str) -> list[list[str]]:
 
 
 def arm_of(cfg) -> str:
-    return cfg.robot.name or cfg.robot.kind.value  # the two-link file sets no name
+    return cfg.robot.get("name") or cfg.robot._target_  # the two-link file sets no name
 
 
 @pytest.fixture(scope="module")

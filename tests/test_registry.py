@@ -35,3 +35,24 @@ def test_import_paths_resolve_or_say_why_not():
         locate("k", "no_such_mod.Thing")
     with pytest.raises(ConfigError, match="it has no 'Nope'"):
         locate("k", "collections.Nope")
+
+
+def test_build_makes_the_class_from_the_node_and_names_a_bad_key():
+    from dataclasses import dataclass
+
+    from selpres.registry import construct
+
+    @dataclass
+    class Arm:
+        mass: float
+        length: float = 1.0
+
+    assert construct(Arm, {"mass": 2.0}, "robot") == Arm(2.0, 1.0)
+    with pytest.raises(
+        ConfigError, match=r"robot.lenght=3 is not allowed: expected one of the keys \['mass', 'length'\]"
+    ):
+        construct(Arm, {"mass": 2.0, "lenght": 3}, "robot")
+    with pytest.raises(ConfigError, match=r"robot.mass=None is not allowed: expected a value \(.*Arm requires it\)"):
+        construct(Arm, {"length": 2.0}, "robot")
+    reg = Registry("node._target_", "selpres.arms", "ENTRY")
+    assert reg.build("collections.OrderedDict", {"a": 1}) == {"a": 1}  # **kwargs: the class checks its own keys

@@ -12,6 +12,7 @@ from selpres.data.task import load_task
 from selpres.report.build import Report
 from selpres.report.compare import Options
 from selpres.report.context import Context
+from selpres.run.specs import data_spec, robot_spec
 from selpres.run.stats import holm, t_test
 from selpres.run.train import train
 from selpres.studies import modern
@@ -66,9 +67,8 @@ def test_nmse_is_mse_over_the_heldout_targets_variance(sweep):
     ctx = Context.load(sweep, Options())
     job = next(j for j in ctx.jobs if j.path.name == "matched")
     cfg = job.results["config"]
-    from omegaconf import OmegaConf
 
-    Y = load_task(OmegaConf.create(cfg["robot"]), OmegaConf.create(cfg["data"])).tests.heldout.Y
+    Y = load_task(robot_spec(cfg["robot"]), data_spec(cfg["data"])).tests.heldout.Y
     var = ((Y - Y.mean(0)) ** 2).mean(0)  # by hand: the population variance
     t1, _ = _seeds(sweep, "matched", "tau1")
     t2, _ = _seeds(sweep, "matched", "tau2")

@@ -9,9 +9,10 @@ import math
 import pytest
 import torch
 
-from selpres.arms.two_link import make_arm
+from selpres.arms.sources import make_arm
 from selpres.data.task import _task, load_task
 from selpres.errors import ConfigError
+from selpres.run.specs import robot_spec, task_specs
 
 from conftest import cfg_of
 
@@ -25,7 +26,7 @@ PAPER_BOX = [
 
 def task_of(*overrides: str):
     cfg = cfg_of("data=sampled", *overrides)
-    return load_task(cfg.robot, cfg.data), cfg
+    return load_task(*task_specs(cfg)), cfg
 
 
 def split(X: torch.Tensor, dof: int):
@@ -36,7 +37,7 @@ def test_inverse_route_targets_are_eq4_and_simulate_back(tmp_path):
     """τ = ID(q, q̇, q̈) for every pattern: the forward simulator (an LDLᵀ solve, another code path) turns
     (q, q̇, τ) back into the drawn q̈; every input lies in its box; nothing is dropped."""
     task, cfg = task_of("robot=puma560", "data.n=3000", "data.heldout=500", "topology.layers=18-40-6")
-    arm = make_arm(cfg.robot)
+    arm = make_arm(robot_spec(cfg.robot))
     q, qd, qdd = split(task.exemplar.X, 6)
     assert torch.allclose(arm.forward_dynamics(q, qd, task.exemplar.Y), qdd, atol=1e-8, rtol=0)
     limits = arm.joint_limits()
@@ -53,7 +54,7 @@ def test_forward_route_acceptance_matches_change_of_variables():
     (2a)²/area(τ box) · E[det H(q) · 1(τ in box)] over q, q̇, q̈ uniform: estimated here from 10^6 draws of
     the closed form (eq. 6), independently of the route's simulation."""
     task, cfg = task_of(*PAPER_BOX, "data.route=forward", "data.draw=uniform", "data.n=2000", "data.heldout=200")
-    arm = make_arm(cfg.robot)
+    arm = make_arm(robot_spec(cfg.robot))
     q, qd, qdd = split(task.exemplar.X, 2)
     assert qdd.abs().max() <= 2.0  # the filter
     assert (task.exemplar.Y[:, 0] >= 14).all() and (task.exemplar.Y[:, 1] <= 8).all()
@@ -82,7 +83,7 @@ def test_wrench_enters_as_jacobian_transpose():
         "topology.layers=9-5-3",
         f"data.wrench=[{','.join(map(str, k))}]",
     )
-    arm = make_arm(cfg.robot)
+    arm = make_arm(robot_spec(cfg.robot))
     q, qd, qdd = split(task.exemplar.X, 3)
     jt_k = (arm.jacobian(q).transpose(-1, -2) @ torch.tensor(k, dtype=F64)).squeeze(-1)
     assert torch.allclose(task.exemplar.Y - arm.inverse_dynamics(q, qd, qdd), jt_k, atol=1e-10, rtol=0)

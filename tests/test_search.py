@@ -14,6 +14,7 @@ from selpres.errors import ConfigError
 from selpres.presentation import search
 from selpres.presentation.schedule import build_schedule
 from selpres.presentation.search import schedule_overrides, shaped_schedule, shaped_sizes
+from selpres.run.specs import task_specs
 
 from conftest import compose, run_python
 
@@ -133,7 +134,7 @@ def test_the_validation_set_shares_no_pattern_with_the_held_out_set_and_seeds_no
         "logging.tensorboard=false",
     ]
     val, test = compose(*base, "data.test_seed=7919"), compose(*base)
-    tv, tt = load_task(val.robot, val.data), load_task(test.robot, test.data)
+    tv, tt = load_task(*task_specs(val)), load_task(*task_specs(test))
     assert torch.equal(tv.exemplar.X, tt.exemplar.X) and torch.equal(tv.exemplar.Y, tt.exemplar.Y)
     assert all(torch.equal(getattr(tv.scaler, k), getattr(tt.scaler, k)) for k in ("x_min", "x_max", "y_min", "y_max"))
     hv, ht = tv.tests.heldout.X, tt.tests.heldout.X

@@ -15,6 +15,7 @@ from selpres.errors import ConfigError
 from selpres.presentation.orders import priority_order, strata
 from selpres.presentation.selection import enlarge_by_loss, pattern_errors, reselected_orders, selection_charge
 from selpres.run.checks import validate
+from selpres.run.specs import task_specs
 from selpres.run.train import Clock, run_epoch, start, train
 from selpres.seeding import generator
 
@@ -25,7 +26,7 @@ N = 1002
 
 
 def _raw_X(cfg) -> torch.Tensor:
-    return load_task(cfg.robot, cfg.data).exemplar.X
+    return load_task(*task_specs(cfg)).exemplar.X
 
 
 # ------------------------------------------------------------------------------------ the pure step

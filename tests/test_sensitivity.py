@@ -18,7 +18,7 @@ from omegaconf import OmegaConf
 from selpres.run.checks import validate
 from selpres.run.problem import prepare
 from selpres.run.results import job_hash
-from selpres.storage import to_container
+from selpres.run.specs import plain as to_container
 
 from conftest import CONFIGS, cfg_of, compose, report_of, run_python
 

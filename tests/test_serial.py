@@ -29,7 +29,7 @@ PAPER = dict(m1=0.42, m2=3.0, l1=0.2, l2=0.26, g=9.81)
 
 
 def load(name: str) -> SerialArm:
-    return SerialArm.from_config(load_group("robot", name))
+    return SerialArm.from_config(OmegaConf.to_container(load_group("robot", name)))
 
 
 # ----------------------------------------------------------------------------------- independent reference

@@ -47,10 +47,11 @@ class ShapedScheduleSweeper(OptunaSweeper):
 
         from selpres.data.task import load_task
         from selpres.presentation.search import SEARCH_KEYS, confirmation_commands, schedule_overrides
+        from selpres.run.specs import task_specs
 
         super().setup(hydra_context=hydra_context, task_function=task_function, config=config)
         impl = self.sweeper
-        n = load_task(config.robot, config.data).n
+        n = load_task(*task_specs(config)).n
         sweep_order, cost = config.schedule.order.value, config.schedule.selection_cost
         configure = impl._configure_trials
 

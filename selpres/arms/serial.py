@@ -164,8 +164,9 @@ class SerialArm:
 
     @classmethod
     def from_config(cls, cfg: Any, prefix: str = "robot") -> SerialArm:
-        """Build from the YAML/dict spec in the module docstring; errors name ``prefix.key`` and the value."""
-        return spec.parse_spec(spec.plain(cfg), prefix, cls)
+        """Build from the YAML/dict spec in the module docstring (plain dicts and lists, as ``yaml.safe_load`` or
+        ``selpres.run.specs.plain`` give them); errors name ``prefix.key`` and the value."""
+        return spec.parse_spec(cfg, prefix, cls)
 
     def to_config(self) -> dict[str, Any]:
         """The URDF-style spec that ``from_config`` reads back (rotations as rpy)."""

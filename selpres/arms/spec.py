@@ -1,6 +1,7 @@
-"""The YAML/dict spec of a serial arm (``robot.kind: serial``), read with errors naming ``robot.<key>``.
+"""The YAML/dict spec of a serial arm (``robot._target_: serial``), read with errors naming ``robot.<key>``.
 
-The spec (see ``selpres.arms.serial``'s docstring) becomes plain rows: ``parse_spec`` checks every key
+The spec (see ``selpres.arms.serial``'s docstring), plain dicts and lists (``selpres.run.specs.plain`` makes them
+from a config), becomes plain rows: ``parse_spec`` checks every key
 and value and each link's physics with this config's key names, and returns what ``SerialArm`` is built
 from, so a typo is refused before any arm exists.
 """
@@ -8,7 +9,7 @@ from, so a typo is refused before any arm exists.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 from selpres.arms.kinematics import ZERO33, Link, Mat3, check_link, rpy_matrix
@@ -17,17 +18,6 @@ from selpres.errors import ConfigError
 INERTIA_KEYS = ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")
 ZERO3 = (0.0, 0.0, 0.0)
 FIELDS = ("name", "mass", "com", "inertia", "joint", "limits")
-
-
-def plain(cfg: Any) -> Any:
-    """Mappings/sequences (OmegaConf nodes included) to dicts/lists of plain Python values."""
-    if isinstance(cfg, Mapping):
-        return {str(k): plain(v) for k, v in cfg.items()}
-    if isinstance(cfg, Sequence) and not isinstance(cfg, (str, bytes)):
-        return [plain(v) for v in cfg]
-    if not isinstance(cfg, (int, float, str, bool, type(None))) and hasattr(cfg, "items"):
-        return {str(k): plain(v) for k, v in cfg.items()}
-    return cfg
 
 
 def _keys(node: Any, key: str, allowed: Sequence[str], required: Sequence[str] = ()) -> dict[str, Any]:
@@ -69,11 +59,12 @@ def parse_spec(node: Any, prefix: str, cls: type) -> Any:
     top = _keys(
         node,
         prefix,
-        ("kind", "name", "gravity", "end_point", "base", "tip", "convention", "links"),
+        ("_target_", "kind", "name", "gravity", "end_point", "base", "tip", "convention", "links"),
         ("gravity", "links"),
     )
-    if top.get("kind", "serial") != "serial":
-        raise ConfigError(f"{prefix}.kind", top["kind"], "'serial' for selpres.arms.serial.SerialArm")
+    for k in ("_target_", "kind"):  # a robot node (configs/robot/*.yaml) or an arm's description (to_config)
+        if top.get(k, "serial") != "serial":
+            raise ConfigError(f"{prefix}.{k}", top[k], "'serial' for selpres.arms.serial.SerialArm")
     convention = top.get("convention", "urdf")
     if convention not in ("urdf", "dh"):
         raise ConfigError(f"{prefix}.convention", convention, "'urdf' (joint xyz/rpy/axis) or 'dh'")

@@ -1,15 +1,13 @@
-"""The arms of a robot config: the paper's analytic two-link arm (section 4, eq. 6) and ``make_arm``.
+"""The paper's analytic two-link arm (section 4, eq. 6).
 
 Point masses sit at the distal ends of the links; θ1 is measured from the horizontal, θ2 relative to
 link 1 (hence c12 in the gravity term); gravity acts along −y. All methods take tensors shaped
 ``[..., 2]`` and compute in the inputs' dtype/device, so one call can simulate the whole
 1,050,625-candidate grid of section 5.1.
 
-``make_arm(robot_cfg)`` is the one place a robot config becomes an arm: ``kind: two_link`` (this
-closed form, which the Table 1 numbers depend on), ``serial`` (``selpres.arms.serial.SerialArm`` from links
-or DH rows) or ``urdf`` (``selpres.arms.urdf.load_urdf(robot.path)``). Every arm has ``to_config()``, its
-canonical description (a URDF's content, not its path), which data hashes use, and ``as_serial()``,
-which ``selpres-export --urdf`` writes out.
+A robot node becomes an arm through its source (``selpres.arms.sources``: ``two_link`` is this closed form, which
+the Table 1 numbers depend on). Every arm has ``to_config()``, its canonical description (a URDF's content, not
+its path), which data hashes use, and ``as_serial()``, which ``selpres-export --urdf`` writes out.
 """
 
 from __future__ import annotations
@@ -17,22 +15,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from enum import Enum
-from pathlib import Path
 from typing import Any
 
 import torch
 
 from selpres.arms.serial import SerialArm
-from selpres.errors import ConfigError
 
 ROBOT_KEYS = ("m1", "m2", "l1", "l2", "g")
-# the fields of robot config (selpres.run.config.RobotConfig) each kind reads; the others must stay unset
-KIND_KEYS = {
-    "two_link": ROBOT_KEYS,
-    "serial": ("name", "convention", "gravity", "end_point", "base", "tip", "links"),
-    "urdf": ("path", "g", "gravity", "base", "tip", "joints", "hold"),
-}
 
 
 def cfg_get(cfg: Any, key: str) -> Any:
@@ -56,7 +45,7 @@ class TwoLinkArm:
         return cls(**{k: float(cfg_get(cfg, k)) for k in ROBOT_KEYS})
 
     def to_config(self) -> dict[str, Any]:
-        """The canonical description (what ``make_arm`` reads back)."""
+        """The canonical description (what ``selpres.arms.sources.make_arm`` reads back)."""
         return {"kind": "two_link", **{k: getattr(self, k) for k in ROBOT_KEYS}}
 
     def as_serial(self) -> SerialArm:
@@ -132,68 +121,3 @@ class TwoLinkArm:
 
 
 Arm = TwoLinkArm | SerialArm
-
-
-def _plain(cfg: Any) -> dict[str, Any]:
-    """A robot config node (DictConfig or dict; enums by value) as a plain dict."""
-    if not isinstance(cfg, Mapping) and hasattr(cfg, "items"):
-        cfg = dict(cfg.items())
-    if not isinstance(cfg, Mapping):
-        raise ConfigError("robot", cfg, "a robot config (a mapping with a 'kind')")
-    try:
-        from omegaconf import DictConfig, OmegaConf
-
-        if isinstance(cfg, DictConfig):
-            return OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
-    except ImportError:  # pragma: no cover
-        pass
-    return {str(k): (v.value if isinstance(v, Enum) else v) for k, v in cfg.items()}
-
-
-def make_arm(robot_cfg: Any) -> Arm:
-    """The arm a robot config describes; raises ConfigError naming ``robot.<key>`` (a URDF's errors name
-    the file and the element). Reads nothing but ``robot.path``."""
-    c = _plain(robot_cfg)
-    kind = c.get("kind", "two_link" if all(k in c for k in ROBOT_KEYS) else None)
-    if kind not in KIND_KEYS:
-        raise ConfigError("robot.kind", kind, f"one of {list(KIND_KEYS)}")
-    used = KIND_KEYS[kind]
-    for k, v in c.items():
-        if k != "kind" and k not in used and v is not None:
-            raise ConfigError(f"robot.{k}", v, f"unset (null) for robot.kind={kind}, which reads {list(used)}")
-    if kind == "two_link":
-        for k in ROBOT_KEYS:
-            v = c.get(k)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
-                raise ConfigError(f"robot.{k}", v, "a positive number (kg, m, m/s²)")
-        return TwoLinkArm.from_config(c)
-    if kind == "serial":
-        return SerialArm.from_config({k: c[k] for k in ("kind", *used) if c.get(k) is not None}, "robot")
-    from selpres.arms.urdf import load_urdf  # the XML reader only when a URDF is asked for
-
-    path, g = c.get("path"), c.get("g")
-    if not isinstance(path, str) or not path or path == "???":
-        raise ConfigError("robot.path", path, "the URDF file to load (robot=urdf robot.path=my_arm.urdf)")
-    if g is not None and (isinstance(g, bool) or not isinstance(g, (int, float)) or not (math.isfinite(g) and g >= 0)):
-        raise ConfigError("robot.g", g, "gravity's magnitude in m/s² (>= 0), along -z of the URDF's root")
-    gravity = c.get("gravity")
-    if gravity is not None and not (
-        isinstance(gravity, (list, tuple))
-        and len(gravity) == 3
-        and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in gravity)
-    ):
-        raise ConfigError("robot.gravity", gravity, "[gx, gy, gz]: three finite numbers (m/s², the root link's frame)")
-    joints, hold = c.get("joints"), c.get("hold") or {}
-    if joints is not None and not (isinstance(joints, list) and joints and all(isinstance(j, str) for j in joints)):
-        raise ConfigError("robot.joints", joints, "a list of joint names to model (null: every revolute joint)")
-    if not isinstance(hold, Mapping):
-        raise ConfigError("robot.hold", hold, "{joint name: position (rad or m)} for held joints")
-    return load_urdf(
-        Path(path).expanduser(),
-        g=g,
-        gravity=gravity,
-        base=c.get("base"),
-        tip=c.get("tip"),
-        joints=joints,
-        hold=dict(hold),
-    )

@@ -55,12 +55,13 @@ def _load() -> str:
 
 def generation_rows(repeats: int) -> list[dict]:
     """Seconds to draw 10^6 patterns (median of ``repeats``), per arm and kind of points."""
-    from selpres.arms.two_link import make_arm
+    from selpres.arms.sources import make_arm
     from selpres.data import sampled as S
+    from selpres.run.specs import robot_spec
 
     rows = []
     for robot, draw in (("puma560", "sobol"), ("puma560", "uniform"), ("two_link", "sobol")):
-        arm = make_arm(compose_train(CONFIG_DIR, [f"robot={robot}"]).robot)
+        arm = make_arm(robot_spec(compose_train(CONFIG_DIR, [f"robot={robot}"]).robot))
         data = {
             "route": "inverse",
             "q": None,

@@ -5,9 +5,10 @@ config), and that hash itself, which also names a task in results.json.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from enum import Enum
 from pathlib import Path
 from typing import Any
@@ -15,9 +16,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from selpres.arms.two_link import cfg_get, make_arm
+from selpres.arms.sources import as_choice, make_arm
+from selpres.arms.two_link import cfg_get
 from selpres.data.file import file_digest
 from selpres.data.paper import INPUT_NAMES, TARGET_NAMES, ExemplarSet, Patterns, TestSets
+from selpres.registry import Choice
 from selpres.storage import atomic_write, stable_hash
 
 
@@ -25,20 +28,19 @@ class DataMismatchError(ValueError):
     """An exported data file was made with a different robot/data config than the one in use."""
 
 
-def _plain(cfg: Any) -> Any:
-    """Resolved plain container with ints folded into floats, so ``m2: 3`` and ``m2: 3.0`` hash alike."""
-    try:
-        from omegaconf import DictConfig, ListConfig, OmegaConf
-
-        if isinstance(cfg, (DictConfig, ListConfig)):
-            cfg = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
-    except ImportError:  # pragma: no cover
-        pass
+def _plain(cfg: Any, fold: bool = True) -> Any:
+    """A spec (``DataSpec``, a robot ``Choice``) or a mapping (a composed config's node too: any Mapping and
+    Sequence) in its canonical form for hashing: ints folded into floats (``fold``), so ``m2: 3`` and ``m2: 3.0``
+    hash alike, enums by name."""
+    if isinstance(cfg, Choice):
+        cfg = {"_target_": cfg.target, **cfg.params}
+    elif dataclasses.is_dataclass(cfg) and not isinstance(cfg, type):
+        cfg = dataclasses.asdict(cfg)
     if isinstance(cfg, Mapping):
-        return {str(k): _plain(v) for k, v in cfg.items()}
-    if isinstance(cfg, (list, tuple)):
-        return [_plain(v) for v in cfg]
-    if isinstance(cfg, (int, float)) and not isinstance(cfg, bool):
+        return {str(k): _plain(v, fold) for k, v in cfg.items()}
+    if isinstance(cfg, Sequence) and not isinstance(cfg, (str, bytes)):
+        return [_plain(v, fold) for v in cfg]
+    if fold and isinstance(cfg, (int, float)) and not isinstance(cfg, bool):
         return float(cfg)
     if isinstance(cfg, Enum):  # typed configs hold enums (e.g. scaling.mode): hash their names
         return cfg.name
@@ -71,7 +73,8 @@ def config_hash(robot_cfg: Any, data_cfg: Any) -> str:
         data["path"] = file_digest(cfg_get(data_cfg, "path"))
         robot = None
     else:
-        robot = _plain(make_arm(robot_cfg).to_config())
+        spec = robot_cfg if isinstance(robot_cfg, Choice) else as_choice(_plain(robot_cfg, fold=False))
+        robot = _plain(make_arm(spec).to_config())
     return stable_hash({"robot": robot, "data": data})
 
 

@@ -35,7 +35,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import torch
-from omegaconf import DictConfig, OmegaConf
 from torch.quasirandom import SobolEngine
 
 from selpres.arms.two_link import Arm, TwoLinkArm, cfg_get
@@ -101,9 +100,8 @@ def _box(value: Any, key: str, dof: int) -> torch.Tensor:
 
 
 def boxes(arm: Arm, data_cfg: Any) -> Boxes:
-    """The boxes of a sampled data config for ``arm``; ConfigError naming ``data.<key>``."""
-    if isinstance(data_cfg, DictConfig):
-        data_cfg = OmegaConf.to_container(data_cfg, resolve=True, enum_to_str=True)
+    """The boxes of a sampled data spec (``selpres.data.spec.DataSpec`` or a plain dict) for ``arm``; ConfigError
+    naming ``data.<key>``."""
     dof, route = arm.dof, _value(cfg_get(data_cfg, "route"))
     q = cfg_get(data_cfg, "q")
     if q is None:
@@ -140,7 +138,7 @@ def boxes(arm: Arm, data_cfg: Any) -> Boxes:
                 raise ConfigError(
                     "data.wrench",
                     list(wrench),
-                    "null for robot.kind=two_link (eq. 6 has no wrench term); a serial or urdf arm takes one",
+                    "null for robot=two_link (eq. 6 has no wrench term); a serial or urdf arm takes one",
                 )
             k = torch.tensor([float(v) for v in wrench], dtype=DTYPE)
     return Boxes(

@@ -174,9 +174,9 @@ ROBOT = "robot."  # an arm's settings: its name, kind, links, masses, ... (confi
 
 
 def arm_name(f: dict[str, str]) -> str:
-    """What an arm is called in a label: ``robot.name`` (puma560, planar3), else its URDF file, else its kind
-    (two_link, whose file sets no name)."""
-    for key in ("robot.name", "robot.path", "robot.kind"):
+    """What an arm is called in a label: ``robot.name`` (puma560, planar3), else its URDF file, else its source
+    (two_link, whose file sets no name; ``robot.kind`` in results from before issue 25)."""
+    for key in ("robot.name", "robot.path", "robot._target_", "robot.kind"):
         if (v := json.loads(f.get(key, "null"))) is not None:
             return str(v)
     return "?"

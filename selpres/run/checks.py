@@ -17,7 +17,7 @@ from omegaconf import DictConfig
 
 from selpres.data.paper import grid_points, heldout_count
 from selpres.data.sampled import MAX_N
-from selpres.data.task import DATA_KEYS, Shape, task_shape
+from selpres.data.task import Shape, route_keys, task_shape
 from selpres.engines.batch import check_batch_options
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.engines.optim import HPARAM_KEYS, checked_hparams
@@ -25,7 +25,7 @@ from selpres.errors import ConfigError
 from selpres.presentation.pruning import REGISTRY as PRUNING
 from selpres.presentation.pruning._job import check_pruning
 from selpres.run.estimate import refuse_before_task
-from selpres.storage import to_container
+from selpres.run.specs import plain, task_specs
 
 MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
 MAX_SEED = 2**64 - 1  # torch.manual_seed's largest
@@ -79,7 +79,7 @@ def optim_hparams(o: DictConfig) -> dict:
 
 def validate(cfg: DictConfig) -> tuple[int, ...]:
     """Checks that need more than a type; returns the parsed topology. Raises ConfigError."""
-    for key, value in _walk(to_container(cfg)):
+    for key, value in _walk(plain(cfg)):
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
     o = cfg.optim
@@ -167,7 +167,7 @@ def pruning_spec(s: DictConfig) -> tuple[str, dict] | None:
             f"null or a node {{_target_: <policy>, <its parameters>}}: schedule={node} sets one, or "
             f"schedule.pruning._target_={node} (policies: {PRUNING.allowed()})",
         )
-    params = to_container(node)
+    params = plain(node)
     target = params.pop("_target_", None)
     if target is None:
         raise ConfigError("schedule.pruning._target_", None, PRUNING.allowed())
@@ -186,8 +186,9 @@ def check_task(cfg: DictConfig) -> Shape:
     the shape of the task (``selpres.data.task.task_shape``: builds the arm or reads a data file's header)."""
     d = cfg.data
     kind = d.kind.value
-    reads = DATA_KEYS[kind]
-    for other in DATA_KEYS.values():
+    keys = route_keys()
+    reads = keys[kind]
+    for other in keys.values():
         for k in other:
             if k not in reads and d[k] is not None:
                 raise ConfigError(f"data.{k}", d[k], f"unset (null) for data.kind={kind}, which reads {list(reads)}")
@@ -216,7 +217,7 @@ def check_task(cfg: DictConfig) -> Shape:
             raise ConfigError("data.n", d.n, f"a whole number of patterns in [1, {MAX_N:,}]")
         if isinstance(d.heldout, int) and d.heldout > MAX_N:
             raise ConfigError("data.heldout", d.heldout, f"at most {MAX_N:,} held-out patterns")
-    return task_shape(cfg.robot, d)
+    return task_shape(*task_specs(cfg))
 
 
 def _check_grid(d: DictConfig) -> None:

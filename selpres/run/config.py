@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Any, List, Optional
+from typing import Any, Dict, List, Optional
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, OmegaConf
@@ -67,35 +67,6 @@ class ScalingMode(Enum):
     commanded = "commanded"
 
 
-class RobotKind(Enum):
-    two_link = "two_link"  # the paper's arm, closed form of eq. (6) (selpres.arms.two_link.TwoLinkArm)
-    serial = "serial"  # N revolute joints from links or DH rows in the YAML (selpres.arms.serial.SerialArm)
-    urdf = "urdf"  # one chain of a URDF tree (robot.path, base, tip, joints, hold: selpres.arms.urdf.load_urdf)
-
-
-@dataclass
-class RobotConfig:
-    """One schema for every arm: ``kind`` says which fields a robot file sets; the others stay None
-    (``selpres.arms.two_link.make_arm`` refuses a missing one, naming it)."""
-
-    kind: RobotKind = MISSING
-    m1: Optional[float] = None  # two_link: point masses (kg), link lengths (m)
-    m2: Optional[float] = None
-    l1: Optional[float] = None
-    l2: Optional[float] = None
-    g: Optional[float] = None  # two_link, urdf: gravity's magnitude (m/s²); urdf: or the vector gravity
-    name: Optional[str] = None  # serial: the spec of selpres.arms.serial (links from the base outwards)
-    convention: Optional[str] = None
-    gravity: Optional[List[float]] = None
-    end_point: Optional[List[float]] = None
-    base: Optional[str] = None
-    tip: Optional[str] = None  # serial, urdf: the link whose origin is the wrench's end point
-    links: Optional[List[Any]] = None
-    path: Optional[str] = None  # urdf: the file
-    joints: Optional[List[str]] = None  # urdf: the modelled joints (null: the chain's revolute joints)
-    hold: Optional[Any] = None  # urdf: held joints' positions {name: value} (Any: a dict a command line can set)
-
-
 @dataclass
 class GridRange:
     lo: float = MISSING
@@ -112,7 +83,7 @@ class ScalingConfig:
 
 
 class DataKind(Enum):
-    grid = "grid"  # the paper's section 5.1 (robot.kind two_link): a grid of θ, θ̇, τ kept if |θ̈| <= limit
+    grid = "grid"  # the paper's section 5.1 (robot=two_link): a grid of θ, θ̇, τ kept if |θ̈| <= limit
     sampled = "sampled"  # any arm, any n: random or low-discrepancy draws (selpres.data.sampled)
     file = "file"  # the user's own table, CSV or .npz (selpres.data.file)
 
@@ -228,7 +199,9 @@ class CheckpointConfig:
 
 @dataclass
 class TrainConfig:
-    robot: RobotConfig = field(default_factory=RobotConfig)
+    # an open node {_target_: two_link|serial|urdf|package.module.Class, <its parameters>}: the arm source's class
+    # checks its own keys (selpres.arms.sources), so a new source edits no schema
+    robot: Dict[str, Any] = field(default_factory=dict)
     data: DataConfig = field(default_factory=DataConfig)
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
     topology: TopologyConfig = field(default_factory=TopologyConfig)

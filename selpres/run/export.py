@@ -19,26 +19,27 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import torch
-from omegaconf import OmegaConf
 
-from selpres.arms.two_link import TwoLinkArm, make_arm
+from selpres.arms.sources import make_arm
+from selpres.arms.two_link import TwoLinkArm
 from selpres.arms.urdf import to_urdf
 from selpres.data import export as E
 from selpres.data.task import load_task
 from selpres.errors import ConfigError
 from selpres.run.checks import check_task
 from selpres.run.config import CONFIG_DIR, compose_train
-from selpres.storage import to_container
+from selpres.run.specs import task_specs
 
 
 def compose_data_config(overrides: list[str]):
-    """(robot, data) of train.py's config with ``robot``/``data`` overrides, checked (not the topology)."""
+    """(robot, data) specs of train.py's config with ``robot``/``data`` overrides, checked (not the topology)."""
     cfg = compose_train(CONFIG_DIR, overrides)
     check_task(cfg)
-    return OmegaConf.create(to_container(cfg.robot)), OmegaConf.create(to_container(cfg.data))
+    return task_specs(cfg)
 
 
 def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> dict[str, Path]:
@@ -61,7 +62,7 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
         print(f"  exemplar {name}: {ex.Y[:, k].min():.3f} .. {ex.Y[:, k].max():.3f}")
     for mode in ("exemplar", "commanded"):
         try:
-            s = task.fit_scaler(OmegaConf.merge(data_cfg, {"scaling": {"mode": mode}}))
+            s = task.fit_scaler(replace(data_cfg, scaling={**data_cfg.scaling, "mode": mode}))
         except ConfigError as e:
             print(f"  scaling.mode={mode:9s} not available: {e.allowed}")
             continue
@@ -96,10 +97,10 @@ def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> di
 
 
 def default_stem(robot_cfg, data_cfg) -> Path:
-    """outputs/data/<robot>_<data>: the arm (a URDF by its file's name, else its name or kind) and the data's
-    kind, so exports of different tasks do not land on one name and no name repeats itself
-    (``exemplar_exemplar.csv``)."""
-    robot = Path(robot_cfg.path).stem if robot_cfg.get("path") else (robot_cfg.get("name") or str(robot_cfg.kind))
+    """outputs/data/<robot>_<data>: the arm (a file's name, else its name or source) and the data's kind, so
+    exports of different tasks do not land on one name and no name repeats itself (``exemplar_exemplar.csv``)."""
+    p = robot_cfg.params
+    robot = Path(p["path"]).stem if isinstance(p.get("path"), str) else (p.get("name") or robot_cfg.target)
     return Path("outputs/data") / f"{robot}_{E.data_kind(data_cfg)}"
 
 

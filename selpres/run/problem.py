@@ -30,8 +30,8 @@ from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
 from selpres.presentation.selection import StageSelection, initial_kind, planned_charge, stage_selection
 from selpres.run.checks import batch_mode, minibatch_reason, optim_hparams, pruning_spec, validate
 from selpres.run.estimate import refuse_job
+from selpres.run.specs import plain, task_specs
 from selpres.seeding import derive_seed, generator
-from selpres.storage import to_container
 
 log = logging.getLogger("selpres")
 
@@ -82,7 +82,7 @@ class Problem:
 def prepare(cfg: DictConfig) -> Problem:
     """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
     sizes = validate(cfg)
-    task = load_task(cfg.robot, cfg.data)
+    task = load_task(*task_specs(cfg))
     schedule, note = task_schedule(cfg, task)
     # scored in torch: batch methods, the mini-batch engine (what the native kernel cannot run), torch/reference
     torch_eval = (
@@ -128,7 +128,7 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
     """The schedule on the task's n: the paper's counts by their proportions when n is not 1002
     (``selpres.presentation.proportions``, logged), refusals with the fraction form, and a data file too short for
     the schedule named as such."""
-    sch = to_container(cfg.schedule)
+    sch = plain(cfg.schedule)
     sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
     if note:
         log.info(note)

@@ -16,10 +16,12 @@ import torch
 from omegaconf import DictConfig
 
 from selpres.data.file import file_digest
+from selpres.data.task import task_files
 from selpres.presentation.sampler import shuffle_implementation
 from selpres.run import floor
+from selpres.run.specs import plain, task_specs
 from selpres.run.stats import summarize
-from selpres.storage import stable_hash, to_container
+from selpres.storage import stable_hash
 
 NOT_IDENTITY = ("logging", "overwrite", "threads", "checkpoint", "name")
 SETS = ("test10", "heldout")
@@ -28,13 +30,12 @@ UNITS = ("nm", "scaled", "nmse")  # nmse: MSE ÷ the set's target variance (selp
 
 def job_hash(cfg: DictConfig) -> str:
     """Identity of a job's numbers: everything but the knobs that cannot change them, and the contents of the
-    files it reads (``robot.path``, ``data.path``), so an edited URDF or CSV is not taken for the finished job."""
-    c = to_container(cfg)
+    files its task reads (``selpres.data.task.task_files``: what the arm's source reads, a data file), so an edited
+    URDF or CSV is not taken for the finished job."""
+    c = plain(cfg)
     for k in NOT_IDENTITY:
         c.pop(k, None)
-    files = [c[g].get("path") for g in ("robot", "data")]
-    paths = [Path(p).expanduser() if isinstance(p, str) else None for p in files]  # as the readers open them
-    c["file_sha256"] = [file_digest(p) if p is not None and p.is_file() else None for p in paths]
+    c["file_sha256"] = [file_digest(p) if p.is_file() else None for p in task_files(*task_specs(cfg))]
     return stable_hash(c)
 
 
@@ -145,7 +146,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         ),
         "replica_results": reps,
         "curves": progress.history,
-        "config": to_container(cfg),
+        "config": plain(cfg),
     }
 
 

@@ -65,7 +65,7 @@ DESIGN = Design.load()
 
 def arm_of(cfg: dict, design: Design = DESIGN) -> str:
     r = cfg["robot"]
-    key = r.get("name") or (r.get("path") and Path(r["path"]).stem) or r.get("kind")
+    key = r.get("name") or (r.get("path") and Path(r["path"]).stem) or r.get("_target_") or r.get("kind")
     return design.arms.get(str(key), str(key))
 
 
@@ -89,11 +89,10 @@ def regime_of(cfg: dict, design: Design = DESIGN) -> str:
 def _heldout_variance(robot_json: str, data_json: str) -> tuple[float, ...]:
     import json
 
-    from omegaconf import OmegaConf
-
     from selpres.data.task import load_task
+    from selpres.run.specs import data_spec, robot_spec
 
-    task = load_task(OmegaConf.create(json.loads(robot_json)), OmegaConf.create(json.loads(data_json)))
+    task = load_task(robot_spec(json.loads(robot_json)), data_spec(json.loads(data_json)))
     return tuple(task.tests.heldout.Y.var(0, unbiased=False).tolist())
 
 
