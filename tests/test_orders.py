@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from selpres.presentation import orders as O
+from selpres.presentation.orders import coverage as O
 from selpres.presentation.orders import priority_order, priority_orders
 from selpres.presentation.orders.coverage import coverage_order, coverage_orders
 from selpres.seeding import generator
