@@ -188,7 +188,6 @@ def _compose_error(compose_cfg, *ov) -> str:
         ("topology=6-99-2", "topology"),  # unknown group option
         ("schedule=zigzag", "schedule"),
         ("engine=turbo", "engine"),  # bad enum values
-        ("schedule.order=zigzag", "schedule.order"),
         ("data.scaling.mode=auto", "data.scaling.mode"),
     ],
 )
@@ -239,6 +238,7 @@ def _config_error(compose_cfg, *ov) -> ConfigError:
         (["data.test_from_exemplar=11"], "data.test_from_exemplar", "11"),
         (["data.scaling.lo=0.9", "data.scaling.hi=0.1"], "data.scaling", "0.9"),
         (["schedule.strata_bins=0"], "schedule.strata_bins", "0"),
+        (["schedule.order=zigzag"], "schedule.order", "zigzag"),  # an order is a registry name or import path
         (["eval.every=-1"], "eval.every", "-1"),
         (["schedule.sizes=[100,50,1002]"], "schedule.sizes", "[100, 50, 1002]"),
         (["schedule.sizes=[50,100,400,800,900]"], "schedule.sizes", "900"),

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 import torch
 
-from selpres.presentation import orders as O
-from selpres.presentation.orders import coverage_order, coverage_orders, priority_order, priority_orders
+from selpres.presentation.orders import coverage as O
+from selpres.presentation.orders import priority_order, priority_orders
+from selpres.presentation.orders.coverage import coverage_order, coverage_orders
 from selpres.seeding import generator
 
 PAPER_SIZES = (50, 100, 400, 800)

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from selpres.presentation import partition as P
-from selpres.presentation.orders import stratified_orders
+from selpres.presentation.orders.stratified import stratified_orders
 from selpres.presentation.partition import grid_strata
 
 N, DIM = 8192, 18  # a 6-joint arm's inputs

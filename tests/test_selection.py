@@ -12,8 +12,11 @@ import torch
 from selpres.data.task import load_task
 from selpres.engines.model import BPN, load_into
 from selpres.errors import ConfigError
-from selpres.presentation.orders import priority_order, strata
-from selpres.presentation.selection import enlarge_by_loss, pattern_errors, reselected_orders, selection_charge
+from selpres.presentation.orders import priority_order, selection_charge
+from selpres.presentation.orders._loss import enlarge_by_loss
+from selpres.presentation.orders.reselect import reselected_orders
+from selpres.presentation.partition import strata
+from selpres.presentation.selection import pattern_errors
 from selpres.run.checks import validate
 from selpres.run.specs import task_specs
 from selpres.run.train import Clock, run_epoch, start, train

@@ -14,7 +14,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.core.override_parser.types import Glob
 from omegaconf import OmegaConf
 
-from selpres.presentation.selection import planned_charge
+from selpres.presentation.orders import planned_charge
 from selpres.run.checks import validate
 from selpres.run.problem import prepare
 from selpres.storage import flatten
@@ -105,7 +105,7 @@ def test_each_point_validates_and_costs_what_its_file_says(point):
     validate(cfg)
     prob = prepare(cfg)  # the checks against the exemplar set, the orders, the stage-wise selection
     sch = prob.schedule
-    order = cfg.schedule.order.value
+    order = cfg.schedule.order
     cost = sch.presentations + planned_charge(order, sch.sizes, cfg.schedule.selection_cost)
     assert cost == stated_cost(point) == expected_cost(point)
     assert (cfg.seed, cfg.replicas, prob.seeds) == (0, 30, list(range(30)))
@@ -148,7 +148,7 @@ def test_on_the_larger_task_every_staged_run_has_its_partner_closest_and_within_
         sch = composed(point).schedule
         sizes, budget, _ = fit_schedule(list(sch.sizes), sch.budget, n)
         built = build_schedule(sizes, None if sch.epochs is None else list(sch.epochs), n, budget)
-        totals[point] = built.presentations + planned_charge(sch.order.value, built.sizes, sch.selection_cost)
+        totals[point] = built.presentations + planned_charge(sch.order, built.sizes, sch.selection_cost)
     assert totals["b25_loss_high"] == 384_411 and totals["b25_matched_charged"] == 384_431
     one_stage = [p for p in POINTS if len(composed(p).schedule.sizes) == 1]
     for p in POINTS:

@@ -66,13 +66,13 @@ def bench_shuffles(quick: bool) -> None:
 def bench_orders(quick: bool) -> None:
     """Selection cost of each priority order (random 6-D inputs): one order at n = 1002 and 1e5, and the
     1000 orders of an R = 1000 job at n = 1002 computed together (``priority_orders``)."""
-    from selpres.presentation.orders import ORDERS, priority_order, priority_orders
+    from selpres.presentation.orders import fixed_orders, priority_order, priority_orders
     from selpres.seeding import generator
 
     print("\npriority orders: the selection cost, paid once per replica and job")
     for n in (N, 100_000):
         X, _ = data(n, seed=3)
-        for kind in ORDERS:
+        for kind in fixed_orders():
             reps = 3 if n == N else 1
             sec = median_seconds(lambda: priority_order(X, kind, generator(0, "subset"), 2), reps)
             print(f"order       {kind:<11} n={n:<7} one order {sec * 1e3:10.2f} ms  (median of {reps})", flush=True)
@@ -109,8 +109,11 @@ def bench_selection(quick: bool, configs: Path) -> bool:
     the trained ones. Returns False if a job failed."""
     from selpres.engines.model import init_replica_params
     from selpres.engines.online import make_engine
-    from selpres.presentation.orders import priority_orders, strata
-    from selpres.presentation.selection import enlarge_by_loss, errors_of, one_thread, reselected_orders
+    from selpres.presentation.orders import priority_orders
+    from selpres.presentation.orders._loss import enlarge_by_loss
+    from selpres.presentation.orders.reselect import reselected_orders
+    from selpres.presentation.partition import strata
+    from selpres.presentation.selection import errors_of, one_thread
     from selpres.seeding import generator
 
     print(

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from selpres.errors import ConfigError
-from selpres.presentation.orders import ORDERS, priority_order
+from selpres.presentation.orders import fixed_orders, priority_order
 from selpres.presentation.proportions import NAMED, fit_schedule
 from selpres.presentation.schedule import Schedule, build_schedule
 from selpres.seeding import generator
@@ -129,10 +129,10 @@ def order_of(order, X, n: int, seed: int, strata_bins: int) -> tuple[torch.Tenso
     """(the priority order of U's n indices, its name): the CLI's order of seed ``seed`` (replica 0 of a job with
     that seed), or the caller's own permutation."""
     if isinstance(order, str):
-        if order not in ORDERS:
+        if order not in fixed_orders():  # the stage-wise orders choose A_k in the CLI's loop, with the network
             raise ValueError(
-                f"order={order!r}: expected one of {', '.join(ORDERS)}, or a permutation of range(n); the loss orders"
-                " (loss_high, loss_low) and reselect choose with the network, in the CLI's loop (python train.py)"
+                f"order={order!r}: expected one of {', '.join(fixed_orders())}, or a permutation of range(n); the "
+                "other orders choose with the network, in the CLI's loop (python train.py schedule.order=...)"
             )
         if order != "random" and X is None:
             raise TypeError(f"order={order!r} needs the inputs X (it groups or spreads patterns by them)")
@@ -141,7 +141,7 @@ def order_of(order, X, n: int, seed: int, strata_bins: int) -> tuple[torch.Tenso
     try:
         perm = torch.as_tensor(np.asarray(order) if not isinstance(order, torch.Tensor) else order)
     except (TypeError, ValueError, RuntimeError):
-        raise TypeError(f"order: expected a name ({', '.join(ORDERS)}) or a permutation of range(n)") from None
+        raise TypeError(f"order: expected a name ({', '.join(fixed_orders())}) or a permutation of range(n)") from None
     if perm.dtype.is_floating_point or perm.dtype == torch.bool or perm.dim() != 1:
         raise TypeError(f"order: expected a 1-D integer permutation of range(n), got {perm.dtype} {list(perm.shape)}")
     perm = perm.to(torch.int64)

@@ -12,7 +12,7 @@ valid schedule instead:
   presentations per stage, > 0: more on the larger sets), so N_i = round(share_i T / n_i), at least 1, and
   the last stage takes what is left of T.
 
-T is the budget less the cost of choosing (``selpres.presentation.selection``): a loss-based order charges its
+T is the budget less the cost of choosing (``selpres.presentation.orders``): a loss-based order charges its
 forward passes at each enlargement, so every order spends the same total. The total lands within n/2
 presentations of the budget (the last stage's rounding), or above it where every stage's minimum of one
 epoch already exceeds it; results.json records the exact count either way.
@@ -23,8 +23,8 @@ from __future__ import annotations
 import math
 
 from selpres.errors import ConfigError
+from selpres.presentation.orders import planned_charge
 from selpres.presentation.schedule import build_schedule
-from selpres.presentation.selection import planned_charge
 
 SEARCH_KEYS = ("search_p", "search_first", "search_growth", "search_tilt", "search_budget")
 

@@ -1,18 +1,8 @@
-"""Orders chosen stage by stage: adaptive loss orders and re-drawn subsets, with the cost of choosing counted.
+"""The job's stage-wise selection: at the start of stage k a stage-wise order (``selpres.presentation.orders``,
+``StagewiseOrder``) chooses A_k, each replica's sampler gets the new order, and the cost of choosing is counted.
 
-The priority orders of :mod:`selpres.presentation.orders` are fixed before training. The orders here choose A_k at the
-start of stage k (its first epoch), so each replica's sampler gets a new order there:
-
-* ``loss_high`` / ``loss_low``: adaptive and nested. A_1 is the seed's *stratified* sample (there is no
-  network to ask yet); at each enlargement A_k = A_{k-1} plus the n_k - n_{k-1} patterns of U \\ A_{k-1} on
-  which the replica's *current* network errs most (hard first) or least (easy first): per-pattern squared
-  error summed over the outputs, in scaled units. Ties go to the earlier pattern of the seed's stratified
-  order: the candidates are kept in that order, and the chosen ones join A_k in it too. All replicas are
-  scored together by one forward pass over U (``engine.predict``), and the chosen patterns are found by a
-  partition, not a sort (at R = 1000: ~13 ms against ~60-80 ms for a stable sort).
-* ``reselect``: not nested. Stage k's A_k is a fresh stratified draw of size n_k (stage 1's is the
-  ``stratified`` order's A_1; stage k > 1 draws from the seed's stream ``(seed, "subset", k)``), so
-  consecutive subsets overlap only by chance, about n_{k-1} n_k / n patterns; the last stage is U.
+The network's scores every order (and pruning policy) may ask for are here too: one forward pass of all replicas
+over U (``errors_of``), on one thread (``one_thread``).
 
 The cost of choosing (``schedule.selection_cost``, default 1/3): scoring a candidate is one forward pass,
 charged as that fraction of a training presentation (per enlargement, rounded up to whole presentations).
@@ -33,19 +23,18 @@ phase "select". Stratified draws (A_1, ``reselect``) need no network and are cha
 from __future__ import annotations
 
 import functools
-import math
 from contextlib import contextmanager
+from typing import TYPE_CHECKING
 
-import numpy as np
 import torch
 
-from selpres.presentation.orders import strata, stratified_orders
-from selpres.presentation.sampler import SelectivePresentation
+from selpres.presentation.orders._order import selection_charge
+from selpres.presentation.partition import strata
 from selpres.presentation.schedule import EpochPlan, Schedule
-from selpres.seeding import generator
 
-LOSS_ORDERS = {"loss_high": True, "loss_low": False}  # order -> hard first?
-STAGEWISE = (*LOSS_ORDERS, "reselect")  # the orders whose A_k is chosen at the start of stage k
+if TYPE_CHECKING:
+    from selpres.presentation.orders import StagewiseOrder
+    from selpres.presentation.sampler import SelectivePresentation
 
 
 @contextmanager
@@ -62,60 +51,10 @@ def one_thread():
         torch.set_num_threads(threads)
 
 
-def initial_kind(kind: str) -> str:
-    """The priority order a job starts from: the stage-wise orders begin with the stratified A_1."""
-    return "stratified" if kind in STAGEWISE else kind
-
-
 def pattern_errors(outputs: torch.Tensor, Y: torch.Tensor) -> torch.Tensor:
     """Squared error of every replica on every pattern, summed over outputs: [R, n, out], [n, out] -> [R, n].
     A diverged replica's NaN counts as +inf, so its choice stays deterministic."""
     return torch.nan_to_num((outputs - Y).square().sum(-1), nan=float("inf"))
-
-
-def enlarge_by_loss(orders: torch.Tensor, errors: torch.Tensor, kept: int, added: int, hard: bool) -> torch.Tensor:
-    """New orders [R, n]: each row's first ``kept`` patterns (A_{k-1}) stay; of the candidates after them,
-    the ``added`` with the largest (``hard``) or smallest ``errors`` [R, n] come next and the others after,
-    both in the order the candidates were in (so equal errors go to the earlier candidate).
-
-    Exactly the first ``added`` of a stable sort by error, found by a partition: v = the added-th value, then
-    every candidate beyond v and the first of those equal to v."""
-    tail = orders[:, kept:]
-    e = errors.gather(1, tail).numpy()
-    R, c = e.shape
-    at = c - added if hard else added - 1  # v's position in each row sorted ascending
-    v = np.partition(e, at, axis=1)[:, at, None]
-    beyond = e > v if hard else e < v
-    tied = e == v
-    need = added - beyond.sum(1, keepdims=True)
-    chosen = beyond | (tied & (np.cumsum(tied, 1) <= need))
-    t = tail.numpy()  # numpy's boolean indexing: ~4x torch's here
-    rows = (orders[:, :kept].numpy(), t[chosen].reshape(R, added), t[~chosen].reshape(R, c - added))
-    return torch.from_numpy(np.concatenate(rows, axis=1))
-
-
-def reselected_orders(sid: torch.Tensor, seeds: list[int], stage: int) -> torch.Tensor:
-    """Stage ``stage``'s fresh stratified orders [R, n] of U's strata ``sid`` (``orders.strata``, computed
-    once per job; stage 0: the ``stratified`` order's own draw)."""
-    gens = [generator(s, "subset") if stage == 0 else generator(s, "subset", stage) for s in seeds]
-    return stratified_orders(sid, gens)
-
-
-def selection_charge(candidates: int, fraction: float) -> int:
-    """Presentations charged per replica for scoring ``candidates`` patterns by a forward pass: candidates x
-    fraction, rounded up to a whole presentation (presentations are counts; never under-charged), after
-    rounding off float noise (952 x 1/3 -> 318, 900 x 1/3 -> 300)."""
-    return math.ceil(round(candidates * fraction, 9))
-
-
-def planned_charge(kind: str, sizes: list[int], fraction: float) -> int:
-    """Presentations a schedule of stage ``sizes`` (counts, the last = n) will be charged per replica for
-    choosing in order ``kind``: at each enlargement the loss orders score the n - n_k candidates outside
-    A_k; the other orders choose without a network and pay nothing. Known before training, so a run's
-    total cost (training + this) can be matched by a one-stage partner (configs/design/selection/)."""
-    if kind not in LOSS_ORDERS:
-        return 0
-    return sum(selection_charge(sizes[-1] - kept, fraction) for kept in sizes[:-1])
 
 
 def errors_of(engine, X: torch.Tensor, Y: torch.Tensor) -> torch.Tensor:
@@ -134,19 +73,18 @@ class StageSelection:
 
     def __init__(
         self,
-        kind: str,
+        order: StagewiseOrder,
         schedule: Schedule,
         seeds: list[int],
         X_raw: torch.Tensor,
-        bins: int,
         X: torch.Tensor,
         Y: torch.Tensor,
         cost_fraction: float,
         samplers: list[SelectivePresentation],
     ):
-        if kind not in STAGEWISE:
-            raise ValueError(f"order {kind!r} is fixed before training; stage-wise orders: {STAGEWISE}")
-        self.kind, self.schedule, self.seeds, self.X_raw, self.bins = kind, schedule, seeds, X_raw, bins
+        if not order.stagewise:
+            raise ValueError(f"order {type(order).__name__} is fixed before training: there is nothing to choose")
+        self.order, self.schedule, self.seeds, self.X_raw = order, schedule, seeds, X_raw
         self.X, self.Y, self.cost_fraction = X, Y, float(cost_fraction)
         self.samplers = samplers
         plan = schedule.plan()
@@ -156,7 +94,7 @@ class StageSelection:
     @functools.cached_property
     def strata(self) -> torch.Tensor:
         """U's strata, once per job (k-means for many inputs: seconds at n = 1e5), for reselect's draws."""
-        return strata(self.X_raw, self.bins)
+        return strata(self.X_raw, self.order.strata_bins)
 
     def begin_epoch(self, ep: EpochPlan, engine, progress) -> int:
         """Before epoch ``ep``: the samplers present ``progress.orders`` (restored after a resume); at a
@@ -177,19 +115,15 @@ class StageSelection:
 
     def _choose(self, stage: int, engine, progress) -> int:
         """Stage ``stage``'s orders into ``progress.orders``; returns the charge per replica."""
-        if self.kind == "reselect":
-            progress.orders = reselected_orders(self.strata, self.seeds, stage)
-            return 0  # a stratified draw needs no network
         current = progress.orders
         if current is None:  # the first choice: from the prepared (stratified) orders
             current = torch.stack([s.order for s in self.samplers])
-        kept, size = self.schedule.stages[stage - 1].size, self.schedule.stages[stage].size
-        errors = errors_of(engine, self.X, self.Y)
-        progress.orders = enlarge_by_loss(current, errors, kept, size - kept, LOSS_ORDERS[self.kind])
-        return selection_charge(self.schedule.n - kept, self.cost_fraction)
+        progress.orders = self.order.choose(self, stage, current, engine)
+        kept = self.schedule.stages[stage - 1].size
+        return selection_charge(self.order.candidates(kept, self.schedule.n), self.cost_fraction)
 
 
-def stage_selection(kind: str, *args) -> StageSelection | None:
-    """The job's stage-wise selection (``StageSelection(kind, *args)``), or None for an order fixed before
+def stage_selection(order, *args) -> StageSelection | None:
+    """The job's stage-wise selection (``StageSelection(order, *args)``), or None for an order fixed before
     training (nothing to choose or charge)."""
-    return StageSelection(kind, *args) if kind in STAGEWISE else None
+    return StageSelection(order, *args) if order.stagewise else None

@@ -22,6 +22,7 @@ from selpres.engines.batch import check_batch_options
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.engines.optim import HPARAM_KEYS, checked_hparams
 from selpres.errors import ConfigError
+from selpres.presentation.orders import make_order
 from selpres.presentation.pruning import REGISTRY as PRUNING
 from selpres.presentation.pruning._job import check_pruning
 from selpres.run.estimate import refuse_before_task
@@ -100,6 +101,7 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         )
     if batch_mode(o) and o.lr_schedule.value != "constant":
         raise ConfigError("optim.lr_schedule", o.lr_schedule.value, "constant in batch mode (optim.batch_size=0)")
+    make_order(cfg.schedule.order)  # a built-in or an importable Order: ConfigError naming schedule.order
     pruning = pruning_spec(cfg.schedule)
     if pruning is not None:
         s = cfg.schedule
@@ -107,7 +109,7 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
         check_pruning(
             *pruning,
             sizes=list(s.sizes),
-            order=s.order.value,
+            order=s.order,
             budget=s.budget,
             epochs=epochs,
             selection_cost=s.selection_cost,

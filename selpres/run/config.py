@@ -53,15 +53,6 @@ class Reduction(Enum):
     mean = "mean"  # mse_loss over the epoch, the online engines' per-pattern loss
 
 
-class Order(Enum):
-    stratified = "stratified"  # the paper's uniform sampling: every prefix a proportional stratified sample
-    random = "random"  # random growth (Wu, Dyer & Neyshabur 2021)
-    coverage = "coverage"  # greedy farthest-point: every prefix a near-minimal-radius cover of U
-    loss_high = "loss_high"  # adaptive: each enlargement adds the patterns the current network errs most on
-    loss_low = "loss_low"  # adaptive: ... errs least on (easy first)
-    reselect = "reselect"  # each stage a fresh stratified draw of its size (not nested)
-
-
 class ScalingMode(Enum):
     exemplar = "exemplar"
     commanded = "commanded"
@@ -134,7 +125,7 @@ class ScheduleConfig:
     sizes: List[Any] = MISSING
     epochs: Optional[List[int]] = None
     budget: Optional[int] = None  # total presentations for a one-stage, compute-matched schedule
-    order: Order = MISSING
+    order: str = MISSING  # an order of selpres.presentation.orders (its registry) or an import path, checked there
     strata_bins: int = MISSING
     selection_cost: float = MISSING  # presentations charged per candidate scored (selpres.presentation.selection)
     # data pruning every epoch, null: none; else an open node {_target_: a policy of selpres.presentation.pruning

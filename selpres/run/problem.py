@@ -22,12 +22,12 @@ from selpres.engines.native_minibatch import make_minibatch_engine
 from selpres.engines.online import make_engine
 from selpres.engines.optim import checked_hparams
 from selpres.errors import ConfigError
-from selpres.presentation.orders import priority_orders
+from selpres.presentation.orders import make_order
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
 from selpres.presentation.pruning._job import Pruning, pruning_plan
 from selpres.presentation.sampler import SelectivePresentation
 from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
-from selpres.presentation.selection import StageSelection, initial_kind, planned_charge, stage_selection
+from selpres.presentation.selection import StageSelection, stage_selection
 from selpres.run.checks import batch_mode, minibatch_reason, optim_hparams, pruning_spec, validate
 from selpres.run.estimate import refuse_job
 from selpres.run.specs import plain, task_specs
@@ -49,7 +49,7 @@ class Problem:
     tests: dict  # name -> (X scaled, Y in Nm)
     samplers: list[SelectivePresentation]
     init_params: list[torch.Tensor]
-    selection: StageSelection | None = None  # loss_high/loss_low/reselect: A_k chosen at each stage start
+    selection: StageSelection | None = None  # a stage-wise order (loss_high, reselect, ...): A_k chosen per stage
     task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
     schedule_note: str | None = None  # how a named schedule's counts were applied to this n (None: as given)
     pruning: Pruning | None = None  # a pruning policy (schedule.pruning): each epoch's patterns chosen by loss
@@ -92,12 +92,11 @@ def prepare(cfg: DictConfig) -> Problem:
     refuse_job(cfg, sizes, schedule, task.n, largest_test, torch_eval)  # before any replica's state is made
     seed = int(cfg.seed)  # read once: an OmegaConf access costs ~20 us, 1000 of them 23 ms at R = 1000
     seeds = [seed + r for r in range(cfg.replicas)]
-    kind, bins = cfg.schedule.order.value, cfg.schedule.strata_bins
-    gens = [generator(s, "subset") for s in seeds]
-    orders = priority_orders(task.exemplar.X, initial_kind(kind), gens, bins)
+    order = make_order(cfg.schedule.order, cfg.schedule.strata_bins)
+    orders = order.orders(task.exemplar.X, [generator(s, "subset") for s in seeds])
     samplers = [SelectivePresentation(order=order, schedule=schedule, seed=s) for order, s in zip(orders, seeds)]
     X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
-    pruning, budget = None, schedule.presentations + planned_charge(kind, schedule.sizes, cfg.schedule.selection_cost)
+    pruning, budget = None, schedule.presentations + order.planned_charge(schedule.sizes, cfg.schedule.selection_cost)
     spec = pruning_spec(cfg.schedule)
     if spec is not None:
         fitted = fit_schedule(cfg.schedule.sizes, cfg.schedule.budget, task.n)[1]
@@ -114,9 +113,7 @@ def prepare(cfg: DictConfig) -> Problem:
         tests=task.scaled_tests(),
         samplers=samplers,
         init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
-        selection=stage_selection(
-            kind, schedule, seeds, task.exemplar.X, bins, X, Y, cfg.schedule.selection_cost, samplers
-        ),
+        selection=stage_selection(order, schedule, seeds, task.exemplar.X, X, Y, cfg.schedule.selection_cost, samplers),
         task=task,
         schedule_note=note,
         pruning=pruning,

@@ -17,6 +17,7 @@ from omegaconf import DictConfig
 
 from selpres.data.file import file_digest
 from selpres.data.task import task_files
+from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.sampler import shuffle_implementation
 from selpres.run import floor
 from selpres.run.specs import plain, task_specs
@@ -104,7 +105,8 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
     task_floor = floor.task_floor(train_Y, prob.tests)
     stats = summary(reps)
     pruning = prob.pruning.describe() if getattr(prob, "pruning", None) is not None else None
-    schedule = {"name": cfg.schedule.name, "order": cfg.schedule.order.value, **prob.schedule.describe()}
+    order = {"order": cfg.schedule.order, "order_class": ORDERS.path_of(cfg.schedule.order)}  # the class that ran
+    schedule = {"name": cfg.schedule.name, **order, **prob.schedule.describe()}
     if pruning is not None:  # what ran, not the plan's upper bound: mean over replicas (each in pruning)
         training = sum(pruning["trained_presentations"]) / R
         schedule.update(presentations=training, epochs=[max(pruning["epochs"])], planned_epochs=schedule["epochs"])

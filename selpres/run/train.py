@@ -315,7 +315,7 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
         "batch_size": cfg.optim.batch_size,
         "sizes": str(prob.schedule.sizes),
         "epochs": str(prob.schedule.epochs),
-        "order": cfg.schedule.order.value,
+        "order": cfg.schedule.order,
         "engine": results["engine"],
         "engine_requested": results["engine_requested"],
     }

@@ -1,28 +1,15 @@
-"""Priority orders: how the nested training sets A1 ⊂ A2 ⊂ … ⊂ U grow (each A_i is a prefix of one order).
+"""``coverage``: greedy farthest-point order (Gonzalez, "Clustering to minimize the maximum intercluster
+distance", Theoretical Computer Science 38:293-306, 1985): each next pattern is the one farthest from those already
+chosen, so every prefix of k patterns covers U within a radius at most twice the best k-point cover's. It needs no
+network. Exact up to ``COVERAGE_EXACT_MAX`` patterns; above that the *two-level* approximation of
+``coverage_orders``.
 
-* ``stratified`` (the paper): the paper chooses each A_i "by a uniform sampling of the entire training
-  space"; here that is exact for every prefix: U is cut into strata (``selpres.presentation.partition.strata``: ``bins``
-  equal-width bins per input, or k-means cells where that grid would have more than 4,096 cells), and
-  each stratum appears in every prefix in proportion to its share of U, within about one
-  pattern (proportional stratified sampling, realised by sorting on the key
-  (rank-within-stratum + U(0,1)) / stratum size).
-* ``random``: plain random growth, the literature's strongest simple baseline (Wu, Dyer & Neyshabur,
-  ICLR 2021).
-* ``coverage``: greedy farthest-point order (Gonzalez, "Clustering to minimize the maximum intercluster
-  distance", Theoretical Computer Science 38:293-306, 1985): each next pattern is the one farthest from
-  those already chosen, so every prefix of k patterns covers U within a radius at most twice the best
-  k-point cover's. It needs no network. Exact up to ``COVERAGE_EXACT_MAX`` patterns; above that the
-  *two-level* approximation of ``coverage_order``.
-
-Orders chosen during training (by the network's error, or redrawn per stage) are in ``selpres.presentation.selection``.
-
-Every order is a deterministic function of (U, the generator's seed). Distances for ``coverage`` are
-Euclidean in U's unit cube (each input column mapped onto [0, 1] by U's own range, as for the strata):
-with the default ``exemplar`` scaling that is the network's scaled input space up to one common factor,
-which leaves a farthest-point order unchanged. Raw and scaled inputs thus define the same order up to
-rounding, but on the paper's grid many distances tie exactly, and rounding can break such ties
-differently (measured: the orders differ from the 10th pattern on), so one config should always pass
-the same X (``selpres.run.problem.prepare`` passes the raw exemplar inputs).
+Distances are Euclidean in U's unit cube (each input column mapped onto [0, 1] by U's own range, as for the strata):
+with the default ``exemplar`` scaling that is the network's scaled input space up to one common factor, which
+leaves a farthest-point order unchanged. Raw and scaled inputs thus define the same order up to rounding, but on
+the paper's grid many distances tie exactly, and rounding can break such ties differently (measured: the orders
+differ from the 10th pattern on), so one config should always pass the same X (``selpres.run.problem.prepare``
+passes the raw exemplar inputs).
 """
 
 from __future__ import annotations
@@ -32,55 +19,14 @@ import math
 import numpy as np
 import torch
 
-from selpres.errors import ConfigError
-from selpres.presentation.partition import strata, unit_cube
+from selpres.presentation.orders._order import Order
+from selpres.presentation.partition import unit_cube
 
-ORDERS = ("stratified", "random", "coverage")
 COVERAGE_EXACT_MAX = 20_000  # exact greedy up to here: O(n^2) time (~a few s at 2e4), O(n) memory
 LEVEL1_WORK = 10**8  # two-level approximation: first-level centres K = max(sqrt(n), LEVEL1_WORK / n)
 _MATRIX_MAX = 2048  # up to here the exact greedy looks distances up in the n x n matrix (<= 32 MB)
 _BATCH = 2**20  # replicas ordered together: about this many distances per step ([replicas, n] float64)
 _CHUNK = 2**16  # second level: cells run in lockstep, about this many padded points per chunk
-
-
-def priority_order(X: torch.Tensor, kind: str, gen: torch.Generator, bins: int = 2) -> torch.Tensor:
-    """A permutation of U's indices (X: [n, inputs]) whose prefixes are the nested training sets."""
-    return priority_orders(X, kind, [gen], bins)[0]
-
-
-def priority_orders(X: torch.Tensor, kind: str, gens: list[torch.Generator], bins: int = 2) -> list[torch.Tensor]:
-    """One priority order per generator (one per replica), computed together where that is cheaper
-    (coverage); each equals ``priority_order`` with that generator alone."""
-    if kind == "random":
-        return [torch.randperm(X.shape[0], generator=g) for g in gens]
-    if kind == "stratified":
-        if bins < 1:
-            raise ConfigError("schedule.strata_bins", bins, "a whole number >= 1")
-        sid = strata(X, bins)  # the same for every replica: computed once
-        return list(stratified_orders(sid, gens))
-    if kind == "coverage":
-        return coverage_orders(X, gens)
-    raise ConfigError("schedule.order", kind, f"one of {list(ORDERS)}")
-
-
-def stratified_orders(sid: torch.Tensor, gens: list[torch.Generator]) -> torch.Tensor:
-    """The stratified orders from the strata ids, one row per generator: random rank within each stratum,
-    then sorted by (rank + U(0,1)) / stratum size. Each generator draws its permutation and then its
-    jitter, exactly as for one replica alone; the rest is batched over the rows (stable sorts and
-    element-wise arithmetic: every row is what it would be alone)."""
-    n = sid.shape[0]
-    draws = [(torch.randperm(n, generator=g), torch.rand(n, generator=g, dtype=torch.float64)) for g in gens]
-    shuffled = torch.stack([d[0] for d in draws])  # [R, n] random rank within each stratum
-    jitter = torch.stack([d[1] for d in draws])
-    _, stratum, counts = torch.unique(sid, return_inverse=True, return_counts=True)  # counts: any order's
-    inverse = stratum[shuffled]
-    # rank of each shuffled pattern within its stratum: position minus the stratum's first position
-    by_stratum = torch.argsort(inverse, dim=1, stable=True)
-    first = torch.cumsum(counts, 0) - counts
-    rank = torch.empty_like(shuffled)
-    rank.scatter_(1, by_stratum, torch.arange(n) - first[inverse.gather(1, by_stratum)])
-    key = (rank.double() + jitter) / counts[inverse].double()
-    return shuffled.gather(1, torch.argsort(key, dim=1, stable=True))
 
 
 def coverage_orders(
@@ -120,6 +66,11 @@ def coverage_orders(
         picks, _ = _farthest_first(np.full((len(start), n), np.inf), n, dist, start)
         orders += [torch.from_numpy(p) for p in picks]
     return orders
+
+
+class Coverage(Order):
+    def orders(self, X: torch.Tensor, gens: list[torch.Generator]) -> list[torch.Tensor]:
+        return coverage_orders(X, gens)
 
 
 def coverage_order(X: torch.Tensor, gen: torch.Generator, **kw) -> torch.Tensor:
@@ -212,3 +163,6 @@ def _within_cells(cols: np.ndarray, d: np.ndarray, owner: np.ndarray, K: int) ->
         rads.append(radii[keep])
     ids, rads = np.concatenate(ids), np.concatenate(rads)
     return ids[np.lexsort((ids, -rads))]
+
+
+ORDER = Coverage
