@@ -340,7 +340,7 @@ def test_final_scores_that_are_not_finite_make_the_replica_diverged():
 @pytest.mark.parametrize(
     "content, why",
     [(os.urandom(3000), "unreadable"), (b'{"a": "\xff"}', "not UTF-8"), (b"[]", "a JSON list"),
-     (b'{"status": "complete"}', "no 'schedule'")],
+     (b'{"status": "complete"}', "schedule is missing")],
     ids=["random", "non-utf8", "list", "bare-status"],
 )  # fmt: skip
 def test_a_bad_results_json_is_listed_unreadable(tmp_path, content, why):

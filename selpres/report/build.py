@@ -7,6 +7,7 @@ A new section (sensitivity, error–cost plane, selection verdicts, ...) is a mo
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,6 +53,18 @@ STUDY_SECTIONS = [
 ]
 
 
+def _built(make, ctx: Context) -> Section | None:
+    """A section, or in its place one line saying it could not be built and why: whatever a job wrote that
+    the load checks (selpres.report.validate) let through, the rest of the report is written."""
+    try:
+        return make(ctx)
+    except Exception as e:
+        name = make.__module__.rsplit(".", 1)[-1]
+        line = f"the {name} section could not be built from these results: {type(e).__name__}: {e}"
+        print(f"warning: {line}", file=sys.stderr)
+        return Section(f"{name} (not built)", [line])
+
+
 def write_text(path: Path, text: str) -> None:
     atomic_write(path, lambda f: f.write(text.encode()))
 
@@ -67,7 +80,7 @@ class Report:
     def build(cls, sweep: Path, options: Options | None = None) -> Report:
         ctx = Context.load(sweep, options)
         order = SECTIONS if ctx.table1_like else STUDY_SECTIONS
-        return cls(ctx, [s for make in order if (s := make(ctx)) is not None])
+        return cls(ctx, [s for make in order if (s := _built(make, ctx)) is not None])
 
     @property
     def markdown(self) -> str:
@@ -88,7 +101,11 @@ class Report:
                 files.append(name)
         for s in self.sections:
             for name, (_, draw) in s.figures.items():
-                draw(out / name)
+                try:
+                    draw(out / name)
+                except Exception as e:  # the rest of the report is still written (see _built)
+                    print(f"warning: {name} not drawn: {type(e).__name__}: {e}", file=sys.stderr)
+                    continue
                 files.append(name)
         write_text(out / "report.md", self.markdown)
         return files
