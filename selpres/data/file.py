@@ -22,6 +22,8 @@ import functools
 import hashlib
 import io
 import math
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -106,8 +108,8 @@ def _npz_columns(path: Path) -> dict[str, np.ndarray]:
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
-        raise DataFileError(path, "file", f"not a readable .npz ({e})") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:  # cut, flipped, not a zip
+        raise DataFileError(path, "file", f"not a readable .npz ({type(e).__name__}: {e})") from None
     if NPZ_TABLE in arrays:
         table, names = arrays[NPZ_TABLE], arrays.get(NPZ_COLUMNS)
         if names is None or names.ndim != 1 or table.ndim != 2 or len(names) != table.shape[1]:

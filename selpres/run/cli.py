@@ -22,9 +22,11 @@ import json
 import logging
 import math
 import os
+import re
 import sys
 import traceback
 from pathlib import Path
+from typing import NoReturn
 
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import CompactHydraException
@@ -194,15 +196,6 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
             raise SweepJobError(f"{out}: {line}") from None
         print(f"error: {line}", file=sys.stderr)
         sys.exit(2)
-    except MemoryError:  # past the estimate (selpres.run.estimate): other processes took the memory, or it erred
-        kept = "the last checkpoint is kept" if Checkpoints.present(out) else "no checkpoint was written yet"
-        line = f"out of memory (the job's estimate fitted when it started; see selpres/run/estimate.py); {kept}"
-        _to_log_file(f"job failed: {line}\n{traceback.format_exc()}")
-        if multirun:
-            print(line, file=sys.stderr)
-            raise SweepJobError(f"{out}: {line}") from None
-        print(f"error: {line}", file=sys.stderr)
-        sys.exit(2)
     except KeyboardInterrupt:
         if multirun:
             raise
@@ -212,11 +205,42 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
             guard.undo(out)
         sys.exit(130)
     except Exception as e:  # a crash: keep the traceback in the job's log, mark the job failed
+        if isinstance(e, MemoryError) or _torch_out_of_memory(e):
+            _out_of_memory(out, e, multirun)
         log.error("job failed:\n%s", traceback.format_exc())
         _failed(out, cfg, repr(e), "exception")
         raise
     log.info("%s\nresults: %s", summary_table(res), out / RESULTS)
     return _objective(res)
+
+
+def _torch_out_of_memory(e: BaseException) -> bool:
+    """torch's failed allocation: a RuntimeError ("DefaultCPUAllocator: can't allocate memory"), not MemoryError."""
+    return isinstance(e, RuntimeError) and ("can't allocate memory" in str(e) or "out of memory" in str(e).lower())
+
+
+def _out_of_memory(out: Path, e: BaseException, multirun: bool) -> NoReturn:
+    """An allocation failed past the estimate (selpres.run.estimate: other processes took the memory, a cap it could
+    not see, or it erred): one line, exit 2; the last checkpoint is kept, else this run's files are removed."""
+    from selpres.run.estimate import available_memory, gb
+
+    limit, source = available_memory()
+    asked = re.search(r"allocate (\d+) bytes", str(e))
+    what = f"{gb(int(asked.group(1)))} at once" if asked else type(e).__name__
+    kept = Checkpoints.present(out)
+    line = (
+        f"out of memory: an allocation of {what} failed with {gb(limit)} available ({source}); lower replicas or "
+        "free memory; " + ("the last checkpoint is kept: run the same command again to resume" if kept else
+                           "nothing of this run was kept")
+    )  # fmt: skip
+    _to_log_file(f"job failed: {line}\n{traceback.format_exc()}")  # the traceback in train.log only
+    if multirun:
+        print(line, file=sys.stderr)
+        raise SweepJobError(f"{out}: {line}") from None
+    print(f"error: {line}", file=sys.stderr)
+    if not kept:
+        guard.undo(out)
+    sys.exit(2)
 
 
 def _check_name(hc, multirun: bool) -> None:
