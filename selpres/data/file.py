@@ -76,9 +76,12 @@ def _not_text(path: Path, data: bytes, e: UnicodeDecodeError, first_line: int = 
     )
 
 
+BOM = b"\xef\xbb\xbf"  # the UTF-8 byte-order mark spreadsheets write first: not part of the first column's name
+
+
 def _csv_text(path: Path) -> str:
     """The whole file as text (newlines kept as they are); DataFileError if it is not UTF-8 or holds NUL bytes."""
-    data = path.read_bytes()
+    data = path.read_bytes().removeprefix(BOM)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -94,7 +97,7 @@ def _csv_header(path: Path) -> tuple[int, list[str]]:
     with open(path, "rb") as f:
         for number, raw in enumerate(f, 1):
             try:
-                line = raw.decode("utf-8")
+                line = (raw.removeprefix(BOM) if number == 1 else raw).decode("utf-8")
             except UnicodeDecodeError as e:
                 raise _not_text(path, raw, e, number) from None
             if "\0" in line:
