@@ -34,7 +34,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from selpres.errors import ConfigError
-from selpres.run import guard, lock, orphan
+from selpres.run import guard, lock, orphan, stop
 from selpres.run.checkpoint import Checkpoints
 from selpres.run.problem import Problem, engine_kind, kind_of
 from selpres.run.results import job_hash
@@ -196,6 +196,15 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
             raise SweepJobError(f"{out}: {line}") from None
         print(f"error: {line}", file=sys.stderr)
         sys.exit(2)
+    except stop.Terminated as e:  # SIGTERM / SIGUSR1 (selpres.run.stop): the loop wrote a checkpoint first
+        resumable = Checkpoints.present(out)
+        how = "run the same command to resume" if resumable else "nothing of this run was kept"
+        print(f"{'' if multirun else 'error: '}{out}: {e}; {how}", file=sys.stderr)
+        logging.shutdown()
+        if not resumable and not multirun:
+            guard.undo(out)
+        lock.release(out)
+        sys.exit(stop.STATUS)
     except KeyboardInterrupt:
         if multirun:
             raise

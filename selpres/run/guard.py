@@ -17,7 +17,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
-from selpres.run import lock, orphan
+from selpres.run import lock, orphan, stop
 
 
 @dataclass
@@ -145,7 +145,9 @@ def undo(out: Path) -> None:
 
 def guarded(main) -> None:
     """``python train.py``'s outermost frame: a Ctrl-C outside the job (while Hydra composes, creates the
-    folder, writes ``.hydra/``) prints one line and exits 130, removing only what this run created."""
+    folder, writes ``.hydra/``) prints one line and exits 130, a SIGTERM or SIGUSR1 143 (selpres.run.stop),
+    removing only what this run created."""
+    stop.install()
     try:
         main()
     except KeyboardInterrupt:
@@ -154,3 +156,9 @@ def guarded(main) -> None:
                 before.undo(folder)
         print("interrupted", file=sys.stderr)
         sys.exit(130)
+    except stop.Terminated as e:  # before the job's own handling (selpres.run.cli): only what this run created goes
+        if not _JOB_STARTED:
+            for folder, before in _BEFORE.items():
+                before.undo(folder)
+        print(f"error: {e} before the job started: nothing was kept", file=sys.stderr)
+        sys.exit(stop.STATUS)
