@@ -11,6 +11,7 @@ import os
 import pickle
 
 import pytest
+import torch
 
 from selpres.engines.model import init_replica_params
 from selpres.engines.online import make_engine
@@ -200,3 +201,34 @@ def test_train_py_on_a_planted_or_cut_history_says_so_once_and_finishes(tmp_path
         assert len(warned) == 1 and "Traceback" not in done.stderr, done.stdout + done.stderr
         assert numbers(json.loads((job / "results.json").read_text())) == numbers(straight)
         assert (job / "notes.txt").read_text() == "the user's" and len(list(job.glob("*.stale-*"))) >= 2
+
+
+# ----------------------------------------------------------------------------- other read-backs (audit)
+def test_a_checkpoint_of_this_hash_whose_engine_state_does_not_fit_is_set_aside(tmp_path, caplog):
+    """A hand-edited checkpoint (this job's hash, another network's weights) crashed every re-run in
+    load_state_dict; now one warning, the files aside, a fresh start on the engine's own initial weights."""
+    Checkpoints(tmp_path, "h").save(engine_of(), Progress([record(-1), record(0)], [None, None], epoch=1))
+    sizes = (6, 4, 2)
+    other = make_engine("torch", sizes, init_replica_params(sizes, [0, 1]), 0.15, 0.9, 1)
+    initial = [p.clone() for p in other.params()]
+    with caplog.at_level("WARNING", logger="selpres"):
+        back = Checkpoints(tmp_path, "h").resume(other, 2)
+    assert back.epoch == 0 and back.history == []
+    assert all(torch.equal(a, b) for a, b in zip(other.params(), initial))  # not half loaded
+    (line,) = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert "engine state does not fit this job" in line and "started afresh" in line
+    assert not Checkpoints.present(tmp_path) and len(list(tmp_path.glob("*.stale-*"))) == 2
+
+
+def test_a_finished_results_json_that_lacks_its_summary_is_redone_not_a_crash(tmp_path, caplog):
+    from selpres.run import cli
+
+    cfg, out = cfg_of("schedule.epochs=[1,1,1,1,1]"), tmp_path / "job"
+    cli._run_locked(cfg, out, multirun=False)
+    good = json.loads((out / "results.json").read_text())
+    cut = {k: v for k, v in good.items() if k != "summary"}
+    (out / "results.json").write_text(json.dumps(cut))
+    with caplog.at_level("WARNING", logger="selpres"):
+        cli._run_locked(cfg, out, multirun=False)  # was KeyError: 'summary' on every re-run
+    assert "lacks what a finished job holds (KeyError: 'summary')" in caplog.text
+    assert numbers(json.loads((out / "results.json").read_text())) == numbers(good)

@@ -145,6 +145,25 @@ class Progress:
         return all(d is not None for d in self.diverged_at)
 
 
+def _layout_differs(ours, saved, at: str = "engine") -> str | None:
+    """Where a saved engine state is not laid out as this engine's (tensor shapes and dtypes, list lengths, of the
+    entries both hold)."""
+    if isinstance(ours, torch.Tensor):
+        if not isinstance(saved, torch.Tensor) or (ours.shape, ours.dtype) != (saved.shape, saved.dtype):
+            got = (tuple(saved.shape), saved.dtype) if isinstance(saved, torch.Tensor) else type(saved).__name__
+            return f"{at} is {got}, this job's {(tuple(ours.shape), ours.dtype)}"
+        return None
+    if isinstance(ours, dict):  # entries made on the first update (an optimizer's moments) may be absent here
+        if not isinstance(saved, dict):
+            return f"{at} is a {type(saved).__name__}"
+        return next((w for k in ours if k in saved and (w := _layout_differs(ours[k], saved[k], f"{at}.{k}"))), None)
+    if isinstance(ours, list | tuple) and ours:
+        if not isinstance(saved, list | tuple) or len(saved) != len(ours):
+            return f"{at} holds another number of entries"
+        return next((w for i, x in enumerate(ours) if (w := _layout_differs(x, saved[i], f"{at}[{i}]"))), None)
+    return None
+
+
 class Checkpoints:
     """``checkpoint.pt`` / ``checkpoint.alt.pt`` + ``history.jsonl`` in a job folder, for one job identity (its
     config hash).
@@ -242,8 +261,21 @@ class Checkpoints:
         slot, ck, history = chosen
         if unreadable:
             log.warning("%s: %s; resumed the checkpoint of epoch %d", self.paths[0].parent, unreadable[0], ck["epoch"])
+        fresh = dumps(engine.state_dict())  # a copy to put back if the saved state does not fit
+        try:
+            if why := _layout_differs(engine.state_dict(), ck["engine"]):
+                raise ValueError(why)
+            engine.load_state_dict(ck["engine"])
+        except Exception as e:  # a hand-edited file with this job's hash: set aside, never a crash on every re-run
+            engine.load_state_dict(torch.load(io.BytesIO(fresh), weights_only=True))
+            moved = self.move_aside([*self.paths, *self.logs])
+            where = ", ".join(p.name for p in moved.values())
+            log.warning("%s: its engine state does not fit this job (%s: %s); moved the job's files aside (%s), "
+                        "started afresh", self.paths[slot], type(e).__name__, e, where)  # fmt: skip
+            progress = Progress.fresh(replicas)
+            progress.stale_checkpoint = str(moved[self.paths[slot]])
+            return progress
         self._next = 1 - slot
-        engine.load_state_dict(ck["engine"])
         if ck["history_format"] == HISTORY_FORMAT:
             os.truncate(self.history_path, ck["history_bytes"])  # drop records appended after this checkpoint
             self._saved = len(history)

@@ -65,6 +65,11 @@ def _finished(out: Path, cfg: DictConfig) -> dict | None:
         return None
     if res.get("status") in ("complete", "diverged") and res.get("config_hash") == job_hash(cfg):
         ran, now = kind_of(res.get("engine")), engine_kind(cfg)
+        try:  # what the command line reads of a finished job (a hand-edited or cut file: the job is redone)
+            summary_table(res), _objective(res)
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as e:
+            log.warning("%s lacks what a finished job holds (%s: %s): running it again", path, type(e).__name__, e)
+            return None
         if ran == now:
             return res
         log.warning("%s ran on the %s engines; this config now runs on the %s ones: running it again", path, ran, now)
