@@ -19,7 +19,8 @@ RESULTS = "results.json"
 WEIGHTS = "weights.pt"
 CHECKPOINT = "checkpoint.pt"
 CHECKPOINT_ALT = "checkpoint.alt.pt"  # checkpoints alternate between the two names (selpres.run.checkpoint)
-HISTORY = "history.pkl"  # the checkpoint's append-only record log (pickled records)
+HISTORY = "history.jsonl"  # the checkpoint's append-only record log (one JSON record a line: it cannot run code)
+HISTORY_PICKLE = "history.pkl"  # the same log as written by selpres before issue 26 (read without running code)
 
 
 def atomic_write(path: Path, write: Callable[[BinaryIO], Any]) -> None:

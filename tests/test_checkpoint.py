@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import pickle
-
 import torch
 
 from selpres.engines.model import init_replica_params
 from selpres.engines.online import make_engine
-from selpres.run.checkpoint import Checkpoints, Progress
+from selpres.run.checkpoint import Checkpoints, Progress, encode
 
 SIZES = (6, 3, 2)
 
@@ -18,13 +16,13 @@ def record(epoch: int) -> dict:
 
 
 def test_records_appended_after_the_last_checkpoint_are_dropped_on_resume(tmp_path):
-    """A kill between a save's history append and its checkpoint rename leaves extra records in history.pkl;
+    """A kill between a save's history append and its checkpoint rename leaves extra records in history.jsonl;
     the resume must return the history of the checkpoint it read: nothing lost, nothing twice."""
     engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
     progress = Progress([record(-1), record(0), record(1)], [None, None], epoch=2, presentations=20)
     Checkpoints(tmp_path, "h").save(engine, progress)
-    with open(tmp_path / "history.pkl", "ab") as f:  # the next save's append, its checkpoint never renamed
-        f.write(b"".join(pickle.dumps(record(e)) for e in (2, 3)))
+    with open(tmp_path / "history.jsonl", "ab") as f:  # the next save's append, its checkpoint never renamed
+        f.write(encode(record(e) for e in (2, 3)))
 
     resumed = Checkpoints(tmp_path, "h")
     back = resumed.resume(make_engine("torch", SIZES, init_replica_params(SIZES, [5, 6]), 0.15, 0.9, 1), 2)
@@ -80,8 +78,8 @@ def test_a_kill_while_the_older_checkpoint_is_replaced_resumes_from_the_newer(tm
     ckpts.save(engine, Progress([record(-1), record(0)], [None, None], epoch=1))  # -> checkpoint.pt
     ckpts.save(engine, Progress([record(-1), record(0), record(1)], [None, None], epoch=2))  # -> .alt.pt
     (tmp_path / "checkpoint.pt").unlink()  # the third save freed the older name, then the job was killed
-    with open(tmp_path / "history.pkl", "ab") as f:  # after appending its records
-        f.write(pickle.dumps(record(2)))
+    with open(tmp_path / "history.jsonl", "ab") as f:  # after appending its records
+        f.write(encode([record(2)]))
     resumed = Checkpoints(tmp_path, "h")
     back = resumed.resume(engine, 2)
     assert back.epoch == 2 and [r["epoch"] for r in back.history] == [-1, 0, 1]
@@ -102,7 +100,7 @@ def test_an_unreadable_partner_is_set_aside_and_ours_resumed(tmp_path):
     assert back.epoch == 1 and [r["epoch"] for r in back.history] == [-1, 0]
     (moved,) = tmp_path.glob("checkpoint.stale-*.alt.pt")
     assert back.stale_checkpoint == str(moved) and moved.read_bytes() == b""
-    assert (tmp_path / "checkpoint.pt").exists() and (tmp_path / "history.pkl").exists()
+    assert (tmp_path / "checkpoint.pt").exists() and (tmp_path / "history.jsonl").exists()
 
 
 def test_a_checkpoint_of_another_config_beside_ours_sets_everything_aside(tmp_path):
@@ -117,5 +115,5 @@ def test_a_checkpoint_of_another_config_beside_ours_sets_everything_aside(tmp_pa
     (foreign,) = tmp_path.glob("checkpoint.stale-*.alt.pt")
     assert back.stale_checkpoint == str(foreign)
     names = sorted(p.name.split("-")[0] + "|" + p.suffix for p in tmp_path.iterdir())
-    assert names == ["checkpoint.stale|.pt", "checkpoint.stale|.pt", "history.stale|.pkl"]
+    assert names == ["checkpoint.stale|.pt", "checkpoint.stale|.pt", "history.stale|.jsonl"]
     assert not Checkpoints.present(tmp_path)

@@ -211,7 +211,7 @@ def test_a_stored_task_holds_its_own_tensors_not_their_bases(cache):
     """torch.save writes a view's whole storage: the held-out set is a view of its draws."""
     task = _load("data.heldout=2000")
     (entry,) = cache.glob("*.task.pt")
-    tensors = sum(v.numel() * v.element_size() for v in C._tensors(C._pack(task)))
+    tensors = sum(v.numel() * v.element_size() for v in C._tensors(C._pack(task, {})))
     assert entry.stat().st_size < tensors + 64_000
 
 
@@ -258,3 +258,50 @@ def test_two_processes_building_one_task_at_once_both_get_it(cache):
     assert all(p.returncode == 0 for p in procs)
     assert outs[0][1] == outs[1][1] and {o[0] for o in outs} <= {"stored", "hit"}
     assert len(list(cache.glob("*.task.pt"))) == 1 and not list(cache.glob(".*.tmp"))
+
+
+def test_a_copied_entry_of_other_configs_is_a_miss_said_once_and_the_numbers_are_right(cache, tmp_path, caplog):
+    """Issue 26's case: an entry of data.test_seed=1 copied under the default config's name (a user syncing cache
+    folders, or two keys colliding) was a hit with test_seed=1's numbers. Now: one warning, a build, and the
+    numbers of a run that never saw the cache."""
+    from selpres.run.train import train
+
+    args = ("schedule.epochs=[1,1,1,1,2]", "replicas=2")
+    T._task.cache_clear()
+    first = train(cfg_of(*args), tmp_path / "a")  # the default config's entry
+    (ours,) = cache.glob("*.task.pt")
+    T._task.cache_clear()
+    other = train(cfg_of(*args, "data.test_seed=1"), tmp_path / "b")
+    (theirs,) = set(cache.glob("*.task.pt")) - {ours}
+    shutil.copyfile(theirs, ours)
+    T._task.cache_clear()
+    with caplog.at_level("WARNING", logger="selpres"):
+        copied = train(cfg_of(*args), tmp_path / "c")
+    warned = [r.getMessage() for r in caplog.records if "data cache" in r.getMessage()]
+    assert warned == [f"data cache: {ours} is not this job's entry (it holds the task of data.test_seed=1 (this job: "
+                      "0)); building the task again"]  # fmt: skip
+    assert copied["data"]["cache"].startswith("stored") and copied["data"]["hash"] == first["data"]["hash"]
+    assert other["data"]["hash"] != first["data"]["hash"]  # the copy really was another task
+    assert numbers(copied) == numbers(first) and numbers(copied) != numbers(other)
+    T._task.cache_clear()
+    assert train(cfg_of(*args), tmp_path / "d")["data"]["cache"].startswith("hit")  # replaced by the right one
+
+
+def test_an_entry_built_by_other_code_is_a_miss(cache, monkeypatch, caplog):
+    """The key holds the source digest; the entry holds it too, so a collision or a copy across versions is caught
+    even where the names agree."""
+    _load("data.heldout=300")
+    (entry,) = cache.glob("*.task.pt")
+    monkeypatch.setattr(C, "code_digest", lambda: "edited source")
+    shutil.copyfile(entry, cache / (C.key(*_jsons("data.heldout=300")) + ".task.pt"))  # where this "code" looks
+    assert _load("data.heldout=300").info["cache"].startswith("stored")
+    assert "built by other source or library versions" in caplog.text
+
+
+def _jsons(*overrides):
+    """The (robot, data) texts a built-in arm's task is keyed by, as selpres.data.task.load_task writes them."""
+    robot, data = task_specs(compose(*overrides))
+    return (
+        json.dumps({"_target_": robot.target, **robot.params}, sort_keys=True),
+        json.dumps(data.as_dict(), sort_keys=True),
+    )

@@ -236,3 +236,16 @@ def test_command_line_exits_2_and_writes_nothing(tmp_path):
     assert out.returncode == 2, out.stderr
     assert f"error: {path}: column 'y', line 3: 'x' is not a number" in out.stderr and "Traceback" not in out.stderr
     assert not run.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]
+
+
+@pytest.mark.parametrize("comments", ["", "# exported by a spreadsheet\n"])
+def test_a_csv_with_a_byte_order_mark_reads_as_the_same_text(sarcos, tmp_path, comments):
+    """Issue 26: every spreadsheet's "CSV UTF-8" starts with EF BB BF; it was refused as its columns were
+    ['\\ufeffq1', ...]. The same file with the mark gives the same task, bit for bit."""
+    text = sarcos.read_bytes()
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + comments.encode() + text)
+    assert bom.read_bytes()[:3] == b"\xef\xbb\xbf" and not text.startswith(b"\xef\xbb\xbf")
+    assert torch.equal(load_columns(bom, ["q1", "tau7"]), load_columns(sarcos, ["q1", "tau7"]))
+    a, b = load_task(file_cfg(bom).robot, file_cfg(bom).data), load_task(file_cfg(sarcos).robot, file_cfg(sarcos).data)
+    assert torch.equal(a.exemplar.X, b.exemplar.X) and torch.equal(a.tests.heldout.Y, b.tests.heldout.Y)

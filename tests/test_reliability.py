@@ -110,7 +110,7 @@ def test_two_processes_on_one_folder_history_once_each(tmp_path, kill):
     res = json.loads((out / "results.json").read_text())
     assert res["status"] == "complete"
     _epochs_once_each(res)
-    assert not list(out.glob("checkpoint*")) and not (out / "history.pkl").exists()
+    assert not list(out.glob("checkpoint*")) and not (out / "history.jsonl").exists()
 
 
 @pytest.mark.slow
@@ -340,7 +340,7 @@ def test_final_scores_that_are_not_finite_make_the_replica_diverged():
 @pytest.mark.parametrize(
     "content, why",
     [(os.urandom(3000), "unreadable"), (b'{"a": "\xff"}', "not UTF-8"), (b"[]", "a JSON list"),
-     (b'{"status": "complete"}', "no 'schedule'")],
+     (b'{"status": "complete"}', "schedule is missing")],
     ids=["random", "non-utf8", "list", "bare-status"],
 )  # fmt: skip
 def test_a_bad_results_json_is_listed_unreadable(tmp_path, content, why):
@@ -370,7 +370,7 @@ def test_a_kill_during_the_final_writes_is_cleaned_up_by_the_rerun(tmp_path, mon
     monkeypatch.undo()
     (out / ".results.json.x1y2.tmp").write_bytes(b"half")
     (out / "notes.txt").write_text("the user's")
-    assert (out / "checkpoint.pt").exists() and (out / "history.pkl").exists()
+    assert (out / "checkpoint.pt").exists() and (out / "history.jsonl").exists()
     before = (out / "results.json").read_bytes()
     cli._run_locked(cfg, out, multirun=False)
     names = sorted(p.name for p in out.iterdir())

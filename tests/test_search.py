@@ -217,3 +217,21 @@ def test_optuna_study_in_sqlite_runs_trials_as_jobs_and_resumes(tmp_path):
         assert after.endswith(f"schedule=matched schedule.budget={res['presentations_done']}")
     else:  # p = 0: conventional cut to the budget, its own partner
         assert "schedule=matched" not in after
+
+
+def test_an_unreadable_optuna_storage_is_one_line_exit_2_and_left_as_it_is(tmp_path, capsys):
+    """Issue 26's audit: a storage file that is not a database ended in sqlalchemy's 88-line traceback."""
+    pytest.importorskip("optuna")
+    from hydra_plugins.selpres_search._sweeper import _finished_trials
+
+    bad = tmp_path / "search.db"
+    bad.write_bytes(bytes(range(256)) * 20)
+    with pytest.raises(SystemExit) as exit_:
+        _finished_trials(f"sqlite:///{bad}", "schedule-search")
+    assert exit_.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f"error: hydra.sweeper.storage=sqlite:///{bad} cannot be read (DatabaseError") and (
+        "move the file aside" in line
+    )
+    assert bad.read_bytes() == bytes(range(256)) * 20
+    assert _finished_trials(f"sqlite:///{tmp_path / 'new.db'}", "schedule-search") == 0  # no study yet: none

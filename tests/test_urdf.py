@@ -8,6 +8,7 @@ import logging
 import math
 import os
 import pickle
+import re
 
 import pytest
 import test_serial as serial_tests  # tests/ is on sys.path (pytest's rootdir-relative import)
@@ -515,3 +516,42 @@ def test_a_gravity_vector_is_exported_faithfully(tmp_path):
     back = load_urdf(to_urdf(arm, tmp_path / "out.urdf"), g=math.sqrt(14.0))
     same_dynamics(arm, back, 1e-11)
     assert back.base == arm.base and back.source["modelled"] == ["j1", "j2"]
+
+
+B_INERTIA = 'ixx="0.05" ixy="0" ixz="0" iyy="0.05" iyz="0" izz="0.01"'
+
+
+@pytest.mark.parametrize(
+    "inertia, moments",
+    [
+        ('ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="5"', (0.1, 0.1, 5.0)),  # the issue's link
+        ('ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.25"', (0.1, 0.1, 0.25)),  # by 20 %: beyond 10 %
+        # the same kind of body turned 45 degrees about z: off-diagonal terms, the principal moments tell
+        ('ixx="2.55" ixy="2.45" ixz="0" iyy="2.55" iyz="0" izz="0.1"', (0.1, 0.1, 5.0)),
+    ],
+)
+def test_an_inertia_no_rigid_body_has_is_refused_naming_the_link_and_its_values(tmp_path, inertia, moments):
+    path = _hand(tmp_path, (B_INERTIA, inertia))
+    with pytest.raises(UrdfError) as err:
+        load_urdf(path)
+    said = str(err.value)
+    v = dict(re.findall(r'(i[xyz]{2})="([^"]+)"', inertia))
+    assert said.startswith(f'{path}: <link name="b"> <inertia ixx={float(v["ixx"]):g}, iyy={float(v["iyy"]):g}, '
+                           f'izz={float(v["izz"]):g}>: is not a rigid body\'s'), said  # fmt: skip
+    a, b, c = moments  # worked out by hand (the turned tensor's eigenvalues: 2.55 +- 2.45 and 0.1)
+    assert f"principal moments {a:g}, {b:g}, {c:g} kg m^2 break the triangle inequality" in said, said
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [
+        (B_INERTIA, 'ixx="0.066" ixy="0" ixz="0" iyy="0.086" iyz="0" izz="0.0125"'),  # the PUMA's link 3: by 8.7 %
+        (B_INERTIA, 'ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.2"'),  # a flat plate: equality
+        (B_INERTIA, 'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"'),  # a point mass
+        # a massless link's lumped tensor (the PUMA 560's link 1, given without a mass)
+        ('<mass value="0.2"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/>',
+         '<mass value="0"/><inertia ixx="0" ixy="0" ixz="0" iyy="0.35" iyz="0" izz="0"/>'),
+    ],
+)  # fmt: skip
+def test_inertias_a_body_can_have_load(tmp_path, edit):
+    assert load_urdf(_hand(tmp_path, edit)).dof == 2

@@ -26,6 +26,7 @@ search seeds is noisy and the best of many trials is biased low; the report's ``
 from __future__ import annotations
 
 import logging
+import sys
 from pathlib import Path
 
 from hydra.types import HydraContext, TaskFunction
@@ -140,5 +141,10 @@ def _finished_trials(storage, study_name) -> int:
         study = optuna.load_study(study_name=study_name, storage=storage)
     except KeyError:  # no such study yet
         return 0
+    except Exception as e:  # not a database, cut, another program's: one line, exit 2, the file left as it is
+        why = str(e).splitlines()[0][:200]
+        print(f"error: hydra.sweeper.storage={storage} cannot be read ({type(e).__name__}: {why}); move the file "
+              "aside to start the study afresh, or name another storage", file=sys.stderr)  # fmt: skip
+        sys.exit(2)
     states = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.FAIL)
     return sum(t.state in states for t in study.get_trials(deepcopy=False))

@@ -10,8 +10,11 @@ cost.
 
 Where: ``$SELPRES_DATA_CACHE`` if set (``off`` turns the cache off), else ``$XDG_CACHE_HOME/selpres/tasks``, else
 ``~/.cache/selpres/tasks``. What a job did is recorded in results.json ``data.cache`` (``hit``, ``stored``,
-``off``, or why it was not stored). Entries are written atomically (a racing job writes the same bytes) and only
-entries of this cache are ever replaced or removed (the oldest beyond :data:`KEEP`).
+``off``, or why it was not stored). Each entry also holds what its key was made of (the two configs and the
+source digest) and is checked against them on load: a copied, synced or colliding entry of other configs is a
+miss with one warning naming what differs, never another task's numbers. Entries are written atomically (a racing
+job writes the same bytes) and only entries of this cache are ever replaced or removed (the oldest beyond
+:data:`KEEP`).
 """
 
 from __future__ import annotations
@@ -32,13 +35,13 @@ import numpy as np
 import torch
 
 from selpres.data.paper import ExemplarSet, Patterns, Scaler, TestSets
-from selpres.storage import atomic_write
+from selpres.storage import atomic_write, flatten
 
 log = logging.getLogger("selpres")
 
 KEEP = 16  # entries kept; the least recently used beyond it are removed
 MAX_BYTES = 512 * 2**20  # a larger task is not stored (a 10^6-pattern PUMA set is ~150 MB)
-FORMAT = 1  # bump when the stored layout below changes
+FORMAT = 2  # bump when the stored layout below changes (2: entries carry their own key)
 _SUFFIX = ".task.pt"
 _NAME = re.compile(r"[0-9a-f]{32}" + re.escape(_SUFFIX))  # the entries' names (key + suffix): nothing else is removed
 STALE_TEMP_S = 3600.0  # a temp file this old is a killed write's, not a running one's
@@ -74,10 +77,34 @@ def _own(x):
     return x.clone() if isinstance(x, torch.Tensor) else x
 
 
-def _pack(task) -> dict:
+def _made_of(robot_json: str, data_json: str) -> dict:
+    """What an entry's key is a function of, stored in the entry and compared on load."""
+    return {"robot": robot_json, "data": data_json, "code": code_digest()}
+
+
+def _differs(stored, wanted: dict) -> str | None:
+    """None when an entry's record of what it was built from is ``wanted``; else what differs, briefly."""
+    if not isinstance(stored, dict):
+        return "it does not record what it was built from"
+    if stored.get("code") != wanted["code"]:
+        return "it was built by other source or library versions"
+    for part in ("robot", "data"):
+        if stored.get(part) != wanted[part]:
+            try:
+                a, b = flatten(json.loads(stored[part])), flatten(json.loads(wanted[part]))
+            except (TypeError, ValueError, AttributeError, KeyError):
+                return f"it holds the task of another {part} config"
+            keys = [k for k in sorted({*a, *b}) if a.get(k) != b.get(k)][:3]
+            said = ", ".join(f"{part}.{k}={a.get(k)!r} (this job: {b.get(k)!r})" for k in keys)
+            return f"it holds the task of {said or f'another {part} config'}"
+    return None
+
+
+def _pack(task, made_of: dict) -> dict:
     ex, t = task.exemplar, task.tests
     sc = task.scaler
     return {
+        "made_of": made_of,
         "exemplar": (_own(ex.X), _own(ex.Y), ex.n_candidates),
         "test10": (_own(t.test10.X), _own(t.test10.Y), _own(t.test10_from_exemplar)),
         "heldout": (_own(t.heldout.X), _own(t.heldout.Y)),
@@ -120,12 +147,20 @@ def cached(robot_json: str, data_json: str, build: Callable[[], Any], make: Call
     except OSError as e:  # a folder this user cannot read: build, and say so when storing fails too
         log.warning("data cache: cannot look in %s (%s); building the task", folder, e.strerror or e)
         present = False
+    made_of = _made_of(robot_json, data_json)
+    task = None
     if present:
         try:
-            task = _unpack(torch.load(path, weights_only=True), make)
+            entry = torch.load(path, weights_only=True)
+            why = _differs(entry.get("made_of"), made_of) if isinstance(entry, dict) else "it is not a task entry"
+            if why is None:
+                task = _unpack(entry, make)
         except Exception as e:  # a cut or foreign file, or one removed meanwhile: build afresh and replace it
             log.warning("data cache: %s cannot be read (%s); building the task again", path, e)
         else:
+            if why is not None:  # copied, synced or colliding: another task's numbers must never be used
+                log.warning("data cache: %s is not this job's entry (%s); building the task again", path, why)
+        if task is not None:
             try:
                 os.utime(path)  # recently used (a read-only or shared cache cannot record it: no matter)
             except OSError:
@@ -133,12 +168,12 @@ def cached(robot_json: str, data_json: str, build: Callable[[], Any], make: Call
             task.info["cache"] = f"hit ({path})"
             return task
     task = build()
-    task.info["cache"] = _store(path, task)
+    task.info["cache"] = _store(path, task, made_of)
     return task
 
 
-def _store(path: Path, task) -> str:
-    packed = _pack(task)
+def _store(path: Path, task, made_of: dict) -> str:
+    packed = _pack(task, made_of)
     size = sum(v.numel() * v.element_size() for v in _tensors(packed))
     if size > MAX_BYTES:
         return f"not stored ({size / 2**20:.0f} MB > {MAX_BYTES / 2**20:.0f} MB)"

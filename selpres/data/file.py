@@ -22,6 +22,8 @@ import functools
 import hashlib
 import io
 import math
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -74,9 +76,12 @@ def _not_text(path: Path, data: bytes, e: UnicodeDecodeError, first_line: int = 
     )
 
 
+BOM = b"\xef\xbb\xbf"  # the UTF-8 byte-order mark spreadsheets write first: not part of the first column's name
+
+
 def _csv_text(path: Path) -> str:
     """The whole file as text (newlines kept as they are); DataFileError if it is not UTF-8 or holds NUL bytes."""
-    data = path.read_bytes()
+    data = path.read_bytes().removeprefix(BOM)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -92,7 +97,7 @@ def _csv_header(path: Path) -> tuple[int, list[str]]:
     with open(path, "rb") as f:
         for number, raw in enumerate(f, 1):
             try:
-                line = raw.decode("utf-8")
+                line = (raw.removeprefix(BOM) if number == 1 else raw).decode("utf-8")
             except UnicodeDecodeError as e:
                 raise _not_text(path, raw, e, number) from None
             if "\0" in line:
@@ -106,8 +111,8 @@ def _npz_columns(path: Path) -> dict[str, np.ndarray]:
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
-        raise DataFileError(path, "file", f"not a readable .npz ({e})") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:  # cut, flipped, not a zip
+        raise DataFileError(path, "file", f"not a readable .npz ({type(e).__name__}: {e})") from None
     if NPZ_TABLE in arrays:
         table, names = arrays[NPZ_TABLE], arrays.get(NPZ_COLUMNS)
         if names is None or names.ndim != 1 or table.ndim != 2 or len(names) != table.shape[1]:

@@ -7,7 +7,8 @@ and, when the sweep is one, a study's sections (:mod:`selpres.studies`: modern, 
 
 The package reads in the data's direction, one concern per module:
 
-- ``jobs``      every job folder under the sweep (finished, diverged, failed or missing);
+- ``jobs``      every job folder under the sweep (finished, diverged, failed, missing or unreadable);
+- ``validate``  what the report reads of a results.json, checked at load (wrong types: unreadable; NaN: missing);
 - ``groups``    method labels, and the replicas of each (topology, method) pooled by seed;
 - ``paper``     the paper's Table 1 numbers, and whether a schedule is the paper's;
 - ``families``  a method with its parameters swept (schedule kind × optimizer), the sensitivity unit;

@@ -14,6 +14,7 @@ the paper's methods, last (compact) for a study of parameters.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,9 +36,21 @@ def study_sections(ctx: Context) -> list[Section]:
     names = sorted(STUDIES.names, key=lambda name: (name != ctx.experiment, name))
     out = []
     for name in names:
-        made = STUDIES.get(name)(ctx)
+        made = _built(STUDIES.get(name), ctx)
         out += made if isinstance(made, list) else [made] if made is not None else []
     return out
+
+
+def _built(make, ctx: Context) -> Section | None:
+    """A section, or in its place one line saying it could not be built and why: whatever a job wrote that
+    the load checks (selpres.report.validate) let through, the rest of the report is written."""
+    try:
+        return make(ctx)
+    except Exception as e:
+        name = make.__module__.rsplit(".", 1)[-1]
+        line = f"the {name} section could not be built from these results: {type(e).__name__}: {e}"
+        print(f"warning: {line}", file=sys.stderr)
+        return Section(f"{name} (not built)", [line])
 
 
 def write_text(path: Path, text: str) -> None:
@@ -55,7 +68,7 @@ class Report:
     def build(cls, sweep: Path, options: Options | None = None) -> Report:
         ctx = Context.load(sweep, options)
         generic = TABLE1_SECTIONS if ctx.table1_like else STUDY_SECTIONS
-        return cls(ctx, study_sections(ctx) + [s for make in generic if (s := make(ctx)) is not None])
+        return cls(ctx, study_sections(ctx) + [s for make in generic if (s := _built(make, ctx)) is not None])
 
     @property
     def markdown(self) -> str:
@@ -76,7 +89,11 @@ class Report:
                 files.append(name)
         for s in self.sections:
             for name, (_, draw) in s.figures.items():
-                draw(out / name)
+                try:
+                    draw(out / name)
+                except Exception as e:  # the rest of the report is still written (see _built)
+                    print(f"warning: {name} not drawn: {type(e).__name__}: {e}", file=sys.stderr)
+                    continue
                 files.append(name)
         write_text(out / "report.md", self.markdown)
         return files

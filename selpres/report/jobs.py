@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import json
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from selpres.report import validate
 from selpres.storage import RESULTS
 
 
@@ -24,6 +25,7 @@ class Job:
     topology: str | None
     results: dict | None = None  # the full results.json of a complete/diverged job
     error: str | None = None
+    notes: list[str] = field(default_factory=list)  # what was read as missing or not complete (selpres.report.validate)
 
     @property
     def replicas(self) -> list[dict]:
@@ -84,7 +86,10 @@ def load_job(folder: Path) -> Job:
         return Job(folder, "unreadable", s, t, error=f"results.json unreadable: {problem}")
     status = res.get("status")
     if status in ("complete", "diverged"):
-        return Job(folder, status, res["schedule"]["name"], res["topology"], results=res)
+        notes = validate.finite_replicas(res)
+        if n := validate.finite_curves(res):
+            notes.append(f"{n:,} curve values not finite (read as missing)")
+        return Job(folder, status, res["schedule"]["name"], res["topology"], results=res, notes=notes)
     s, t = _hydra_identity(folder)
     err = res.get("error", "no error recorded")
     if res.get("kind"):
@@ -92,22 +97,15 @@ def load_job(folder: Path) -> Job:
     return Job(folder, "failed" if status == "failed" else f"unknown status {status!r}", s, t, error=err)
 
 
-# what the report reads of a finished job's results.json (selpres.run.results.build writes them all)
-FINISHED_KEYS = {"schedule": dict, "topology": str, "summary": dict, "replica_results": list, "curves": list}
-
-
 def _not_results(res) -> str | None:
-    """Why a parsed results.json is not one selpres wrote (None: it is), so the report lists it and goes on."""
+    """Why a parsed results.json is not one the report can read (None: it is), so the report lists it and goes
+    on: a finished job's fields are checked by :mod:`selpres.report.validate`."""
     if not isinstance(res, dict):
         return f"a JSON {type(res).__name__}, not an object"
     if res.get("status") not in ("complete", "diverged"):
         return None  # failed / unknown: listed by status, nothing more is read
-    for key, kind in FINISHED_KEYS.items():
-        if not isinstance(res.get(key), kind):
-            return f"status {res['status']!r} but no {key!r} ({kind.__name__})"
-    if not isinstance(res["schedule"].get("name"), str):
-        return "no schedule name"
-    return None
+    problems = validate.problems_of(res)
+    return f"status {res['status']!r} but {validate.describe(problems)}" if problems else None
 
 
 def load_jobs(sweep: Path) -> list[Job]:

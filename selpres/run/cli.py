@@ -22,9 +22,11 @@ import json
 import logging
 import math
 import os
+import re
 import sys
 import traceback
 from pathlib import Path
+from typing import NoReturn
 
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import CompactHydraException
@@ -32,7 +34,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from selpres.errors import ConfigError
-from selpres.run import guard, lock, orphan
+from selpres.run import guard, lock, orphan, stop
 from selpres.run.checkpoint import Checkpoints
 from selpres.run.problem import Problem, engine_kind, kind_of
 from selpres.run.results import job_hash
@@ -63,6 +65,11 @@ def _finished(out: Path, cfg: DictConfig) -> dict | None:
         return None
     if res.get("status") in ("complete", "diverged") and res.get("config_hash") == job_hash(cfg):
         ran, now = kind_of(res.get("engine")), engine_kind(cfg)
+        try:  # what the command line reads of a finished job (a hand-edited or cut file: the job is redone)
+            summary_table(res), _objective(res)
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as e:
+            log.warning("%s lacks what a finished job holds (%s: %s): running it again", path, type(e).__name__, e)
+            return None
         if ran == now:
             return res
         log.warning("%s ran on the %s engines; this config now runs on the %s ones: running it again", path, ran, now)
@@ -194,15 +201,15 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
             raise SweepJobError(f"{out}: {line}") from None
         print(f"error: {line}", file=sys.stderr)
         sys.exit(2)
-    except MemoryError:  # past the estimate (selpres.run.estimate): other processes took the memory, or it erred
-        kept = "the last checkpoint is kept" if Checkpoints.present(out) else "no checkpoint was written yet"
-        line = f"out of memory (the job's estimate fitted when it started; see selpres/run/estimate.py); {kept}"
-        _to_log_file(f"job failed: {line}\n{traceback.format_exc()}")
-        if multirun:
-            print(line, file=sys.stderr)
-            raise SweepJobError(f"{out}: {line}") from None
-        print(f"error: {line}", file=sys.stderr)
-        sys.exit(2)
+    except stop.Terminated as e:  # SIGTERM / SIGUSR1 (selpres.run.stop): the loop wrote a checkpoint first
+        resumable = Checkpoints.present(out)
+        how = "run the same command to resume" if resumable else "nothing of this run was kept"
+        print(f"{'' if multirun else 'error: '}{out}: {e}; {how}", file=sys.stderr)
+        logging.shutdown()
+        if not resumable and not multirun:
+            guard.undo(out)
+        lock.release(out)
+        sys.exit(stop.STATUS)
     except KeyboardInterrupt:
         if multirun:
             raise
@@ -212,11 +219,42 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
             guard.undo(out)
         sys.exit(130)
     except Exception as e:  # a crash: keep the traceback in the job's log, mark the job failed
+        if isinstance(e, MemoryError) or _torch_out_of_memory(e):
+            _out_of_memory(out, e, multirun)
         log.error("job failed:\n%s", traceback.format_exc())
         _failed(out, cfg, repr(e), "exception")
         raise
     log.info("%s\nresults: %s", summary_table(res), out / RESULTS)
     return _objective(res)
+
+
+def _torch_out_of_memory(e: BaseException) -> bool:
+    """torch's failed allocation: a RuntimeError ("DefaultCPUAllocator: can't allocate memory"), not MemoryError."""
+    return isinstance(e, RuntimeError) and ("can't allocate memory" in str(e) or "out of memory" in str(e).lower())
+
+
+def _out_of_memory(out: Path, e: BaseException, multirun: bool) -> NoReturn:
+    """An allocation failed past the estimate (selpres.run.estimate: other processes took the memory, a cap it could
+    not see, or it erred): one line, exit 2; the last checkpoint is kept, else this run's files are removed."""
+    from selpres.run.estimate import available_memory, gb
+
+    limit, source = available_memory()
+    asked = re.search(r"allocate (\d+) bytes", str(e))
+    what = f"{gb(int(asked.group(1)))} at once" if asked else type(e).__name__
+    kept = Checkpoints.present(out)
+    line = (
+        f"out of memory: an allocation of {what} failed with {gb(limit)} available ({source}); lower replicas or "
+        "free memory; " + ("the last checkpoint is kept: run the same command again to resume" if kept else
+                           "nothing of this run was kept")
+    )  # fmt: skip
+    _to_log_file(f"job failed: {line}\n{traceback.format_exc()}")  # the traceback in train.log only
+    if multirun:
+        print(line, file=sys.stderr)
+        raise SweepJobError(f"{out}: {line}") from None
+    print(f"error: {line}", file=sys.stderr)
+    if not kept:
+        guard.undo(out)
+    sys.exit(2)
 
 
 def _check_name(hc, multirun: bool) -> None:

@@ -14,8 +14,11 @@ engine; the model below gives 84 KB, an overestimate by a few per cent):
 - torch evaluation (engine=torch/reference, batch methods and the mini-batch engine): replica blocks of at most
   R / 8 on the largest test set, [block, N, widest layer] float64 activations twice, plus [R, N, outputs] outputs.
 
-The limit is what the machine has now: ``MemAvailable`` (/proc/meminfo), or the cgroup's limit if lower;
-``SELPRES_MEMORY_LIMIT`` (bytes) sets it, for a machine shared with other work (and for tests).
+The limit is what this process may still allocate: ``MemAvailable`` (/proc/meminfo), or the cgroup's limit, or
+what the process's own caps leave (``ulimit -v``: RLIMIT_AS less the address space it has mapped, VmSize;
+``ulimit -d``: RLIMIT_DATA less its data segment, VmData), whichever is lowest; ``SELPRES_MEMORY_LIMIT`` (bytes)
+sets it, for a machine shared with other work (and for tests). An allocation that fails all the same (torch
+raises RuntimeError "can't allocate memory", not MemoryError) is the same one-line refusal (selpres.run.cli).
 
 Time: a lower bound, at speeds no engine here reaches (10 us an epoch for the loop's bookkeeping, 0.1 ns per
 weight per presentation and replica, ~10x faster than the native kernel's one-off timing); a plan whose lower
@@ -67,7 +70,29 @@ def available_memory() -> tuple[int, str]:
             continue
         if limit.isdigit() and int(limit) < best[0]:
             best = (int(limit), f"the cgroup limit ({path})")
+    for room in _rlimit_rooms():
+        if room[0] < best[0]:
+            best = room
     return best
+
+
+def _rlimit_rooms() -> list[tuple[int, str]]:
+    """(bytes left, why) under this process's RLIMIT_AS and RLIMIT_DATA, where set."""
+    import resource
+
+    try:
+        with open("/proc/self/status") as f:
+            status = {k: v.split() for k, _, v in (line.partition(":") for line in f)}
+    except OSError:
+        status = {}
+    rooms = []
+    for name, field, shell in (("RLIMIT_AS", "VmSize", "ulimit -v"), ("RLIMIT_DATA", "VmData", "ulimit -d")):
+        soft, _ = resource.getrlimit(getattr(resource, name))
+        if soft == resource.RLIM_INFINITY:
+            continue
+        used = int(status[field][0]) * 1024 if status.get(field) else 0
+        rooms.append((max(0, soft - used), f"{name} ({shell}) {gb(soft)} less the {gb(used)} this process maps"))
+    return rooms
 
 
 def gb(b: float) -> str:

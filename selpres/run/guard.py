@@ -11,13 +11,13 @@ import shutil
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
-from selpres.run import lock, orphan
+from selpres.run import lock, orphan, stop
 from selpres.run.config import retired
 
 
@@ -67,6 +67,7 @@ class Before:
 
 
 _BEFORE: dict[Path, Before] = {}
+MIN_FREE = 1 << 20  # bytes free a run folder needs: Hydra's record (~9 KB) and log, results.json (tens of KB)
 _JOB_STARTED = False  # run_job began: from then on it handles Ctrl-C itself (see guarded)
 
 
@@ -90,12 +91,50 @@ class OutputGuard(Callback):
             print(f"error: {e}", file=sys.stderr)
             sys.exit(2)
         except OSError as e:
+            if created is not None:  # the folders this run made before the write failed
+                shutil.rmtree(created, ignore_errors=True)
             print(f"error: cannot write into {folder} ({e.strerror or e}): nothing was written", file=sys.stderr)
             sys.exit(2)
         _BEFORE[folder] = Before.look(folder, created, held.created)
+        try:
+            st = os.statvfs(folder)
+        except OSError:
+            return
+        if (free := st.f_bavail * st.f_frsize) < MIN_FREE:
+            refuse(f"{folder} has {free:,} bytes free; a job needs at least {MIN_FREE:,} for Hydra's record (.hydra/), "
+                   "its log and its results: nothing was written")  # fmt: skip
+        _save_config_refusing()
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         orphan.record_sweep_parent()
+
+
+def refuse(line: str) -> NoReturn:
+    """Before the job runs: one line, exit 2, and every folder this run looked at as it was."""
+    for folder, before in _BEFORE.items():
+        before.undo(folder)
+    print(f"error: {line}", file=sys.stderr)
+    sys.exit(2)
+
+
+def _save_config_refusing() -> None:
+    """Hydra writes ``.hydra/*.yaml`` after this callback and before the job, where an OSError (a disk that
+    filled meanwhile, a file-size limit) would end in its traceback: it becomes :func:`refuse`'s one line. (The
+    module's ``_save_config`` is what its ``run_job`` calls; Hydra 1.3 has no hook between the two.)"""
+    import hydra.core.utils as hydra_utils
+
+    save = hydra_utils._save_config
+    if getattr(save, "selpres_refusing", False):
+        return
+
+    def refusing(cfg, filename: str, output_dir: Path) -> None:
+        try:
+            save(cfg, filename, output_dir)
+        except OSError as e:
+            refuse(f"cannot write Hydra's record {Path(output_dir) / filename} ({e.strerror or e}): nothing was kept")
+
+    refusing.selpres_refusing = True
+    hydra_utils._save_config = refusing
 
 
 def undo(out: Path) -> None:
@@ -107,12 +146,14 @@ def undo(out: Path) -> None:
 
 def guarded(main) -> None:
     """``python train.py``'s outermost frame: a Ctrl-C outside the job (while Hydra composes, creates the
-    folder, writes ``.hydra/``) prints one line and exits 130, removing only what this run created. A retired
-    spelling (``schedule.prune_ratio=0.3``) is refused in one line naming the new one, before anything is written."""
+    folder, writes ``.hydra/``) prints one line and exits 130, a SIGTERM or SIGUSR1 143 (selpres.run.stop),
+    removing only what this run created. A retired spelling (``schedule.prune_ratio=0.3``) is refused in one line
+    naming the new one, before anything is written."""
     refusal = retired(sys.argv[1:])
     if refusal is not None:
         print(f"error: {refusal}", file=sys.stderr)
         sys.exit(2)
+    stop.install()
     try:
         main()
     except KeyboardInterrupt:
@@ -121,3 +162,9 @@ def guarded(main) -> None:
                 before.undo(folder)
         print("interrupted", file=sys.stderr)
         sys.exit(130)
+    except stop.Terminated as e:  # before the job's own handling (selpres.run.cli): only what this run created goes
+        if not _JOB_STARTED:
+            for folder, before in _BEFORE.items():
+                before.undo(folder)
+        print(f"error: {e} before the job started: nothing was kept", file=sys.stderr)
+        sys.exit(stop.STATUS)

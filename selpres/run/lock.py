@@ -86,8 +86,14 @@ class FolderLock:
             if not same:  # we locked a file its holder has just removed
                 os.close(fd)
                 continue
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            except OSError:  # a full disk: leave no empty lock file of ours behind
+                if created:
+                    os.unlink(path)
+                os.close(fd)
+                raise
             return cls(folder, fd, created)
         raise FolderBusy(folder, "")
 

@@ -26,7 +26,7 @@ from selpres.data import paper as D
 from selpres.engines.minibatch import MiniBatchEngine
 from selpres.presentation.sampler import epoch_orders, shuffle_implementation
 from selpres.presentation.schedule import EpochPlan
-from selpres.run import floor, lock, orphan
+from selpres.run import floor, lock, orphan, stop
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
 from selpres.run.checks import check_seed
@@ -260,7 +260,7 @@ def train(
         clock = Clock()
         with clock("prepare"):
             job = start(cfg, out_dir, clock)
-        with clock("loop"):
+        with clock("loop"), stop.loop():
             for ep in job.prob.plan[job.progress.epoch :]:
                 rec = run_epoch(job, ep, clock)
                 spent = job.prob.pruning is not None and job.prob.pruning.exhausted  # every replica spent its budget
@@ -271,14 +271,17 @@ def train(
                     break
                 if spent:
                     break
-                due = job.checkpoint_due(ep)
-                if due or (orphan.gone() and job.ckpts is not None and ep.index < len(job.prob.plan) - 1):
+                due, more = job.checkpoint_due(ep), ep.index < len(job.prob.plan) - 1
+                stopping = more and (orphan.gone() or stop.requested() is not None)  # gone, or SIGTERM/SIGUSR1
+                if due or (stopping and job.ckpts is not None):
                     with clock("checkpoint"):
                         job.progress.seconds = clock.snapshot()
                         job.ckpts.save(job.engine, job.progress)
                         job.tracker.flush()
-                if orphan.gone() and ep.index < len(job.prob.plan) - 1:  # the sweep's process is gone
-                    kept = "checkpoint kept" if job.ckpts is not None else "no checkpoint: the re-run starts afresh"
+                if stopping:
+                    kept = "checkpoint written" if job.ckpts is not None else "no checkpoint: the re-run starts afresh"
+                    if stop.requested() is not None:
+                        raise stop.Terminated(stop.requested(), f"after epoch {ep.index + 1} ({kept})")
                     raise orphan.SweepGone(f"after epoch {ep.index + 1} ({kept})")
         with clock("eval"):
             final = final_scores(job.engine, job.prob)

@@ -50,19 +50,20 @@ def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path) -> list
         }
         if j.results:
             reps = j.replicas
-            bad = sum(r["status"] != "complete" for r in reps)
+            bad = [r for r in reps if r["status"] != "complete"]
+            kinds = {k: sum(r["status"] == k for r in bad) for k in dict.fromkeys(r["status"] for r in bad)}
             row.update(
-                replicas=f"{len(reps) - bad}/{len(reps)}" + (f" ({bad} diverged)" if bad else ""),
+                replicas=f"{len(reps) - len(bad)}/{len(reps)}"
+                + (f" ({', '.join(f'{n} {k}' for k, n in kinds.items())})" if bad else ""),
                 seeds=f"{min(r['seed'] for r in reps)}..{max(r['seed'] for r in reps)}" if reps else "",
                 **j.engine,
                 wall_total_s=j.results["wall_seconds"]["total"],
             )
-            if bad:
-                row["error"] = "; ".join(
-                    f"seed {r['seed']} diverged at epoch {_diverged_epoch(r)}"
-                    for r in reps
-                    if r["status"] != "complete"
-                )
+            diverged = [
+                f"seed {r['seed']} diverged at epoch {_diverged_epoch(r)}" for r in bad if "not_finite" not in r
+            ]
+            if diverged or j.notes:
+                row["error"] = "; ".join(diverged + j.notes)
         rows.append(row)
     for t in topologies if crossed(sweep) else ():
         for m in methods:

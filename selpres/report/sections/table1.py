@@ -15,7 +15,8 @@ FOOTNOTE = (
     "of the mean. *test-10* = the paper's 10-pattern metric, *held-out* = all held-out patterns. Wall time "
     "per replica-run = the job's training seconds ÷ its replicas (replicas are trained together, batched), "
     "measured with the engine named after it (and the one requested, when the run fell back). "
-    "Diverged replicas are excluded from means and counted under *replicas complete*.\n\n"
+    "Diverged replicas (and any whose final score is not finite) are excluded from means and counted under "
+    "*replicas complete*.\n\n"
     "² nMSE = held-out MSE ÷ the variance of the held-out torques, the mean over joints (the inverse-dynamics "
     "literature's metric; 1 = no better than a constant); the mean predictor's RMS is the error of always "
     "predicting the exemplar set's mean torque, the task's floor."
@@ -23,8 +24,10 @@ FOOTNOTE = (
 
 
 def replicas_text(g: Group) -> str:
-    n, bad = len(g.by_seed), g.n_diverged
-    return f"{n - bad}/{n}" + (f" ({bad} diverged)" if bad else "")
+    """complete/all, and why the others are not: diverged, or a final score that is not finite (report.validate)."""
+    n, bad = len(g.by_seed), [r["status"] for r in g.by_seed.values() if r["status"] != "complete"]
+    why = ", ".join(f"{bad.count(k)} {k}" for k in dict.fromkeys(bad))
+    return f"{n - len(bad)}/{n}" + (f" ({why})" if bad else "")
 
 
 def table1_rows(groups, topologies, methods) -> list[dict]:

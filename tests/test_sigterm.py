@@ -1,0 +1,76 @@
+"""Issue 26: SIGTERM and SIGUSR1 (SLURM's preemption, requeue and --signal) write a checkpoint at once and stop
+with one line and status 143; the re-run resumes from THAT checkpoint, mid-stage, and ends bit-identical to an
+uninterrupted run. Real signals to a real ``python train.py``."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+
+import pytest
+import torch
+from test_resume import newest_checkpoint, run
+
+pytestmark = pytest.mark.slow  # subprocesses
+# checkpoints at stage ends only (checkpoint.every=1000): stage 4 runs epochs 5..44, 0.05-0.4 s each on the
+# reference engine (machine and load), so a signal 0.6 s into it finds no periodic checkpoint newer than epoch 4
+ARGS = ["engine=reference", "schedule.epochs=[1,1,2,40,3]", "replicas=1", "checkpoint.every=1000"]
+STAGE_ENDS = {1, 2, 4, 44}  # epochs done at the end of stages 1-4 (where periodic checkpoints are written)
+
+
+@pytest.fixture(scope="module")
+def straight(tmp_path_factory):
+    out = tmp_path_factory.mktemp("straight")
+    run(out, ARGS)
+    return out
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
+def test_a_signal_mid_stage_checkpoints_there_and_the_rerun_resumes_it_exactly(tmp_path, straight, sig):
+    out = tmp_path / "job"
+    p = run(out, ARGS, wait=False)
+    deadline = time.time() + 240
+    while newest_checkpoint(out)[1] < 4 and time.time() < deadline:  # stage 3 done: into stage 4
+        time.sleep(0.05)
+    time.sleep(0.6)  # an epoch or so into stage 4
+    p.send_signal(sig)
+    output, _ = p.communicate(timeout=120)
+    assert p.returncode == 143, output
+    ckpt, epoch = newest_checkpoint(out)
+    assert epoch not in STAGE_ENDS and 4 < epoch < 44, (epoch, output)  # written at the signal, not periodic
+    line = (
+        f"error: {out}: stopped by {sig.name} after epoch {epoch} (checkpoint written); run the same command to resume"
+    )
+    assert line in output.splitlines() and "Traceback" not in output, output
+    assert not (out / "results.json").exists()
+
+    resumed = run(out, ARGS)
+    assert f"resuming from {ckpt} at epoch {epoch}" in resumed.stdout.read()
+    a = json.loads((out / "results.json").read_text())
+    b = json.loads((straight / "results.json").read_text())
+    assert a["resumed_from_epoch"] == epoch
+    for key in ("summary", "replica_results", "curves", "presentations_done", "config_hash"):
+        assert a[key] == b[key], key
+    wa, wb = torch.load(out / "weights.pt")["params"], torch.load(straight / "weights.pt")["params"]
+    assert all(torch.equal(x, y) for x, y in zip(wa, wb))
+
+
+@pytest.mark.parametrize("delay", [0.0, 1.5])
+def test_a_signal_during_set_up_removes_what_the_run_created(tmp_path, delay):
+    """Before the loop (Hydra's record written, the task being built): nothing to keep, so nothing is left in a
+    folder that existed before; one line, 143."""
+    out = tmp_path / "job"
+    out.mkdir()
+    (out / "mine.txt").write_text("the user's")
+    p = run(out, [*ARGS, "data.heldout=100000", "eval.heldout_curve=300"], wait=False)  # a slow set-up
+    deadline = time.time() + 120
+    while not (out / ".hydra" / "config.yaml").exists() and time.time() < deadline:
+        time.sleep(0.02)
+    time.sleep(delay)
+    p.send_signal(signal.SIGTERM)
+    output, _ = p.communicate(timeout=120)
+    assert p.returncode == 143, output
+    (line,) = [x for x in output.splitlines() if x.startswith("error:")]  # before or inside the job's set-up
+    assert "stopped by SIGTERM" in line and "nothing" in line and "was kept" in line, output
+    assert sorted(x.name for x in out.iterdir()) == ["mine.txt"]
