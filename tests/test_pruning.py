@@ -96,7 +96,7 @@ def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
     pr = res["pruning"]
     # Adam with ReLU: the mini-batch engine, for those and not for the pruning (tests/test_native_pruning.py: the
     # paper's regime runs on the native kernel)
-    assert res["engine"] == "minibatch" and "optim.name=adam" in res["engine_fallback"]
+    assert res["engine"] == "minibatch" and "optim._target_=adam" in res["engine_fallback"]
     assert "pruning" not in res["engine_fallback"]
     for cost in pr["cost"]:
         assert 6000 - (1 + 1 / 3) < cost <= 6000 + 1e-9

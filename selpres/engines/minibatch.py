@@ -1,4 +1,4 @@
-"""Mini-batch training of R replicas with today's units and optimizers: ReLU/SiLU/tanh nets, Adam, AdamW, SGD.
+"""Mini-batch training of R replicas with today's units and optimizers: ReLU/SiLU/tanh nets, Adam, AdamW, SGD, ...
 
 The online engines (:mod:`selpres.engines.online`) run the paper's network - sigmoid units, SGD with
 momentum at a constant rate - and the native kernel runs nothing else. :class:`MiniBatchEngine` runs what
@@ -6,8 +6,9 @@ they cannot, replica-batched in eager torch with a hand-written backward (checke
 :class:`selpres.engines.model.BPN`, ``tests/test_minibatch.py``):
 
 * ``model.activation``: sigmoid, tanh, relu or silu hidden units (linear output unless sigmoid);
-* ``optim.name``: sgd, adam or adamw on mini-batches of ``optim.batch_size`` patterns
-  (:class:`selpres.engines.optim.replica.ReplicaOptimizer`, per replica as torch.optim's own rules);
+* ``optim._target_``: any elementwise ``torch.optim`` optimizer (sgd, adam, adamw, a user's own) on mini-batches of
+  ``optim.batch_size`` patterns, stepped on the replicas' stacked weights: R separate optimizers
+  (:class:`selpres.engines.optim._replicas.ReplicaSteps`);
 * ``optim.lr_schedule``: ``constant`` or ``cosine``: lr · ½(1 + cos(π c / C)) where c is the replica's cost
   so far (presentations, forward passes charged for choosing included) and C the run's own budget, so a
   run scheduled for a smaller budget decays to zero at its own end (a compute-matched run is one scheduled
@@ -34,7 +35,8 @@ import torch
 from selpres.engines.inputs import check_inputs, check_patterns, pruned_epoch_args, pruned_mean
 from selpres.engines.model import forward_replicas
 from selpres.engines.online import ScoredByPredict
-from selpres.engines.optim.replica import ReplicaOptimizer
+from selpres.engines.optim import make_optimizer
+from selpres.engines.optim._replicas import ReplicaSteps
 
 LR_SCHEDULES = ("constant", "cosine")
 
@@ -70,7 +72,8 @@ def _act_prime(name: str, z: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
 
 
 class MiniBatchEngine(ScoredByPredict):
-    """R replicas, mini-batches of ``batch_size``, ``rule`` in sgd/adam/adamw, ``activation`` hidden units."""
+    """R replicas, mini-batches of ``batch_size``, the optimizer ``optimizer`` (a built-in name or an import path)
+    with keyword arguments ``hparams`` (``lr`` is the schedule's peak), ``activation`` hidden units."""
 
     name = "minibatch"
 
@@ -78,7 +81,7 @@ class MiniBatchEngine(ScoredByPredict):
         self,
         sizes,
         params,
-        rule: str,
+        optimizer: str,
         hparams: dict,
         batch_size: int,
         activation: str = "sigmoid",
@@ -92,7 +95,7 @@ class MiniBatchEngine(ScoredByPredict):
             raise ValueError(f"{len(params)} parameter tensors for topology {self.sizes}")
         if lr_schedule not in LR_SCHEDULES:
             raise ValueError(f"lr_schedule {lr_schedule!r}: one of {LR_SCHEDULES}")
-        self.rule, self.batch_size, self.activation = rule, int(batch_size), activation
+        self.optimizer, self.batch_size, self.activation = optimizer, int(batch_size), activation
         self.lr_schedule, self.horizon, self.reduction = lr_schedule, float(horizon), reduction
         self.fallback_reason = fallback_reason
         self.R = params[0].shape[0]
@@ -102,9 +105,9 @@ class MiniBatchEngine(ScoredByPredict):
         self.flat = torch.cat([t.detach().to(torch.float64).reshape(self.R, -1) for t in params], dim=1)
         self.flat.grad = torch.zeros_like(self.flat)
         self.p, self._g = self._views(self.flat), self._views(self.flat.grad)
-        h = dict(hparams)
-        self.lr = float(h.pop("lr"))
-        self.opt = ReplicaOptimizer([self.flat], rule, **{k: v for k, v in h.items() if v is not None})
+        h = {k: v for k, v in hparams.items() if v is not None}
+        self.opt = ReplicaSteps(lambda params: make_optimizer(optimizer, params, h), self.flat)
+        self.lr = float(self.opt.opt.param_groups[0]["lr"])  # the schedule's peak: optim.lr, or the class's default
         self.spent = torch.zeros(self.R, dtype=torch.float64)  # each replica's cost so far (the lr schedule's clock)
         self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
 

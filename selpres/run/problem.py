@@ -19,6 +19,7 @@ from selpres.engines.batch import BatchEngine
 from selpres.engines.minibatch import MiniBatchEngine
 from selpres.engines.model import init_replica_params
 from selpres.engines.online import make_engine
+from selpres.engines.optim import check_hparams
 from selpres.errors import ConfigError
 from selpres.presentation.orders import priority_orders
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
@@ -26,8 +27,9 @@ from selpres.presentation.pruning import Pruning, pruning_plan
 from selpres.presentation.sampler import SelectivePresentation
 from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
 from selpres.presentation.selection import StageSelection, initial_kind, planned_charge, stage_selection
-from selpres.run.checks import batch_mode, minibatch_reason, optim_hparams, validate
+from selpres.run.checks import validate
 from selpres.run.estimate import refuse_job
+from selpres.run.optimizer import minibatch_reason, optim_spec
 from selpres.seeding import derive_seed, generator
 from selpres.storage import to_container
 
@@ -84,7 +86,7 @@ def prepare(cfg: DictConfig) -> Problem:
     schedule, note = task_schedule(cfg, task)
     # scored in torch: batch methods, the mini-batch engine (what the native kernel cannot run), torch/reference
     torch_eval = (
-        batch_mode(cfg.optim) or minibatch_reason(cfg) is not None or cfg.engine.value in ("torch", "reference")
+        optim_spec(cfg).batch or minibatch_reason(cfg) is not None or cfg.engine.value in ("torch", "reference")
     )
     largest_test = max(len(task.tests.heldout.X), len(task.tests.test10.X))
     refuse_job(cfg, sizes, schedule, task.n, largest_test, torch_eval)  # before any replica's state is made
@@ -151,7 +153,7 @@ def engine_kind(cfg: DictConfig) -> str:
     or ``online`` (the native, torch and reference engines: one update rule)."""
     if minibatch_reason(cfg) is not None:
         return "minibatch"
-    return "batch" if batch_mode(cfg.optim) else "online"
+    return "batch" if optim_spec(cfg).batch else "online"
 
 
 def kind_of(engine_name: str | None) -> str:
@@ -164,7 +166,7 @@ def job_engine(cfg: DictConfig, prob: Problem):
     Batch methods (QuickProp, Delta-Bar-Delta, Rprop, Adam, batch SGD) step once per epoch in torch."""
     from selpres.native import KernelUnavailable
 
-    o = cfg.optim
+    o = optim_spec(cfg)
     kind = engine_kind(cfg)
     if kind == "minibatch":
         reason = minibatch_reason(cfg)
@@ -172,27 +174,27 @@ def job_engine(cfg: DictConfig, prob: Problem):
         return MiniBatchEngine(
             prob.sizes,
             prob.init_params,
-            o.name.value,
-            {k: v for k, v in optim_hparams(o).items() if v is not None},
+            o.target,
+            o.params,
             o.batch_size,
             cfg.model.activation.value,
-            o.lr_schedule.value,
+            o.lr_schedule,
             prob.budget,
-            o.reduction.value,
+            o.reduction,
             fallback_reason=reason,
         )
     if kind == "batch":
         return BatchEngine(
             prob.sizes,
             prob.init_params,
-            o.name.value,
-            optim_hparams(o),
+            o.target,
+            o.params,
             sigmoid_prime_offset=o.sigmoid_prime_offset,
-            reduction=o.reduction.value,
+            reduction=o.reduction,
         )
     try:
-        momentum = 0.0 if o.momentum is None else o.momentum
-        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, o.lr, momentum, o.batch_size)
+        hp = check_hparams(o.target, o.params)  # the online rule, SGD with momentum: lr, momentum
+        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, hp["lr"], hp["momentum"], o.batch_size)
     except KernelUnavailable as exc:
         raise ConfigError(
             "engine", cfg.engine.value, f"fast, torch or reference: the native kernel cannot run here ({exc})"

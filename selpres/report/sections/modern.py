@@ -20,6 +20,7 @@ from pathlib import Path
 
 from selpres.report.compare import Options, adjust_family, outcome, paired, paired_columns, reading
 from selpres.report.context import Context, Section
+from selpres.report.families import optim_target
 from selpres.report.markdown import table
 from selpres.run.stats import summarize
 
@@ -40,7 +41,7 @@ def arm_of(cfg: dict) -> str:
 
 def regime_of(cfg: dict) -> str:
     o, act = cfg["optim"], cfg.get("model", {}).get("activation", "sigmoid")
-    name, b = o["name"], o["batch_size"]
+    name, b = optim_target(o), o["batch_size"]
     if name == "sgd" and b == 1 and act == "sigmoid" and o.get("lr_schedule", "constant") == "constant":
         return f"paper: sigmoid, online SGD (lr {o['lr']:g}, momentum {o.get('momentum') or 0:g})"
     # the rate is left out: it is chosen per arm (on a validation draw), and shown in the table's lr column
