@@ -1,8 +1,9 @@
 """The report of a study of parameters shaped like ``experiment=sensitivity``, on a synthetic sweep with
-hand-worked numbers: optimizer configs as the optimizer group writes them (``optim._target_: sgd``, and as
-results written before it did, ``optim.name: sgd`` with every other optimizer's key null), selective presentation over p, n_i, N_i and N with a budget-matched conventional
-partner at each cost, SGD over lr × momentum at 150,300 t and a Delta-Bar-Delta that is flat but bad
-everywhere. Each test fails on the report as it was before these cases were handled."""
+hand-worked numbers: optimizer configs as the optimizer group writes them (``optim._target_: sgd``; and as
+results written before it did, ``optim.name: sgd`` with every other optimizer's key null), selective
+presentation over p, n_i, N_i and N with a budget-matched conventional partner at each cost, SGD over
+lr × momentum at 150,300 t and a Delta-Bar-Delta that is flat but bad everywhere. Each test fails on the
+report as it was before these cases were handled."""
 
 from __future__ import annotations
 
