@@ -58,13 +58,13 @@ class OptimSpec:
 def optim_spec(cfg: DictConfig) -> OptimSpec:
     """``cfg.optim`` as an :class:`OptimSpec`, its keys' types checked (ConfigError naming ``optim.<key>``)."""
     o = to_container(cfg.optim)
+    if "name" in o:  # the spelling before optim._target_
+        raise ConfigError(
+            "optim.name", o["name"], f"no key: renamed, write optim._target_={o['name']} (or optim=<file>)"
+        )
     if "_target_" not in o:
-        if "name" in o:
-            raise ConfigError("optim.name", o["name"], f"optim._target_={o['name']} (or optim=<file>): renamed")
         raise ConfigError(KEY, None, OPTIMIZERS.allowed())
     target = OPTIMIZERS.check(o["_target_"])
-    if "name" in o:
-        raise ConfigError("optim.name", o["name"], "no value: the optimizer is named by optim._target_")
     b = o.get("batch_size")
     if isinstance(b, bool) or not isinstance(b, int) or b < 0:
         raise ConfigError(
