@@ -175,9 +175,7 @@ def _compose_error(compose_cfg, *ov) -> str:
     [
         ("optim.lrr=0.1", "optim.lrr"),  # unknown key
         ("robot.mass=1", "robot.mass"),
-        ("optim.lr=abc", "optim.lr"),  # wrong types
-        ("replicas=two", "replicas"),
-        ("optim.batch_size=1.5", "optim.batch_size"),
+        ("replicas=two", "replicas"),  # wrong types
         ("schedule.epochs=[1,x]", "schedule.epochs"),
         ("topology=6-99-2", "topology"),  # unknown group option
         ("schedule=zigzag", "schedule"),
@@ -212,14 +210,17 @@ def _config_error(compose_cfg, *ov) -> ConfigError:
         (["topology.layers=5-8-2"], "topology.layers", "5-8-2"),
         (["topology.layers=6-8-3"], "topology.layers", "6-8-3"),
         (["topology.layers=6"], "topology.layers", "6"),
-        (["optim.lr=0"], "optim.lr", "0.0"),
+        (["optim.lr=0"], "optim.lr", "0"),
+        (["optim.lr=abc"], "optim.lr", "abc"),  # the optim node is open: its class checks the types
+        (["optim.batch_size=1.5"], "optim.batch_size", "1.5"),
+        (["+optim.lrr=0.1"], "optim.lrr", "0.1"),  # a key sgd does not take
         (["optim.lr=-0.5"], "optim.lr", "-0.5"),
         (["optim.momentum=1.0"], "optim.momentum", "1.0"),
         (["optim.momentum=-0.1"], "optim.momentum", "-0.1"),
         (["optim.batch_size=-1"], "optim.batch_size", "-1"),
         (["optim=quickprop", "optim.batch_size=1"], "optim.batch_size", "1"),  # a batch method steps per epoch
         (["optim=quickprop", "optim.mu=-1"], "optim.mu", "-1"),
-        (["optim=quickprop", "optim.momentum=0.9"], "optim.momentum", "0.9"),  # a key quickprop does not use
+        (["optim=quickprop", "+optim.momentum=0.9"], "optim.momentum", "0.9"),  # a key quickprop does not take
         (["optim=adam", "engine=native"], "engine", "native"),  # batch mode runs in torch
         (["optim=delta_bar_delta", "optim.phi=1.5"], "optim.phi", "1.5"),
         (["replicas=0"], "replicas", "0"),

@@ -86,18 +86,21 @@ def optim_spec(cfg: DictConfig) -> OptimSpec:
     )
 
 
-def _left_by_the_group_file(target: str, params: dict) -> dict:
-    """Keys the class does not take whose values are those of the ``optim`` group file this Hydra job composed,
-    when that file names another optimizer: what ``optim._target_=torch.optim.NAdam`` leaves of ``optim=paper``
-    (momentum 0.9). Outside a Hydra job (the compose API), nothing: every key is checked."""
-    try:
-        from hydra.core.hydra_config import HydraConfig
+_group_file: str | None = None  # the optim group option of the CLI job running in this process (run_job sets it)
 
-        choice = HydraConfig.get().runtime.choices.get("optim")
-    except ValueError:
-        return {}
-    path = CONFIG_DIR / "optim" / f"{choice}.yaml"
-    if not choice or not path.is_file():
+
+def composed_from(choice: str | None) -> None:
+    """Called by the CLI for every job with Hydra's choice of the ``optim`` group (``paper``, ``adam``, ...)."""
+    global _group_file
+    _group_file = choice
+
+
+def _left_by_the_group_file(target: str, params: dict) -> dict:
+    """Keys the class does not take whose values are those of the ``optim`` group file the CLI job composed, when
+    that file names another optimizer: what ``optim._target_=torch.optim.NAdam`` leaves of ``optim=paper``
+    (momentum 0.9). Outside a CLI job (the compose API), nothing: every key is checked."""
+    path = CONFIG_DIR / "optim" / f"{_group_file}.yaml"
+    if not _group_file or not path.is_file():
         return {}
     group = OmegaConf.to_container(OmegaConf.load(path))
     if group.get("_target_") == target:
