@@ -5,7 +5,8 @@ momentum at a constant rate - and the native kernel runs nothing else. :class:`M
 they cannot, replica-batched in eager torch with a hand-written backward (checked against autograd on
 :class:`selpres.engines.model.BPN`, ``tests/test_minibatch.py``):
 
-* ``model.activation``: sigmoid, tanh, relu or silu hidden units (linear output unless sigmoid);
+* ``model.activation``: sigmoid, tanh, relu, silu or a user's own hidden units (:mod:`selpres.engines.activations`;
+  linear output unless sigmoid);
 * ``optim._target_``: any elementwise ``torch.optim`` optimizer (sgd, adam, adamw, a user's own) on mini-batches of
   ``optim.batch_size`` patterns, stepped on the replicas' stacked weights: R separate optimizers
   (:class:`selpres.engines.optim._replicas.ReplicaSteps`);
@@ -32,6 +33,7 @@ import math
 
 import torch
 
+from selpres.engines.activations import activation as units
 from selpres.engines.inputs import check_inputs, check_patterns, pruned_epoch_args, pruned_mean
 from selpres.engines.model import forward_replicas
 from selpres.engines.online import ScoredByPredict
@@ -47,28 +49,6 @@ def lr_factor(kind: str, spent: torch.Tensor, horizon: float) -> torch.Tensor:
         return torch.ones_like(spent)
     frac = (spent / max(horizon, 1e-300)).clamp(0.0, 1.0)
     return 0.5 * (1.0 + torch.cos(math.pi * frac))
-
-
-def _act(name: str, z: torch.Tensor) -> torch.Tensor:
-    if name == "sigmoid":
-        return torch.sigmoid(z)
-    if name == "tanh":
-        return torch.tanh(z)
-    if name == "relu":
-        return torch.relu(z)
-    return z * torch.sigmoid(z)  # silu
-
-
-def _act_prime(name: str, z: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
-    """d act / dz from the pre-activation z and the activation a."""
-    if name == "sigmoid":
-        return a * (1 - a)
-    if name == "tanh":
-        return 1 - a * a
-    if name == "relu":
-        return (z > 0).to(z.dtype)
-    s = torch.sigmoid(z)
-    return s * (1 + z * (1 - s))
 
 
 class MiniBatchEngine(ScoredByPredict):
@@ -96,6 +76,7 @@ class MiniBatchEngine(ScoredByPredict):
         if lr_schedule not in LR_SCHEDULES:
             raise ValueError(f"lr_schedule {lr_schedule!r}: one of {LR_SCHEDULES}")
         self.optimizer, self.batch_size, self.activation = optimizer, int(batch_size), activation
+        self.act = units(activation)  # forward(z), prime(z, a): selpres.engines.activations
         self.lr_schedule, self.horizon, self.reduction = lr_schedule, float(horizon), reduction
         self.fallback_reason = fallback_reason
         self.R = params[0].shape[0]
@@ -127,7 +108,8 @@ class MiniBatchEngine(ScoredByPredict):
         X, Y = X.to(torch.float64), Y.to(torch.float64)
         weights, counts = pruned_epoch_args(order, weights, counts)
         counts = torch.full((R,), m, dtype=torch.int64) if counts is None else counts
-        nout, B, act = self.sizes[-1], self.batch_size, self.activation
+        nout, B, act = self.sizes[-1], self.batch_size, self.act
+        squash = getattr(act, "SIGMOID_OUTPUT", False)  # the paper's net: a sigmoid output layer
         Ws, bs = self.p[0::2], self.p[1::2]
         self.last_losses = torch.full((R, m), float("nan"), dtype=torch.float64)
         total = torch.zeros(R, dtype=torch.float64)
@@ -148,7 +130,7 @@ class MiniBatchEngine(ScoredByPredict):
             for k, (W, b) in enumerate(zip(Ws, bs)):
                 z = torch.baddbmm(b.unsqueeze(1), acts[-1], W.transpose(1, 2))
                 zs.append(z)
-                acts.append(torch.sigmoid(z) if k == last and act == "sigmoid" else (z if k == last else _act(act, z)))
+                acts.append(torch.sigmoid(z) if k == last and squash else (z if k == last else act.forward(z)))
             diff = acts[-1] - Y[idx]
             loss_p = diff.square().mean(-1)  # [R, b] per-pattern mse
             if not full:
@@ -161,14 +143,14 @@ class MiniBatchEngine(ScoredByPredict):
             else:
                 scale = w
             delta = diff * scale.unsqueeze(2)  # dL/d(output)
-            if act == "sigmoid":
+            if squash:
                 delta = delta * acts[-1] * (1 - acts[-1])
             for layer in range(last, -1, -1):
                 a_prev = acts[layer]
                 self._g[2 * layer].copy_(torch.bmm(delta.transpose(1, 2), a_prev))
                 self._g[2 * layer + 1].copy_(delta.sum(dim=1))
                 if layer:
-                    delta = torch.bmm(delta, Ws[layer]) * _act_prime(act, zs[layer - 1], a_prev)
+                    delta = torch.bmm(delta, Ws[layer]) * act.prime(zs[layer - 1], a_prev)
             lr = self.lr * lr_factor(self.lr_schedule, self.spent, self.horizon)
             self.opt.step(lr=lr, active=active)
             self.spent += nb.to(torch.float64)

@@ -18,6 +18,7 @@ from omegaconf import DictConfig
 from selpres.data.paper import grid_points, heldout_count
 from selpres.data.sampled import MAX_N
 from selpres.data.task import DATA_KEYS, Shape, task_shape
+from selpres.engines.activations import activation
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.errors import ConfigError
 from selpres.run.estimate import refuse_before_task
@@ -46,6 +47,7 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
     for key, value in _walk(to_container(cfg)):
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
+    activation(cfg.model.activation)  # ConfigError naming model.activation
     check_optim(cfg)  # ConfigError naming optim.<key>
     if cfg.replicas < 1:
         raise ConfigError("replicas", cfg.replicas, "a whole number >= 1")

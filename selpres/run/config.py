@@ -27,13 +27,6 @@ class EngineName(Enum):
     torch = "torch"  # replica-batched eager PyTorch: the pure-torch fallback
 
 
-class Activation(Enum):
-    sigmoid = "sigmoid"  # the paper's BPN: sigmoid hidden and output units
-    tanh = "tanh"  # the others: these hidden units, a linear output layer (selpres.engines.minibatch)
-    relu = "relu"
-    silu = "silu"
-
-
 class Pruning(Enum):
     infobatch = "infobatch"  # Qin et al. 2024 (selpres.presentation.pruning)
     selective_backprop = "selective_backprop"  # Jiang et al. 2019
@@ -165,7 +158,8 @@ class TopologyConfig:
 
 @dataclass
 class ModelConfig:
-    activation: Activation = MISSING  # hidden units (selpres.engines.model.ACTIVATIONS)
+    # hidden units: a built-in of selpres.engines.activations (sigmoid, tanh, relu, silu) or a class by its import path
+    activation: str = MISSING
 
 
 @dataclass

@@ -121,8 +121,8 @@ def minibatch_reason(cfg: DictConfig) -> str | None:
     why = []
     if ONLINE not in spec.modes:
         why.append(f"optim._target_={spec.target}")
-    if cfg.model.activation.value != "sigmoid":
-        why.append(f"model.activation={cfg.model.activation.value}")
+    if cfg.model.activation != "sigmoid":
+        why.append(f"model.activation={cfg.model.activation}")
     if spec.lr_schedule != "constant":
         why.append(f"optim.lr_schedule={spec.lr_schedule}")
     if not why:
@@ -141,7 +141,7 @@ def check_optim(cfg: DictConfig) -> OptimSpec:
         raise ConfigError("optim.batch_size", b, f"a whole number >= 1: {spec.target} runs on mini-batches only")
     if b >= 1 and not ({ONLINE, MINIBATCH} & set(runs)):
         raise ConfigError("optim.batch_size", b, "0 (the whole epoch): a batch method")
-    act = cfg.model.activation.value
+    act = cfg.model.activation
     if spec.batch and act != "sigmoid":
         raise ConfigError("model.activation", act, "sigmoid in batch mode (optim.batch_size=0), or a mini-batch")
     if spec.batch and spec.lr_schedule != "constant":

@@ -177,7 +177,7 @@ def job_engine(cfg: DictConfig, prob: Problem):
             o.target,
             o.params,
             o.batch_size,
-            cfg.model.activation.value,
+            cfg.model.activation,
             o.lr_schedule,
             prob.budget,
             o.reduction,

@@ -299,7 +299,7 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
         "params": job.engine.params(),
         "seeds": prob.seeds,
         "topology": cfg.topology.layers,
-        "activation": cfg.model.activation.value,  # load_into(BPN(topology, activation=...), params, r)
+        "activation": cfg.model.activation,  # load_into(BPN(topology, activation=...), params, r)
         "scaler": dataclasses.asdict(prob.scaler),
         "config_hash": job.chash,
     }
