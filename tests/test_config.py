@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pytest
 from hydra.core.hydra_config import HydraConfig
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.core.override_parser.types import Glob
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
@@ -127,6 +129,10 @@ def test_experiments_are_multirun_sweeps(compose_cfg, option):
     if "BasicSweeper" not in str(cfg.hydra.sweeper.get("_target_", "")):
         return  # an Optuna search space (interval, choice): tests/test_search.py checks experiment=search
     for group, values in params.items():
+        override = OverridesParser.create().parse_overrides([f"{group}={values}"])[0]
+        if isinstance(override.value(), Glob):  # a glob over a group's options (experiment=sensitivity)
+            assert override.value().filter(_options(group)), f"experiment {option}: {group}={values} matches nothing"
+            continue
         for v in str(values).split(","):
             if (CONFIGS / group).is_dir():  # a group: its options
                 assert v in _options(group), f"experiment {option} sweeps unknown {group}={v}"
