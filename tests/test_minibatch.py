@@ -17,7 +17,7 @@ def _reference(params, r, rule, hp, activation):
     model = load_into(BPN(SIZES, activation=activation), params, r)
     lr = hp["lr"]
     if rule == "sgd":
-        opt = torch.optim.SGD(model.parameters(), lr=lr, momentum=hp["momentum"], weight_decay=hp["weight_decay"])
+        opt = torch.optim.SGD(model.parameters(), lr=lr, momentum=hp["momentum"])
     elif rule == "adam":
         opt = torch.optim.Adam(model.parameters(), lr=lr, weight_decay=hp["weight_decay"])
     else:
@@ -32,9 +32,7 @@ def test_engine_equals_autograd_with_torch_optim_per_replica(activation, rule):
     R, n, m, B = 3, 40, 11, 4
     X, Y = torch.rand(n, 6, dtype=torch.float64), torch.rand(n, 2, dtype=torch.float64)
     params = init_replica_params(SIZES, [1, 2, 3])
-    hp = {"lr": 0.05 if rule == "sgd" else 0.01, "weight_decay": 0.01}
-    if rule == "sgd":
-        hp["momentum"] = 0.9
+    hp = {"lr": 0.05, "momentum": 0.9} if rule == "sgd" else {"lr": 0.01, "weight_decay": 0.01}
     horizon = 2 * m
     eng = MiniBatchEngine(SIZES, params, rule, dict(hp), B, activation, "cosine", horizon)
     counts = torch.tensor([11, 7, 4])  # replicas present different numbers of patterns (pruning)

@@ -200,7 +200,10 @@ def test_bad_parameters_name_key_value_and_range(factory, key, value):
         ("adam", {"beta2": 1.0}, "optim.beta2"),
         ("sgd", {"momentum": 1.0}, "optim.momentum"),
         ("quickprop", {"kappa": 0.1}, "optim.kappa"),  # a key the optimizer does not use
-        ("lbfgs", {}, "optim.name"),  # an unknown optimizer
+        ("lbfgs", {}, "optim._target_"),  # an unknown optimizer
+        ("torch.optim.LBFGS", {}, "optim._target_"),  # a known one that is not elementwise
+        ("torch.optim.NAdam", {"kappa": 0.1}, "optim.kappa"),  # a key torch's class does not take
+        ("torch.optim.NAdam", {"lr": -1.0}, "optim._target_"),  # a value torch's class refuses
     ],
 )
 def test_make_optimizer_errors_carry_the_config_key(name, hparams, key):
@@ -214,6 +217,7 @@ def test_make_optimizer_maps_flat_keys_and_skips_none():
     rprop = make_optimizer(
         "rprop", p, {"lr": 0.2, "eta_minus": 0.4, "eta_plus": 1.3, "step_min": 0.0, "step_max": 9.0, "momentum": None}
     )
+    assert type(rprop).__module__ == "selpres.engines.optim.rprop"
     assert isinstance(rprop, torch.optim.Rprop)
     g = rprop.param_groups[0]
     assert (g["lr"], g["etas"], g["step_sizes"]) == (0.2, (0.4, 1.3), (0.0, 9.0))

@@ -442,9 +442,9 @@ def test_an_optimizers_own_parameters_are_left_out_of_other_optimizers_labels(tm
         d = write_job(s, "conventional", "6-4-2", res)
         d.rename(d.with_name(d.name + f",optim={optim['name']}"))
     _, _, methods = aggregate(load_jobs(s))
-    assert methods == [
-        "conventional optim.lr=0.001 optim.mu=1.75 optim.name=quickprop",
-        "conventional optim.lr=0.15 optim.momentum=0.9 optim.name=paper",
+    assert methods == [  # results written before optim._target_ named the optimizer optim.name
+        "conventional optim._target_=paper optim.lr=0.15 optim.momentum=0.9",
+        "conventional optim._target_=quickprop optim.lr=0.001 optim.mu=1.75",
     ]
 
 

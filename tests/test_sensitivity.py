@@ -119,6 +119,19 @@ def test_every_design_file_is_swept_once_and_the_job_count_is_the_documented_one
     assert design_points("glob([sel_*,matched_*])") == part
 
 
+def test_the_rivals_grid_is_the_generators_and_the_experiment_lists_no_names(tmp_path):
+    """scripts/make_sensitivity_designs.py, run again, writes exactly the rivals' files there are (no file
+    edited by hand, none missing or extra), and the experiment sweeps them by glob, not by a list of names."""
+    done = run_python("scripts/make_sensitivity_designs.py", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    made = {p.name: p.read_text() for p in tmp_path.glob("*.yaml")}
+    have = {p.name: p.read_text() for p in DESIGN.glob("*.yaml") if family(p.stem) in RIVALS}
+    assert len(made) == 120 and sorted(made) == sorted(have)
+    assert [n for n in made if made[n] != have[n]] == []
+    text = EXPERIMENT.read_text()
+    assert not [p for p in POINTS if p in text.split("hydra:")[1]], "design names listed in the experiment"
+
+
 def test_costs_worked_by_hand():
     by_hand = {
         "sel_paper": 70_560,  # Table 1: 50·30 + 100·30 + 400·30 + 800·30 + 1002·30
@@ -170,7 +183,7 @@ def test_every_rival_runs_its_whole_grid_at_the_papers_cost_and_at_the_selective
         grid: dict[int, set] = {PAPER_COST: set(), SELECTIVE_COST: set()}
         for name in (p for p in POINTS if family(p) == prefix):
             c = point(name)
-            assert c["optim"]["name"] == optim and len(c["schedule"]["sizes"]) == 1, name
+            assert c["optim"]["_target_"] == optim and len(c["schedule"]["sizes"]) == 1, name
             assert c["schedule"]["name"] == ("conventional" if stated_cost(name) == PAPER_COST else "matched")
             grid[stated_cost(name)].add(tuple(c["optim"][k] for k in SWEPT[optim]))
         assert grid[PAPER_COST] == grid[SELECTIVE_COST] and len(grid[PAPER_COST]) >= 5, prefix
@@ -216,6 +229,6 @@ def test_a_tiny_sweep_runs_end_to_end_and_reports(tmp_path):
         res = jobs[name]
         assert res["status"] == "complete" and res["seeds"] == [0, 1]
         assert res["presentations_done"] == res["schedule"]["presentations"] == stated_cost(name)
-        assert res["config"]["optim"]["name"] == point(name)["optim"]["name"]
+        assert res["config"]["optim"]["_target_"] == point(name)["optim"]["_target_"]
     report_of(sweep, tmp_path / "r")
     assert (tmp_path / "r" / "report.md").is_file()

@@ -1,7 +1,8 @@
 """Engines: the network and the ways it is trained on a presented epoch (stage 4 of arm -> data -> presentation ->
 engine -> loop -> results -> report).
 
-Owns the BPN module, topology parsing and the replica weight layout (``model``), the online-SGD engines
+Owns the BPN module, topology parsing and the replica weight layout (``model``), its hidden units
+(``activations``, one module each), the online-SGD engines
 (``online``: ``reference``, the executable definition of correct; ``torch``; ``native``, the C kernel; what
 they all take, pruned epochs included, checked in ``inputs``), mini-batch training with today's units and
 optimizers (``minibatch``: eager torch; ``native_minibatch``: the native mini-batch kernel, and which of the two a

@@ -1,13 +1,15 @@
-"""Mini-batch training of R replicas with today's units and optimizers: ReLU/SiLU/tanh nets, Adam, AdamW, SGD.
+"""Mini-batch training of R replicas with today's units and optimizers: ReLU/SiLU/tanh nets, Adam, AdamW, SGD, ...
 
 The online engines (:mod:`selpres.engines.online`) run the paper's network - sigmoid units, SGD with
 momentum at a constant rate - and the native kernel runs nothing else. :class:`MiniBatchEngine` runs what
 they cannot, replica-batched in eager torch with a hand-written backward (checked against autograd on
 :class:`selpres.engines.model.BPN`, ``tests/test_minibatch.py``):
 
-* ``model.activation``: sigmoid, tanh, relu or silu hidden units (linear output unless sigmoid);
-* ``optim.name``: sgd, adam or adamw on mini-batches of ``optim.batch_size`` patterns
-  (:class:`selpres.engines.optim.replica.ReplicaOptimizer`, per replica as torch.optim's own rules);
+* ``model.activation``: sigmoid, tanh, relu, silu or a user's own hidden units (:mod:`selpres.engines.activations`;
+  linear output unless sigmoid);
+* ``optim._target_``: any elementwise ``torch.optim`` optimizer (sgd, adam, adamw, a user's own) on mini-batches of
+  ``optim.batch_size`` patterns, stepped on the replicas' stacked weights: R separate optimizers
+  (:class:`selpres.engines.optim._replicas.ReplicaSteps`);
 * ``optim.lr_schedule``: ``constant`` or ``cosine``: lr · ½(1 + cos(π c / C)) where c is the replica's cost
   so far (presentations, forward passes charged for choosing included) and C the run's own budget, so a
   run scheduled for a smaller budget decays to zero at its own end (a compute-matched run is one scheduled
@@ -31,10 +33,12 @@ import math
 
 import torch
 
+from selpres.engines.activations import activation as units
 from selpres.engines.inputs import check_inputs, check_patterns, pruned_epoch_args, pruned_mean
 from selpres.engines.model import forward_replicas
 from selpres.engines.online import ScoredByPredict
-from selpres.engines.optim.replica import ReplicaOptimizer
+from selpres.engines.optim import make_optimizer
+from selpres.engines.optim._replicas import ReplicaSteps
 
 LR_SCHEDULES = ("constant", "cosine")
 
@@ -47,30 +51,9 @@ def lr_factor(kind: str, spent: torch.Tensor, horizon: float) -> torch.Tensor:
     return 0.5 * (1.0 + torch.cos(math.pi * frac))
 
 
-def _act(name: str, z: torch.Tensor) -> torch.Tensor:
-    if name == "sigmoid":
-        return torch.sigmoid(z)
-    if name == "tanh":
-        return torch.tanh(z)
-    if name == "relu":
-        return torch.relu(z)
-    return z * torch.sigmoid(z)  # silu
-
-
-def _act_prime(name: str, z: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
-    """d act / dz from the pre-activation z and the activation a."""
-    if name == "sigmoid":
-        return a * (1 - a)
-    if name == "tanh":
-        return 1 - a * a
-    if name == "relu":
-        return (z > 0).to(z.dtype)
-    s = torch.sigmoid(z)
-    return s * (1 + z * (1 - s))
-
-
 class MiniBatchEngine(ScoredByPredict):
-    """R replicas, mini-batches of ``batch_size``, ``rule`` in sgd/adam/adamw, ``activation`` hidden units."""
+    """R replicas, mini-batches of ``batch_size``, the optimizer ``optimizer`` (a built-in name or an import path)
+    with keyword arguments ``hparams`` (``lr`` is the schedule's peak), ``activation`` hidden units."""
 
     name = "minibatch"
 
@@ -78,7 +61,7 @@ class MiniBatchEngine(ScoredByPredict):
         self,
         sizes,
         params,
-        rule: str,
+        optimizer: str,
         hparams: dict,
         batch_size: int,
         activation: str = "sigmoid",
@@ -92,7 +75,8 @@ class MiniBatchEngine(ScoredByPredict):
             raise ValueError(f"{len(params)} parameter tensors for topology {self.sizes}")
         if lr_schedule not in LR_SCHEDULES:
             raise ValueError(f"lr_schedule {lr_schedule!r}: one of {LR_SCHEDULES}")
-        self.rule, self.batch_size, self.activation = rule, int(batch_size), activation
+        self.optimizer, self.batch_size, self.activation = optimizer, int(batch_size), activation
+        self.act = units(activation)  # forward(z), prime(z, a): selpres.engines.activations
         self.lr_schedule, self.horizon, self.reduction = lr_schedule, float(horizon), reduction
         self.fallback_reason = fallback_reason
         self.R = params[0].shape[0]
@@ -102,9 +86,9 @@ class MiniBatchEngine(ScoredByPredict):
         self.flat = torch.cat([t.detach().to(torch.float64).reshape(self.R, -1) for t in params], dim=1)
         self.flat.grad = torch.zeros_like(self.flat)
         self.p, self._g = self._views(self.flat), self._views(self.flat.grad)
-        h = dict(hparams)
-        self.lr = float(h.pop("lr"))
-        self.opt = ReplicaOptimizer([self.flat], rule, **{k: v for k, v in h.items() if v is not None})
+        h = {k: v for k, v in hparams.items() if v is not None}
+        self.opt = ReplicaSteps(lambda params: make_optimizer(optimizer, params, h), self.flat)
+        self.lr = float(self.opt.opt.param_groups[0]["lr"])  # the schedule's peak: optim.lr, or the class's default
         self.spent = torch.zeros(self.R, dtype=torch.float64)  # each replica's cost so far (the lr schedule's clock)
         self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
 
@@ -124,7 +108,8 @@ class MiniBatchEngine(ScoredByPredict):
         X, Y = X.to(torch.float64), Y.to(torch.float64)
         weights, counts = pruned_epoch_args(order, weights, counts)
         counts = torch.full((R,), m, dtype=torch.int64) if counts is None else counts
-        nout, B, act = self.sizes[-1], self.batch_size, self.activation
+        nout, B, act = self.sizes[-1], self.batch_size, self.act
+        squash = getattr(act, "SIGMOID_OUTPUT", False)  # the paper's net: a sigmoid output layer
         Ws, bs = self.p[0::2], self.p[1::2]
         self.last_losses = torch.full((R, m), float("nan"), dtype=torch.float64)
         total = torch.zeros(R, dtype=torch.float64)
@@ -145,7 +130,7 @@ class MiniBatchEngine(ScoredByPredict):
             for k, (W, b) in enumerate(zip(Ws, bs)):
                 z = torch.baddbmm(b.unsqueeze(1), acts[-1], W.transpose(1, 2))
                 zs.append(z)
-                acts.append(torch.sigmoid(z) if k == last and act == "sigmoid" else (z if k == last else _act(act, z)))
+                acts.append(torch.sigmoid(z) if k == last and squash else (z if k == last else act.forward(z)))
             diff = acts[-1] - Y[idx]
             loss_p = diff.square().mean(-1)  # [R, b] per-pattern mse
             if not full:
@@ -158,14 +143,14 @@ class MiniBatchEngine(ScoredByPredict):
             else:
                 scale = w
             delta = diff * scale.unsqueeze(2)  # dL/d(output)
-            if act == "sigmoid":
+            if squash:
                 delta = delta * acts[-1] * (1 - acts[-1])
             for layer in range(last, -1, -1):
                 a_prev = acts[layer]
                 self._g[2 * layer].copy_(torch.bmm(delta.transpose(1, 2), a_prev))
                 self._g[2 * layer + 1].copy_(delta.sum(dim=1))
                 if layer:
-                    delta = torch.bmm(delta, Ws[layer]) * _act_prime(act, zs[layer - 1], a_prev)
+                    delta = torch.bmm(delta, Ws[layer]) * act.prime(zs[layer - 1], a_prev)
             lr = self.lr * lr_factor(self.lr_schedule, self.spent, self.horizon)
             self.opt.step(lr=lr, active=active)
             self.spent += nb.to(torch.float64)

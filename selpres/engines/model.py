@@ -19,8 +19,9 @@ import math
 import re
 
 import torch
-import torch.nn.functional as F
 from torch import nn
+
+from selpres.engines.activations import activation as units
 
 _TOPOLOGY_RE = re.compile(r"^\d+(-\d+)+$")
 
@@ -49,27 +50,24 @@ def parse_topology(topology: str) -> tuple[int, ...]:
     return sizes
 
 
-ACTIVATIONS = {"sigmoid": torch.sigmoid, "tanh": torch.tanh, "relu": torch.relu, "silu": F.silu}
-
-
 class BPN(nn.Module):
     """Multilayer perceptron (sigmoid: the paper's BPN): the idiomatic ``nn.Module`` that defines correct
-    results. ``activation``: the hidden units' function (:data:`ACTIVATIONS`)."""
+    results. ``activation``: the hidden units (:data:`selpres.engines.activations.ACTIVATIONS`: a built-in name
+    or a class by its import path)."""
 
     def __init__(self, sizes: tuple[int, ...] | str, dtype: torch.dtype = torch.float64, activation: str = "sigmoid"):
         super().__init__()
-        if activation not in ACTIVATIONS:
-            raise ValueError(f"activation {activation!r}: choose one of {', '.join(ACTIVATIONS)}")
+        self.act = units(activation)  # ConfigError naming model.activation
         self.sizes = parse_topology(sizes) if isinstance(sizes, str) else tuple(sizes)
         self.activation = activation
         self.layers = nn.ModuleList(nn.Linear(i, o, dtype=dtype) for i, o in zip(self.sizes[:-1], self.sizes[1:]))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if self.activation == "sigmoid":  # the paper's net, exactly as before
+        if getattr(self.act, "SIGMOID_OUTPUT", False):  # the paper's net, exactly as before
             for layer in self.layers:
                 x = torch.sigmoid(layer(x))
             return x
-        f = ACTIVATIONS[self.activation]
+        f = self.act.forward
         for layer in self.layers[:-1]:
             x = f(layer(x))
         return self.layers[-1](x)
@@ -129,11 +127,12 @@ def _forward_block(params: list[torch.Tensor], x: torch.Tensor, activation: str 
     """Every layer is one batched product over the replicas (``x`` broadcast, not copied), then an
     in-place sigmoid: [R, N, in] -> [R, N, out] with no transposes (other activations: linear output)."""
     h = x.expand(params[0].shape[0], *x.shape)
-    if activation == "sigmoid":
+    act = units(activation)
+    if getattr(act, "SIGMOID_OUTPUT", False):
         for w, b in zip(params[0::2], params[1::2]):
             h = torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2)).sigmoid_()
         return h
-    f, last = ACTIVATIONS[activation], len(params) // 2 - 1
+    f, last = act.forward, len(params) // 2 - 1
     for k, (w, b) in enumerate(zip(params[0::2], params[1::2])):
         h = torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2))
         h = h if k == last else f(h)

@@ -5,7 +5,8 @@ set aside:
 
 - the schedule's kind: one stage = conventional training; several stages grown in the paper's stratified
   order = selective presentation; several stages in another order = staged training in that order;
-- the optimizer, ``optim.name`` (results written before optimizers could be chosen have none: the paper's
+- the optimizer, ``optim._target_`` (``optim.name`` in results written before it; none in results written
+  before optimizers could be chosen: the paper's
   SGD with momentum, "paper").
 
 One-stage families are also split by total presentations: a rival is tuned at a fixed cost (the paper's
@@ -29,15 +30,20 @@ CONVENTIONAL_SGD = "conventional SGD"
 BUDGET_MATCHED = "budget-matched"
 PAPER_ORDER = "stratified"
 SCHEDULE = "schedule."  # the keys of p, n_i, N_i (and order, budget): selective presentation's parameters
-SGD = "sgd"  # optim.name of SGD with momentum (configs/optim/paper.yaml)
-# optim.name of SGD in results written before the optimizer group: "paper", or no name at all
+SGD = "sgd"  # optim._target_ of SGD with momentum (configs/optim/paper.yaml)
+# how results written before named SGD: optim.name "paper", or no name at all
 _SGD_NAMES = (SGD, "paper", None)
 BUDGET_TOLERANCE = 0.01  # a one-stage run within 1 % of a staged run's presentations is budget-matched
 
 
+def optim_target(optim: dict) -> str | None:
+    """The optimizer a results.json config names: ``optim._target_``, or ``optim.name`` in results written before."""
+    return optim.get("_target_", optim.get("name"))
+
+
 def optimizer(g: Group) -> str:
-    """``optim.name`` of the group's jobs; SGD with momentum is "sgd" whatever name older results gave it."""
-    name = ((g.used[0].results.get("config") or {}).get("optim") or {}).get("name")
+    """The optimizer of the group's jobs; SGD with momentum is "sgd" whatever name older results gave it."""
+    name = optim_target((g.used[0].results.get("config") or {}).get("optim") or {})
     return SGD if name in _SGD_NAMES else name
 
 
@@ -270,7 +276,7 @@ def at_fixed_other_parameters(fam: Family) -> list[Family]:
 
 def _is_paper_optim(g: Group) -> bool:
     optim = (g.used[0].results.get("config") or {}).get("optim") or {}
-    return optimizer(g) == SGD and all(optim.get(k) == v for k, v in PAPER_OPTIM.items() if k != "name")
+    return optimizer(g) == SGD and all(optim.get(k) == v for k, v in PAPER_OPTIM.items() if k != "_target_")
 
 
 def paper_run(groups: dict[tuple[str, str], Group], topology: str, method: str) -> Group | None:

@@ -149,11 +149,10 @@ def settings(job: Job) -> dict[str, str]:
     partner are read from."""
     if not (job.results and "config" in job.results):
         return {}
-    return {
-        k: json.dumps(v, separators=(",", ":"))
-        for k, v in flatten(job.results["config"]).items()
-        if not k.startswith(_NOT_A_METHOD)
-    }
+    flat = flatten(job.results["config"])
+    if "optim.name" in flat and "optim._target_" not in flat:  # results written before optim._target_
+        flat["optim._target_"] = flat.pop("optim.name")
+    return {k: json.dumps(v, separators=(",", ":")) for k, v in flat.items() if not k.startswith(_NOT_A_METHOD)}
 
 
 def varying(members: list[dict[str, str]]) -> list[str]:

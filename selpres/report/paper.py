@@ -24,9 +24,9 @@ PAPER = {
     },
 }
 PAPER_UNITS_NOTE = "paper (units unstated)"
-# Note 1 of Table 1: SGD with momentum, online; what configs/optim/paper.yaml holds (optim.name "sgd";
+# Note 1 of Table 1: SGD with momentum, online; what configs/optim/paper.yaml holds (optim._target_ "sgd";
 # "paper" or none in results written before the optimizer group).
-PAPER_OPTIM = {"name": "sgd", "lr": 0.15, "momentum": 0.9, "batch_size": 1}
+PAPER_OPTIM = {"_target_": "sgd", "lr": 0.15, "momentum": 0.9, "batch_size": 1}
 
 
 def _stages(sched: dict, method: str) -> bool:

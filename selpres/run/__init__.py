@@ -2,9 +2,10 @@
 loop -> results -> report).
 
 Owns the typed config schema (``config``) and the checks a type cannot express, made before any work
-(``checks``, with the memory and time estimates of ``estimate``); one writer per job folder (``lock``) and
-sweep workers that stop with their sweep (``orphan``); SIGTERM/SIGUSR1 that stop a job with a checkpoint written
-(``stop``); what a config determines before the first update
+(``checks``, with the memory and time estimates of ``estimate``; the ``optim`` node as a plain spec and how its
+optimizer may run: ``optimizer``); one writer per job folder (``lock``) and sweep workers that stop with their
+sweep (``orphan``); SIGTERM/SIGUSR1 that stop a job with a checkpoint written (``stop``); what a config
+determines before the first update
 (``problem``: prepare, job_engine); the loop (``train``: start (resume) -> run_epoch ... -> finish);
 checkpoints and the append-only history (``checkpoint``); TensorBoard (``tracking``); results.json and a job's
 identity (``results``) with the seed statistics (``stats``) and the task's floor (``floor``); the guard that

@@ -18,14 +18,14 @@ from omegaconf import DictConfig
 from selpres.data.paper import grid_points, heldout_count
 from selpres.data.sampled import MAX_N
 from selpres.data.task import Shape, route_keys, task_shape
-from selpres.engines.batch import check_batch_options
+from selpres.engines.activations import activation
 from selpres.engines.model import TopologyError, parse_topology
-from selpres.engines.optim import HPARAM_KEYS, checked_hparams
 from selpres.errors import ConfigError
 from selpres.presentation.orders import make_order
 from selpres.presentation.pruning import REGISTRY as PRUNING
 from selpres.presentation.pruning._job import check_pruning
 from selpres.run.estimate import refuse_before_task
+from selpres.run.optimizer import check_optim
 from selpres.run.specs import plain, task_specs
 
 MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
@@ -45,62 +45,13 @@ def _walk(node, prefix=""):
         yield prefix, node
 
 
-MINIBATCH_OPTIMIZERS = ("sgd", "adam", "adamw")  # the others are batch methods (one step per epoch)
-
-
-def batch_mode(o: DictConfig) -> bool:
-    """One optimizer step per epoch (selpres.engines.batch) rather than online/mini-batch training."""
-    return o.name.value not in MINIBATCH_OPTIMIZERS or o.batch_size == 0
-
-
-def minibatch_reason(cfg: DictConfig) -> str | None:
-    """Why a job needs a mini-batch engine (the native mini-batch kernel, selpres.engines.native_minibatch, or the
-    torch one, selpres.engines.minibatch) rather than the online SGD engines (native kernel / torch / reference),
-    or None: the online kernel runs sigmoid units and SGD with momentum at a constant rate, nothing else (pruned
-    epochs too: per-replica counts, weighted patterns)."""
-    o = cfg.optim
-    if batch_mode(o):
-        return None
-    why = []
-    if o.name.value != "sgd":
-        why.append(f"optim.name={o.name.value}")
-    if cfg.model.activation.value != "sigmoid":
-        why.append(f"model.activation={cfg.model.activation.value}")
-    if o.lr_schedule.value != "constant":
-        why.append(f"optim.lr_schedule={o.lr_schedule.value}")
-    if not why:
-        return None
-    return "the native kernel runs sigmoid units and SGD at a constant rate only; this job has " + ", ".join(why)
-
-
-def optim_hparams(o: DictConfig) -> dict:
-    """The optimizer keys of ``cfg.optim`` (None = not set), as ``checked_hparams`` takes them."""
-    return {k: o[k] for k in HPARAM_KEYS}
-
-
 def validate(cfg: DictConfig) -> tuple[int, ...]:
     """Checks that need more than a type; returns the parsed topology. Raises ConfigError."""
     for key, value in _walk(plain(cfg)):
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
-    o = cfg.optim
-    checked_hparams(o.name.value, optim_hparams(o))  # ConfigError naming optim.<key>
-    check_batch_options(o.sigmoid_prime_offset, o.reduction.value)
-    if o.batch_size < 0 or (o.name.value not in MINIBATCH_OPTIMIZERS and o.batch_size != 0):
-        allowed = (
-            "0 (the whole epoch): a batch method"
-            if o.name.value not in MINIBATCH_OPTIMIZERS
-            else "0 (the whole epoch) or a whole number >= 1 (1 = online, as in the paper)"
-        )
-        raise ConfigError("optim.batch_size", o.batch_size, allowed)
-    if batch_mode(o) and cfg.model.activation.value != "sigmoid":
-        raise ConfigError(
-            "model.activation",
-            cfg.model.activation.value,
-            "sigmoid in batch mode (optim.batch_size=0), or a mini-batch",
-        )
-    if batch_mode(o) and o.lr_schedule.value != "constant":
-        raise ConfigError("optim.lr_schedule", o.lr_schedule.value, "constant in batch mode (optim.batch_size=0)")
+    activation(cfg.model.activation)  # ConfigError naming model.activation
+    spec = check_optim(cfg)  # ConfigError naming optim.<key>
     make_order(cfg.schedule.order)  # a built-in or an importable Order: ConfigError naming schedule.order
     pruning = pruning_spec(cfg.schedule)
     if pruning is not None:
@@ -114,22 +65,9 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
             epochs=epochs,
             selection_cost=s.selection_cost,
         )
-        if batch_mode(o):
+        if spec.batch:
             why = f"a mini-batch >= 1 with schedule.pruning._target_={pruning[0]}"
-            raise ConfigError("optim.batch_size", o.batch_size, why)
-    if minibatch_reason(cfg) and cfg.engine.value not in ("fast", "native", "torch"):
-        raise ConfigError(
-            "engine",
-            cfg.engine.value,
-            f"fast, native or torch: {minibatch_reason(cfg)} (the mini-batch engines: native kernel or torch)",
-        )
-    if batch_mode(o) and cfg.engine.value not in ("fast", "torch"):
-        raise ConfigError(
-            "engine",
-            cfg.engine.value,
-            f"fast or torch with optim.name={o.name.value} and "
-            f"optim.batch_size={o.batch_size}: batch mode runs replica-batched in torch",
-        )
+            raise ConfigError("optim.batch_size", cfg.optim.batch_size, why)
     if cfg.replicas < 1:
         raise ConfigError("replicas", cfg.replicas, "a whole number >= 1")
     check_seed(cfg)

@@ -34,7 +34,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from selpres.errors import ConfigError
-from selpres.run import guard, lock, orphan, stop
+from selpres.run import guard, lock, optimizer, orphan, stop
 from selpres.run.checkpoint import Checkpoints
 from selpres.run.problem import Problem, engine_kind, kind_of
 from selpres.run.results import job_hash
@@ -113,6 +113,7 @@ def run_job(cfg: DictConfig) -> float:
     hc = HydraConfig.get()
     out = Path(hc.runtime.output_dir)
     multirun = hc.mode == RunMode.MULTIRUN
+    optimizer.composed_from(hc.runtime.choices.get("optim"))  # what a _target_ given over it may leave behind
     try:
         _check_name(hc, multirun)
     except ConfigError as e:  # before the job touches its folder: remove only what this run created

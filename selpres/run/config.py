@@ -27,32 +27,6 @@ class EngineName(Enum):
     torch = "torch"  # replica-batched eager PyTorch: the pure-torch fallback
 
 
-class OptimName(Enum):
-    sgd = "sgd"  # SGD + momentum (Rumelhart et al.): online/mini-batch engines; batch_size 0 = batch mode
-    quickprop = "quickprop"  # the batch methods run in selpres.engines.batch.BatchEngine
-    delta_bar_delta = "delta_bar_delta"
-    rprop = "rprop"
-    adam = "adam"  # batch mode with batch_size 0 (configs/optim/adam.yaml); mini-batch with batch_size >= 1
-    adamw = "adamw"  # Loshchilov & Hutter 2019: decoupled weight decay (batch or mini-batch, as adam)
-
-
-class Activation(Enum):
-    sigmoid = "sigmoid"  # the paper's BPN: sigmoid hidden and output units
-    tanh = "tanh"  # the others: these hidden units, a linear output layer (selpres.engines.minibatch)
-    relu = "relu"
-    silu = "silu"
-
-
-class LrSchedule(Enum):
-    constant = "constant"
-    cosine = "cosine"  # lr * (1 + cos(pi c / C)) / 2 over the run's own budget C (presentations)
-
-
-class Reduction(Enum):
-    sum = "sum"  # the epoch's error E = ½Σe², as Fahlman and Jacobs published their rules
-    mean = "mean"  # mse_loss over the epoch, the online engines' per-pattern loss
-
-
 class ScalingMode(Enum):
     exemplar = "exemplar"
     commanded = "commanded"
@@ -139,34 +113,9 @@ class TopologyConfig:
 
 
 @dataclass
-class OptimConfig:
-    """One schema for every optimizer: a group file sets ``name`` and its own keys; the rest stay None
-    (an optimizer refuses a key it does not use, naming it)."""
-
-    name: OptimName = MISSING
-    lr: float = MISSING
-    batch_size: int = MISSING  # 1 = online (the paper); 0 = the whole epoch (batch mode)
-    momentum: Optional[float] = None  # sgd, delta_bar_delta
-    mu: Optional[float] = None  # quickprop
-    weight_decay: Optional[float] = None  # quickprop, adam
-    kappa: Optional[float] = None  # delta_bar_delta
-    phi: Optional[float] = None
-    theta: Optional[float] = None
-    eta_minus: Optional[float] = None  # rprop
-    eta_plus: Optional[float] = None
-    step_min: Optional[float] = None
-    step_max: Optional[float] = None
-    beta1: Optional[float] = None  # adam
-    beta2: Optional[float] = None
-    eps: Optional[float] = None
-    sigmoid_prime_offset: float = 0.0  # batch mode: added to σ' in the backward pass (Fahlman: 0.1)
-    reduction: Reduction = Reduction.sum  # batch mode: the epoch's error, summed or mean
-    lr_schedule: LrSchedule = LrSchedule.constant  # mini-batch engine: constant, or cosine over the run's budget
-
-
-@dataclass
 class ModelConfig:
-    activation: Activation = MISSING  # hidden units (selpres.engines.model.ACTIVATIONS)
+    # hidden units: a built-in of selpres.engines.activations (sigmoid, tanh, relu, silu) or a class by its import path
+    activation: str = MISSING
 
 
 @dataclass
@@ -196,7 +145,15 @@ class TrainConfig:
     data: DataConfig = field(default_factory=DataConfig)
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
     topology: TopologyConfig = field(default_factory=TopologyConfig)
-    optim: OptimConfig = field(default_factory=OptimConfig)
+    # open: ``_target_`` (selpres.engines.optim.OPTIMIZERS: a built-in or an import path) and the optimizer's own
+    # keyword arguments, which its class checks (selpres.run.optimizer); these keys say how the engines run it
+    optim: Dict[str, Any] = field(
+        default_factory=lambda: {
+            "sigmoid_prime_offset": 0.0,  # batch mode: added to σ' in the backward pass (Fahlman: 0.1)
+            "reduction": "sum",  # batch mode: the epoch's error, summed (Rumelhart's ½Σe²) or mean (mse_loss)
+            "lr_schedule": "constant",  # mini-batch: constant, or lr (1 + cos(π c / C)) / 2 over the run's budget C
+        }
+    )
     model: ModelConfig = field(default_factory=ModelConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)

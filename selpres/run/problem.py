@@ -20,7 +20,7 @@ from selpres.engines.model import init_replica_params
 from selpres.engines.native_minibatch import NAME as NATIVE_MINIBATCH
 from selpres.engines.native_minibatch import make_minibatch_engine
 from selpres.engines.online import make_engine
-from selpres.engines.optim import checked_hparams
+from selpres.engines.optim import check_hparams, with_defaults
 from selpres.errors import ConfigError
 from selpres.presentation.orders import make_order
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
@@ -28,8 +28,9 @@ from selpres.presentation.pruning._job import Pruning, pruning_plan
 from selpres.presentation.sampler import SelectivePresentation
 from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
 from selpres.presentation.selection import StageSelection, stage_selection
-from selpres.run.checks import batch_mode, minibatch_reason, optim_hparams, pruning_spec, validate
+from selpres.run.checks import pruning_spec, validate
 from selpres.run.estimate import refuse_job
+from selpres.run.optimizer import minibatch_reason, optim_spec
 from selpres.run.specs import plain, task_specs
 from selpres.seeding import derive_seed, generator
 
@@ -86,7 +87,7 @@ def prepare(cfg: DictConfig) -> Problem:
     schedule, note = task_schedule(cfg, task)
     # scored in torch: batch methods, the mini-batch engine (what the native kernel cannot run), torch/reference
     torch_eval = (
-        batch_mode(cfg.optim) or minibatch_reason(cfg) is not None or cfg.engine.value in ("torch", "reference")
+        optim_spec(cfg).batch or minibatch_reason(cfg) is not None or cfg.engine.value in ("torch", "reference")
     )
     largest_test = max(len(task.tests.heldout.X), len(task.tests.test10.X))
     refuse_job(cfg, sizes, schedule, task.n, largest_test, torch_eval)  # before any replica's state is made
@@ -153,7 +154,7 @@ def engine_kind(cfg: DictConfig) -> str:
     or ``online`` (the native, torch and reference engines: one update rule)."""
     if minibatch_reason(cfg) is not None:
         return "minibatch"
-    return "batch" if batch_mode(cfg.optim) else "online"
+    return "batch" if optim_spec(cfg).batch else "online"
 
 
 def kind_of(engine_name: str | None) -> str:
@@ -168,7 +169,7 @@ def job_engine(cfg: DictConfig, prob: Problem):
     Batch methods (QuickProp, Delta-Bar-Delta, Rprop, Adam, batch SGD) step once per epoch in torch."""
     from selpres.native import KernelUnavailable
 
-    o = cfg.optim
+    o = optim_spec(cfg)
     kind = engine_kind(cfg)
     if kind == "minibatch":  # the native mini-batch kernel (fast, native) or the torch mini-batch engine (torch)
         log.info("engine %s runs a mini-batch engine: %s", cfg.engine.value, minibatch_reason(cfg))
@@ -177,13 +178,13 @@ def job_engine(cfg: DictConfig, prob: Problem):
                 cfg.engine.value,
                 prob.sizes,
                 prob.init_params,
-                o.name.value,
-                checked_hparams(o.name.value, optim_hparams(o)),  # the registry's defaults for unset keys, for both
+                o.target,
+                with_defaults(o.target, o.params),  # the optimizer's defaults for unset keys, for both engines
                 o.batch_size,
-                cfg.model.activation.value,
-                o.lr_schedule.value,
+                cfg.model.activation,
+                o.lr_schedule,
                 prob.budget,
-                o.reduction.value,
+                o.reduction,
             )
         except KernelUnavailable as exc:
             raise ConfigError(
@@ -193,14 +194,14 @@ def job_engine(cfg: DictConfig, prob: Problem):
         return BatchEngine(
             prob.sizes,
             prob.init_params,
-            o.name.value,
-            optim_hparams(o),
+            o.target,
+            o.params,
             sigmoid_prime_offset=o.sigmoid_prime_offset,
-            reduction=o.reduction.value,
+            reduction=o.reduction,
         )
     try:
-        momentum = 0.0 if o.momentum is None else o.momentum
-        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, o.lr, momentum, o.batch_size)
+        hp = check_hparams(o.target, o.params)  # the online rule, SGD with momentum: lr, momentum
+        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, hp["lr"], hp["momentum"], o.batch_size)
     except KernelUnavailable as exc:
         raise ConfigError(
             "engine", cfg.engine.value, f"fast, torch or reference: the native kernel cannot run here ({exc})"

@@ -20,6 +20,7 @@ from selpres.data.task import task_files
 from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.sampler import shuffle_implementation
 from selpres.run import floor
+from selpres.run.optimizer import optim_spec
 from selpres.run.specs import plain, task_specs
 from selpres.run.stats import summarize
 from selpres.storage import stable_hash
@@ -104,6 +105,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
     train_Y = prob.task.exemplar.Y if prob.task is not None else prob.scaler.inverse_y(prob.Y)
     task_floor = floor.task_floor(train_Y, prob.tests)
     stats = summary(reps)
+    spec = optim_spec(cfg)
     pruning = prob.pruning.describe() if getattr(prob, "pruning", None) is not None else None
     order = {"order": cfg.schedule.order, "order_class": ORDERS.path_of(cfg.schedule.order)}  # the class that ran
     schedule = {"name": cfg.schedule.name, **order, **prob.schedule.describe()}
@@ -118,6 +120,8 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "pruning": pruning,  # infobatch / selective_backprop: parameters, per-replica cost, patterns left out
         "topology": cfg.topology.layers,
         "engine": engine.name,  # what ran
+        "optimizer": spec.path,  # the class whose rule ran (selpres.engines.optim, or the user's own)
+        "optimizer_dropped": spec.dropped or None,  # keys of the optim group file the chosen class does not take
         "engine_requested": cfg.engine.value,
         "engine_fallback": engine.fallback_reason,  # why "fast" did not run natively (None if it did)
         "evaluation": engine.evaluation,  # e.g. "native, 8 lanes (AVX-512)": the same numbers, not the same speed

@@ -301,7 +301,7 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
         "params": job.engine.params(),
         "seeds": prob.seeds,
         "topology": cfg.topology.layers,
-        "activation": cfg.model.activation.value,  # load_into(BPN(topology, activation=...), params, r)
+        "activation": cfg.model.activation,  # load_into(BPN(topology, activation=...), params, r)
         "scaler": dataclasses.asdict(prob.scaler),
         "config_hash": job.chash,
     }
@@ -312,9 +312,9 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
         "topology": cfg.topology.layers,
         "seed": cfg.seed,
         "replicas": len(prob.seeds),
-        "optim": cfg.optim.name.value,
-        "lr": cfg.optim.lr,
-        "momentum": cfg.optim.momentum,
+        "optim": cfg.optim._target_,
+        "lr": cfg.optim.get("lr"),
+        "momentum": cfg.optim.get("momentum"),
         "batch_size": cfg.optim.batch_size,
         "sizes": str(prob.schedule.sizes),
         "epochs": str(prob.schedule.epochs),

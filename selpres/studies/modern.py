@@ -24,6 +24,7 @@ from omegaconf import OmegaConf
 
 from selpres.report.compare import Options, adjust_family, outcome, paired, paired_columns, reading
 from selpres.report.context import Context, Section
+from selpres.report.families import optim_target
 from selpres.report.markdown import table
 from selpres.run.stats import summarize
 
@@ -69,15 +70,9 @@ def arm_of(cfg: dict, design: Design = DESIGN) -> str:
     return design.arms.get(str(key), str(key))
 
 
-def optimizer_of(o: dict) -> str:
-    """The optimizer's name as the config gave it: its registry name or import path (``_target_``), or the
-    older ``name``."""
-    return str(o.get("_target_") or o.get("name"))
-
-
 def regime_of(cfg: dict, design: Design = DESIGN) -> str:
     o, act = cfg["optim"], cfg.get("model", {}).get("activation", "sigmoid")
-    name, b = optimizer_of(o), o["batch_size"]
+    name, b = optim_target(o), o["batch_size"]
     if name == "sgd" and b == 1 and act == "sigmoid" and o.get("lr_schedule", "constant") == "constant":
         return f"paper: sigmoid, online SGD (lr {o['lr']:g}, momentum {o.get('momentum') or 0:g})"
     # the rate is left out: it is chosen per arm (on a validation draw), and shown in the table's lr column

@@ -29,7 +29,7 @@ from selpres.studies._sensitivity import FAMILY, FIXED, PAPER_TOTAL, TOLERANCE, 
 NOTE = (
     "A *family* is one method with its parameters swept (see `selpres/report/families.py`): the schedule's "
     "kind (one stage = conventional; several stages in the stratified order = selective presentation) and "
-    "the optimizer (`optim.name`); one-stage families are split by their cost, except conventional training "
+    "the optimizer (`optim._target_`); one-stage families are split by their cost, except conventional training "
     "stopped at each staged run's cost, which is one family (*budget-matched*). A *setting* is one swept "
     "point; its error is the mean final held-out RMS (Nm) over its complete seeds. Best, median and worst "
     "are over the family's settings; *within 10 %* counts the settings whose mean is at most 1.1 × the "

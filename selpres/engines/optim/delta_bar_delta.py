@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import torch
 
-from selpres.engines.optim._base import PerWeightOptimizer, require
+from selpres.engines.optim._base import BATCH, PerWeightOptimizer, require
 
 
 class DeltaBarDelta(PerWeightOptimizer):
@@ -39,6 +39,8 @@ class DeltaBarDelta(PerWeightOptimizer):
     theta 0.7), for summed errors of small problems; ``configs/optim/delta_bar_delta.yaml`` holds the
     values for this project's problem.
     """
+
+    MODES = (BATCH,)  # a batch method: one step per epoch on the epoch's gradient
 
     def __init__(self, params, **hparams):
         super().__init__(params, self.hparams(**hparams))
@@ -72,3 +74,6 @@ class DeltaBarDelta(PerWeightOptimizer):
             step.add_(state["prev_step"], alpha=group["momentum"])
         p.add_(step)
         state["prev_step"] = step
+
+
+OPTIMIZER = DeltaBarDelta

@@ -33,14 +33,14 @@ the slopes over all training patterns before ``UPDATE_WEIGHTS``); whether that e
 mean is the engine's choice (:class:`selpres.engines.batch.BatchEngine`, ``reduction``); ``lr`` and
 ``weight_decay`` are on that scale. Not included: Fahlman's "split epsilon" (lr divided by the unit's
 fan-in) and his atanh error function, options of his program rather than of the update rule; the
-sigmoid-prime offset is a change of the backward pass, :func:`selpres.engines.optim.offset_sigmoid`.
+sigmoid-prime offset is a change of the backward pass, :func:`selpres.engines.optim._offset.offset_sigmoid`.
 """
 
 from __future__ import annotations
 
 import torch
 
-from selpres.engines.optim._base import PerWeightOptimizer, require
+from selpres.engines.optim._base import BATCH, PerWeightOptimizer, require
 
 
 class QuickProp(PerWeightOptimizer):
@@ -49,6 +49,8 @@ class QuickProp(PerWeightOptimizer):
     ``lr`` is Fahlman's epsilon, ``mu`` the maximum growth factor, ``weight_decay`` the decay term
     folded into the slope. State per weight: ``prev_step`` (dw(t-1)) and ``prev_slope`` (S(t-1)).
     """
+
+    MODES = (BATCH,)  # a batch method: one step per epoch on the epoch's gradient
 
     def __init__(self, params, **hparams):
         super().__init__(params, self.hparams(**hparams))
@@ -85,3 +87,6 @@ def _quickprop_step(s, s_prev, dw, lr, mu, shrink):
     secant = torch.where(denom != 0, s / torch.where(denom != 0, denom, 1.0) * dw, 0.0)
     jump = torch.where(at_max, mu * dw, secant)
     return torch.where(with_gradient, -lr * s, 0.0) + torch.where(moved, jump, 0.0)
+
+
+OPTIMIZER = QuickProp
