@@ -127,6 +127,5 @@ def test_the_name_lists_stay_light(package):
     sees it. (``selection`` names the sampler for its types only, so a job's pruning or selection is no path.)"""
     init = REPO / (package.replace(".", "/") + "/__init__.py")
     heavy = init.read_text() + "\n\ndef samplers():\n    from selpres.presentation.sampler import epoch_orders\n"
-    assert circles(REPO / "selpres", {package: heavy}) == [
-        sorted([package, "selpres.presentation.arguments", "selpres.presentation.sampler"])
-    ]
+    (found,) = circles(REPO / "selpres", {package: heavy})  # one circle, through the sampler's own helpers too
+    assert {package, "selpres.presentation.arguments", "selpres.presentation.sampler"} <= set(found)

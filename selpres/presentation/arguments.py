@@ -132,7 +132,7 @@ def order_of(order, X, n: int, seed: int, strata_bins: int) -> tuple[torch.Tenso
         if order not in fixed_orders():  # the stage-wise orders choose A_k in the CLI's loop, with the network
             raise ValueError(
                 f"order={order!r}: expected one of {', '.join(fixed_orders())}, or a permutation of range(n); the "
-                "other orders choose with the network, in the CLI's loop (python train.py schedule.order=...)"
+                "other orders choose with the network, in the CLI's loop (python train.py with that order)"
             )
         if order != "random" and X is None:
             raise TypeError(f"order={order!r} needs the inputs X (it groups or spreads patterns by them)")
