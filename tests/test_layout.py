@@ -17,9 +17,7 @@ ROOMS = ("arms", "data", "presentation", "engines", "run", "report", "studies", 
 MAX_LINES = 450
 # Rooms that get specs, not configs (issue 25): only selpres.run reads the composed config, so these import neither
 # omegaconf nor hydra (nor a selpres.run enum: the flow check above refuses any import of run).
-SPEC_ROOMS = ("arms", "data")
-# TO EXTEND AFTER MERGING issue 25: rooms other helpers are still converting to specs; move each into SPEC_ROOMS
-SPEC_ROOMS_PENDING = ("presentation", "engines", "native")
+SPEC_ROOMS = ("arms", "data", "presentation", "engines", "native")
 CONFIG_PACKAGES = ("omegaconf", "hydra")
 
 
