@@ -84,9 +84,12 @@ class BatchEngine(ScoredByPredict):
         self.p = [t.detach().to(torch.float64).clone().contiguous().requires_grad_(True) for t in params]
         self.opt = make_optimizer(optimizer, self.p, hparams)
 
-    def train_epoch(self, X, Y, order):
+    def train_epoch(self, X, Y, order, weights=None, counts=None, spent=None):
         """One step per replica on the gradient of its error over ``order[r]``; returns the [R] mean
-        per-pattern loss (``mse_loss`` per pattern) before the step."""
+        per-pattern loss (``mse_loss`` per pattern) before the step. A batch method presents all of A_i at a
+        constant rate: no counts or weights (the checks refuse a pruning schedule in batch mode)."""
+        if weights is not None or counts is not None:
+            raise ValueError("batch mode presents all of order[r]: no weights or counts")
         check_inputs(self.sizes, X, Y, order, self.R)
         R, m = order.shape
         if m == 0:

@@ -101,9 +101,12 @@ class MiniBatchEngine(ScoredByPredict):
         return out
 
     @torch.no_grad()
-    def train_epoch(self, X, Y, order, weights=None, counts=None):
-        """Mini-batches over ``order[r, :counts[r]]``; returns the [R] mean pre-update pattern loss."""
+    def train_epoch(self, X, Y, order, weights=None, counts=None, spent=None):
+        """Mini-batches over ``order[r, :counts[r]]``; returns the [R] mean pre-update pattern loss. ``spent``: each
+        replica's cost so far, the rate schedule's clock (None: the engine's own count, e.g. from a checkpoint)."""
         check_inputs(self.sizes, X, Y, order, self.R)
+        if spent is not None:
+            self.spent.copy_(torch.as_tensor(spent, dtype=torch.float64).expand_as(self.spent))
         R, m = order.shape
         X, Y = X.to(torch.float64), Y.to(torch.float64)
         weights, counts = pruned_epoch_args(order, weights, counts)

@@ -111,9 +111,12 @@ class NativeMiniBatchEngine(MiniBatchEngine):
         self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
         self._staged = None  # a large set's rows for the kernel (selpres.native.staging), kept between epochs
 
-    def train_epoch(self, X, Y, order, weights=None, counts=None):
-        """Mini-batches over ``order[r, :counts[r]]``; returns the [R] mean pre-update pattern loss."""
+    def train_epoch(self, X, Y, order, weights=None, counts=None, spent=None):
+        """Mini-batches over ``order[r, :counts[r]]``; returns the [R] mean pre-update pattern loss. ``spent``: each
+        replica's cost so far, the rate schedule's clock (None: the engine's own count, e.g. from a checkpoint)."""
         check_inputs(self.sizes, X, Y, order, self.R)
+        if spent is not None:
+            self.spent.copy_(torch.as_tensor(spent, dtype=torch.float64).expand_as(self.spent))
         R, m = order.shape
         weights, counts = pruned_epoch_args(order, weights, counts)
         self._staged = stage(self._staged, X, Y)

@@ -78,7 +78,11 @@ class Engine(Protocol):
     fallback_reason: str | None
     evaluation: str  # what runs the forward passes of scoring (native: its vector width), for results.json
 
-    def train_epoch(self, X: torch.Tensor, Y: torch.Tensor, order: torch.Tensor) -> torch.Tensor: ...
+    def train_epoch(self, X, Y, order, weights=None, counts=None, spent=None) -> torch.Tensor:
+        """The one epoch call: replica r presents ``order[r, :counts[r]]`` (all of ``order[r]`` without counts), each
+        pattern's loss weighted by ``weights`` (1 without), at its rate for the cost ``spent[r]`` it has already
+        spent (an engine whose rate follows a schedule; a constant rate ignores it). Returns each replica's mean
+        loss; a pruned epoch's per-pattern losses are left in ``last_losses``. ReferenceEngine defines it."""
 
     def predict(self, X: torch.Tensor) -> torch.Tensor: ...
 
@@ -130,7 +134,7 @@ class ReferenceEngine(ScoredByPredict):
         self.optimizers = [torch.optim.SGD(m.parameters(), lr=lr, momentum=momentum) for m in self.models]
         self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
 
-    def train_epoch(self, X, Y, order, weights=None, counts=None):
+    def train_epoch(self, X, Y, order, weights=None, counts=None, spent=None):  # spent: a constant rate's, unused
         check_inputs(self.sizes, X, Y, order, self.R)
         m = order.shape[1]
         weights, counts = pruned_epoch_args(order, weights, counts)
@@ -206,7 +210,7 @@ class TorchEngine(ScoredByPredict):
         self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
 
     @torch.no_grad()
-    def train_epoch(self, X, Y, order, weights=None, counts=None):
+    def train_epoch(self, X, Y, order, weights=None, counts=None, spent=None):  # spent: a constant rate's, unused
         check_inputs(self.sizes, X, Y, order, self.R)
         R, m = order.shape
         weights, counts = pruned_epoch_args(order, weights, counts)
@@ -332,7 +336,7 @@ class NativeEngine:
             k += n
         return out
 
-    def train_epoch(self, X, Y, order, weights=None, counts=None):
+    def train_epoch(self, X, Y, order, weights=None, counts=None, spent=None):  # spent: a constant rate's, unused
         check_inputs(self.sizes, X, Y, order, self.R)
         m = order.shape[1]
         weights, counts = pruned_epoch_args(order, weights, counts)

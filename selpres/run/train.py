@@ -23,7 +23,6 @@ import torch
 from omegaconf import DictConfig
 
 from selpres.data import paper as D
-from selpres.engines.minibatch import MiniBatchEngine
 from selpres.presentation.sampler import epoch_orders, shuffle_implementation
 from selpres.presentation.schedule import EpochPlan
 from selpres.run import floor, lock, orphan, stop
@@ -199,9 +198,10 @@ def record(job: Job, rec: dict) -> None:
 
 
 def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
-    """One epoch: (at a stage start of a stage-wise order) the choice of A_i, every replica's shuffle of its
-    current A_i, the engine's updates, then scoring."""
-    prob, progress = job.prob, job.progress
+    """One epoch, of every schedule: (at a stage start of a stage-wise order) the choice of A_i, every replica's
+    shuffle of its current A_i, (a pruning policy, selpres.presentation.pruning) the patterns each replica presents
+    and their weights, the engine's one epoch call, then the costs and scoring."""
+    prob, progress, pr = job.prob, job.progress, job.prob.pruning
     if prob.selection is not None:
         with clock("select"):
             prob.selection.begin_epoch(ep, job.engine, progress)
@@ -209,38 +209,25 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
         for s in prob.samplers:
             s.set_epoch(ep.index)
         order = epoch_orders(prob.samplers, job.orders_buffer)
-    if prob.pruning is not None:
-        return run_pruned_epoch(job, ep, order, clock)
-    if isinstance(job.engine, MiniBatchEngine):  # its lr schedule's clock: the job's cost so far
-        job.engine.spent.fill_(progress.presentations)
+    weights = counts = None
+    spent = float(progress.presentations)  # the job's cost so far: a rate schedule's clock
+    if pr is not None:
+        with clock("select"):
+            choice = pr.choose(ep.index, order, job.engine, prob.X, prob.Y)
+        order, weights, counts, spent = choice.order, choice.weights, choice.counts, pr.spent
     with clock("train"):
-        loss = job.engine.train_epoch(prob.X, prob.Y, order)
-    progress.epoch, progress.presentations = ep.index + 1, progress.presentations + ep.presentations
-    with clock("eval"):
-        mark_diverged(progress, job.engine, loss, ep.index)
-        rec = curve_point(job.engine, prob, job.cadence, ep, loss, progress)
-    with clock("log"):
-        record(job, rec)
-    return rec
-
-
-def run_pruned_epoch(job: Job, ep: EpochPlan, order: torch.Tensor, clock: Clock) -> dict:
-    """An epoch of a data-pruning schedule (selpres.presentation.pruning): the patterns each replica presents
-    (and their weights) chosen from its shuffle of U, the updates, the costs (mean over replicas on the curve)."""
-    prob, progress, pr = job.prob, job.progress, job.prob.pruning
-    with clock("select"):
-        choice = pr.choose(ep.index, order, job.engine, prob.X, prob.Y)
-    if isinstance(job.engine, MiniBatchEngine):  # its lr schedule's clock (the online engines' rate is constant)
-        job.engine.spent.copy_(pr.spent)
-    with clock("train"):
-        loss = job.engine.train_epoch(prob.X, prob.Y, choice.order, weights=choice.weights, counts=choice.counts)
-    pr.finish(choice, job.engine.last_losses)
+        loss = job.engine.train_epoch(prob.X, prob.Y, order, weights=weights, counts=counts, spent=spent)
     progress.epoch = ep.index + 1
-    # whole presentations on the curve, as for every schedule (each replica's exact cost: results' pruning)
-    progress.presentations = round(float(pr.spent.mean()))
-    progress.selection_presentations = round(float(pr.charged.mean()))
+    if pr is None:
+        progress.presentations += ep.presentations
+    else:
+        pr.finish(choice, job.engine.last_losses)
+        # whole presentations on the curve, as for every schedule (each replica's exact cost: results' pruning)
+        progress.presentations = round(float(pr.spent.mean()))
+        progress.selection_presentations = round(float(pr.charged.mean()))
     with clock("eval"):
-        mark_diverged(progress, job.engine, torch.nan_to_num(loss, nan=0.0), ep.index)
+        # a replica that presented nothing this epoch (its budget spent) has a NaN loss, not a diverged one
+        mark_diverged(progress, job.engine, loss if pr is None else torch.nan_to_num(loss, nan=0.0), ep.index)
         rec = curve_point(job.engine, prob, job.cadence, ep, loss, progress)
     with clock("log"):
         record(job, rec)
