@@ -1,4 +1,6 @@
-"""Writes the rivals' grid of experiment=sensitivity: selpres/configs/design/{sgd,qp,dbd,adam,rprop}_*.yaml.
+"""Writes every design point of experiment=sensitivity into selpres/configs/design/: selective presentation one
+factor at a time around the paper's schedule with its budget-matched partners ({sel,matched}_*.yaml), and the
+rivals' grids ({sgd,qp,dbd,adam,rprop}_*.yaml).
 
 Each rival optimizer is run over a Cartesian grid of its critical parameters (the ranges and their sources:
 configs/experiment/sensitivity.yaml's comment) at two costs: the paper's (c150300: 150 epochs of n = 1002,
@@ -56,9 +58,79 @@ PAPER_SGD = {  # the paper's own setting (Note 1 of Table 1) at each cost
 }
 
 
+N, N1, EPOCHS = 1002, 50, 150  # the paper's n, n1 and sum N_i
+PAPER_SIZES = [50, 100, 400, 800, 1002]
+# name -> (what the first line says, n_i, N_i); a second comment line where one is given
+SELECTIVE = {
+    "N_300": ("total epochs N = 300 (N_i = 60), the paper's n_i", PAPER_SIZES, [60] * 5),
+    "N_75": ("total epochs N = 75 (N_i = 15), the paper's n_i", PAPER_SIZES, [15] * 5),
+    "Ni_decreasing": ("N_i decreasing 50,40,30,20,10 (sum 150), the paper's n_i", PAPER_SIZES, [50, 40, 30, 20, 10]),
+    "Ni_increasing": ("N_i increasing 10,20,30,40,50 (sum 150), the paper's n_i", PAPER_SIZES, [10, 20, 30, 40, 50]),
+    "growth_linear": (
+        "linear growth of n_i from n1 = 50 (equal increments), N_i = 30",
+        [N1 + k * (N - N1) // 4 for k in range(5)],
+        [30] * 5,
+    ),
+    **{
+        f"n1_{n1}": (f"n1 = {n1}, the paper's other n_i and N_i", [n1, *PAPER_SIZES[1:]], [30] * 5)
+        for n1 in (10, 25, 75)
+    },
+    "paper": (
+        "the paper's schedule (Table 1): p = 4, n_i = 50,100,400,800,1002, N_i = 30",
+        PAPER_SIZES,
+        [30] * 5,
+    ),
+}
+GEOMETRIC_NOTE = {4: "(also the growth factor's geometric level)."}
+
+
+def geometric(p: int) -> tuple[list[int], list[int]]:
+    """p + 1 stages, n_i geometric from n1 to n (rounded), N_i equal with sum N_i = 150 (the remainder last)."""
+    sizes = [round(N1 * (N / N1) ** (i / p)) for i in range(p + 1)]
+    base, extra = divmod(EPOCHS, p + 1)
+    return sizes, [base + (i >= p + 1 - extra) for i in range(p + 1)]
+
+
+def selective() -> dict[str, str]:
+    """sel_<name>.yaml and, for each cost, its budget-matched partner matched_<cost>.yaml."""
+    out, partners = {}, {}
+    points = {
+        f"p{p}": (f"p = {p}: n_i geometric from n1 = 50 to n, N_i equal with sum N_i = 150", *geometric(p))
+        for p in range(1, 7)
+    }
+    for name, (what, sizes, epochs) in sorted({**SELECTIVE, **points}.items()):
+        cost = sum(n * e for n, e in zip(sizes, epochs))
+        note = GEOMETRIC_NOTE.get(len(sizes) - 1) if name in points else None
+        first = f"# Selective presentation, {what}" + ("" if note else ".")
+        lines = ["# @package _global_", first, *([f"# {note}"] if note else []), f"# cost: {cost:,} presentations"]
+        lines += ["defaults:", "  - override /schedule: selective", "schedule:", f"  sizes: {sizes}".replace("'", "")]
+        out[f"sel_{name}.yaml"] = "\n".join([*lines, f"  epochs: {epochs}", ""])
+        if name != "paper":  # the paper's partner is sgd_c70560_lr0.15_m0.9 (Table 1's matched run)
+            partners.setdefault(cost, []).append(f"sel_{name}")
+    for cost, names in partners.items():
+        out[f"matched_{cost}.yaml"] = "\n".join(
+            [
+                "# @package _global_",
+                f"# Conventional training (online SGD, lr 0.15, momentum 0.9) stopped at {cost:,} presentations:",
+                f"# the budget-matched partner of {', '.join(sorted(names, key=_partner_order))}.",
+                f"# cost: {cost:,} presentations",
+                "defaults:",
+                "  - override /schedule: matched",
+                "schedule:",
+                f"  budget: {cost}",
+                "",
+            ]
+        )
+    return out
+
+
+def _partner_order(name: str) -> tuple[int, str]:
+    return (0 if name.startswith("sel_p") else 1, name)
+
+
 def designs() -> dict[str, str]:
-    """file name -> contents, for every rival, setting and cost."""
-    out = {}
+    """file name -> contents, for every selective point and partner, and every rival, setting and cost."""
+    out = selective()
     for prefix, (group, rule, params) in RIVALS.items():
         for cost, (schedule, where) in COSTS.items():
             for values in itertools.product(*(vals for _, _, vals in params)):
@@ -77,7 +149,8 @@ def designs() -> dict[str, str]:
 def main(out: Path = OUT) -> None:
     out.mkdir(parents=True, exist_ok=True)
     files = designs()
-    stale = [p.name for p in out.glob("*.yaml") if p.name.split("_")[0] in RIVALS and p.name not in files]
+    ours = (*RIVALS, "sel", "matched")
+    stale = [p.name for p in out.glob("*.yaml") if p.name.split("_")[0] in ours and p.name not in files]
     for name in stale:  # a setting taken out of a range above
         (out / name).unlink()
     for name, text in files.items():

@@ -247,5 +247,5 @@ def test_a_csv_with_a_byte_order_mark_reads_as_the_same_text(sarcos, tmp_path, c
     bom.write_bytes(b"\xef\xbb\xbf" + comments.encode() + text)
     assert bom.read_bytes()[:3] == b"\xef\xbb\xbf" and not text.startswith(b"\xef\xbb\xbf")
     assert torch.equal(load_columns(bom, ["q1", "tau7"]), load_columns(sarcos, ["q1", "tau7"]))
-    a, b = load_task(file_cfg(bom).robot, file_cfg(bom).data), load_task(file_cfg(sarcos).robot, file_cfg(sarcos).data)
+    a, b = load_task(*task_specs(file_cfg(bom))), load_task(*task_specs(file_cfg(sarcos)))
     assert torch.equal(a.exemplar.X, b.exemplar.X) and torch.equal(a.tests.heldout.Y, b.tests.heldout.Y)

@@ -16,7 +16,7 @@ SCRIPTS = sorted((REPO / "scripts").glob("make_*_designs.py"))
 
 def test_the_known_grids_have_their_generators():
     names = {p.stem for p in SCRIPTS}
-    assert {"make_modern_designs", "make_selection_designs"} <= names
+    assert {"make_modern_designs", "make_selection_designs", "make_sensitivity_designs"} <= names
 
 
 @pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.stem)

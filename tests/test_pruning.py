@@ -110,16 +110,21 @@ def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
         assert all(c == 0 for c in pr["charged_presentations"]) and all(x > 0 for x in pr["left_out"])
 
 
-def test_a_finished_job_of_another_update_is_run_again(tmp_path, caplog):
+def test_a_finished_job_of_another_update_is_run_again(tmp_path, caplog, monkeypatch):
     """A paper-regime pruning job finished on the mini-batch engine (before issue 22 moved it to the online
-    engines) is not taken as done: results.json's engine must run the update this config now gets."""
+    engines) is not taken as done: results.json's engine must run the update this config now gets. (The fields a
+    finished job must hold are tests/test_history.py's and test_refusals.py's: here only the engine is read.)"""
     import json
 
+    from selpres.run import cli
     from selpres.run.cli import _finished
     from selpres.run.results import job_hash
 
     paper = cfg_of("schedule=infobatch", "schedule.epochs=[2]")
     adam = cfg_of("schedule=infobatch", "schedule.epochs=[2]", "optim=adam_minibatch", "model.activation=relu")
+
+    monkeypatch.setattr(cli, "summary_table", lambda res: "")
+    monkeypatch.setattr(cli, "_objective", lambda res: 0.0)
 
     def finished(cfg, engine):
         (tmp_path / "results.json").write_text(

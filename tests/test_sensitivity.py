@@ -119,14 +119,15 @@ def test_every_design_file_is_swept_once_and_the_job_count_is_the_documented_one
     assert design_points("glob([sel_*,matched_*])") == part
 
 
-def test_the_rivals_grid_is_the_generators_and_the_experiment_lists_no_names(tmp_path):
-    """scripts/make_sensitivity_designs.py, run again, writes exactly the rivals' files there are (no file
-    edited by hand, none missing or extra), and the experiment sweeps them by glob, not by a list of names."""
+def test_the_grid_is_the_generators_and_the_experiment_lists_no_names(tmp_path):
+    """scripts/make_sensitivity_designs.py, run again, writes exactly the design files there are (selective
+    presentation's 15 points and 13 partners, the rivals' 120: no file edited by hand, none missing or extra), and
+    the experiment sweeps them by glob, not by a list of names."""
     done = run_python("scripts/make_sensitivity_designs.py", str(tmp_path))
     assert done.returncode == 0, done.stderr
     made = {p.name: p.read_text() for p in tmp_path.glob("*.yaml")}
-    have = {p.name: p.read_text() for p in DESIGN.glob("*.yaml") if family(p.stem) in RIVALS}
-    assert len(made) == 120 and sorted(made) == sorted(have)
+    have = {p.name: p.read_text() for p in DESIGN.glob("*.yaml")}
+    assert len(made) == 148 == len(POINTS) and sorted(made) == sorted(have)
     assert [n for n in made if made[n] != have[n]] == []
     text = EXPERIMENT.read_text()
     assert not [p for p in POINTS if p in text.split("hydra:")[1]], "design names listed in the experiment"
