@@ -162,16 +162,11 @@ class NativeMiniBatchEngine(MiniBatchEngine):
         }
 
     def load_state_dict(self, state):
-        """Its own ``state_dict``, or the torch mini-batch engine's (a job checkpointed there, e.g. under
-        ``engine=fast`` before this kernel existed, resumes here): params, its optimizer's state, spent."""
-        if "moments" in state:
-            moments, steps = [self._pack(t) for t in state["moments"]], state["steps"]
-        else:  # ReplicaOptimizer's state of the one flat [R, P] tensor: the packed layout's order
-            st = state["optimizer"]["state"].get(0, {})
-            first = st.get("exp_avg", st.get("momentum_buffer"))
-            zeros = torch.zeros(self.R, self.P, dtype=torch.float64)
-            moments = [self._pack([zeros if t is None else t]) for t in (first, st.get("exp_avg_sq"))]
-            steps = st.get("step", torch.zeros(self.R, dtype=torch.float64))
+        """Its own ``state_dict`` only: a checkpoint of the torch mini-batch engine (another layout of the optimizer's
+        state) is refused, and selpres.run.checkpoint moves such a file aside and starts the job afresh."""
+        if "moments" not in state:
+            raise ValueError("a checkpoint of another mini-batch engine (no packed moments): not this kernel's")
+        moments, steps = [self._pack(t) for t in state["moments"]], state["steps"]
         self.w = self._pack(state["params"])
         self.m1, self.m2 = moments
         self.steps = torch.from_numpy(self._lanes(steps.to(torch.float64).numpy()))
