@@ -19,13 +19,13 @@ def test_divergence_is_reported_not_fatal(monkeypatch):
         engine = real(*args, **kwargs)
         step, calls = engine.train_epoch, []
 
-        def train_epoch(X, Y, order):
+        def train_epoch(X, Y, order, **kw):  # the one epoch call (weights, counts, spent)
             calls.append(1)
             if len(calls) == 4:  # before epoch 4's updates: replica 1 has a NaN weight
                 state = engine.state_dict()
                 state["params"][0][1, 0, 0] = float("nan")
                 engine.load_state_dict(state)
-            return step(X, Y, order)
+            return step(X, Y, order, **kw)
 
         engine.train_epoch = train_epoch
         return engine
