@@ -199,7 +199,7 @@ def test_a_checkpoint_of_the_torch_engine_is_refused_not_misread():
 
 def test_what_the_kernel_cannot_run_is_named():
     assert native_reason("adam", "relu", "cosine", "mean", {"lr": 0.1, "beta1": 0.9}) is None
-    assert "optim.name=rprop" in native_reason("rprop", "relu", "cosine", "mean", {})
+    assert "optim._target_=rprop" in native_reason("rprop", "relu", "cosine", "mean", {})
     assert "model.activation=gelu" in native_reason("adam", "gelu", "constant", "mean", {})
     assert "optim.mu" in native_reason("sgd", "relu", "constant", "mean", {"mu": 1.5})
     assert native_reason("sgd", "relu", "constant", "mean", {"mu": None}) is None

@@ -53,7 +53,7 @@ class ShapedScheduleSweeper(OptunaSweeper):
         super().setup(hydra_context=hydra_context, task_function=task_function, config=config)
         impl = self.sweeper
         n = load_task(*task_specs(config)).n
-        sweep_order, cost = config.schedule.order.value, config.schedule.selection_cost
+        sweep_order, cost = config.schedule.order, config.schedule.selection_cost
         configure = impl._configure_trials
 
         def translated(trials, distributions, fixed):

@@ -39,11 +39,11 @@ def design(name: str) -> dict:
     return dict(
         sizes=tuple(int(s) for s in c.topology.layers.split("-")),
         n=int(c.data.n),
-        rule=o.name.value,
-        hparams={k: o[k] for k in ("lr", "beta1", "beta2", "eps", "weight_decay") if o[k] is not None},
+        rule=o._target_,
+        hparams={k: o[k] for k in ("lr", "beta1", "beta2", "eps", "weight_decay") if o.get(k) is not None},
         batch=int(o.batch_size),
-        activation=c.model.activation.value,
-        schedule=o.lr_schedule.value,
+        activation=c.model.activation,
+        schedule=o.lr_schedule,
         horizon=float(c.data.n * sum(c.schedule.epochs)),
     )
 

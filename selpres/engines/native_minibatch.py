@@ -47,7 +47,7 @@ def native_reason(rule: str, activation: str, lr_schedule: str, reduction: str, 
 
     unknown = sorted(k for k, v in hparams.items() if v is not None and k != "lr" and k not in HPARAM_DEFAULTS)
     for what, value, known in (
-        ("optim.name", rule, RULES),
+        ("optim._target_", rule, RULES),
         ("model.activation", activation, ACTIVATIONS),
         ("optim.lr_schedule", lr_schedule, LR_SCHEDULES),
         ("optim.reduction", reduction, REDUCTIONS),
