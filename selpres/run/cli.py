@@ -110,6 +110,11 @@ def _leftovers(out: Path, cfg: DictConfig) -> None:
 def run_job(cfg: DictConfig) -> float:
     """Hydra task function body; returns the mean held-out RMS (Nm) for sweepers such as Optuna."""
     guard.job_started()
+    with stop.handling():  # a sweep's job runs in a launcher's worker (loky, submitit), where train.py never ran
+        return _job(cfg)
+
+
+def _job(cfg: DictConfig) -> float:
     hc = HydraConfig.get()
     out = Path(hc.runtime.output_dir)
     multirun = hc.mode == RunMode.MULTIRUN
@@ -204,8 +209,14 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
         sys.exit(2)
     except stop.Terminated as e:  # SIGTERM / SIGUSR1 (selpres.run.stop): the loop wrote a checkpoint first
         resumable = Checkpoints.present(out)
-        how = "run the same command to resume" if resumable else "nothing of this run was kept"
-        print(f"{'' if multirun else 'error: '}{out}: {e}; {how}", file=sys.stderr)
+        if resumable:
+            how = "run the same command to resume"
+        else:  # a sweep's job keeps its folder (Hydra's record, its log), as for any failed job
+            how = "no checkpoint yet: the same command starts it again" if multirun else "nothing of this run was kept"
+        line = f"{out}: {e}; {how}"
+        if multirun and os.environ.get("SUBMITIT_EXECUTOR") != "slurm":
+            _terminated_in_sweep(out, line)
+        print(f"{'' if multirun else 'error: '}{line}", file=sys.stderr)
         logging.shutdown()
         if not resumable and not multirun:
             guard.undo(out)
@@ -227,6 +238,17 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
         raise
     log.info("%s\nresults: %s", summary_table(res), out / RESULTS)
     return _objective(res)
+
+
+def _terminated_in_sweep(out: Path, line: str) -> NoReturn:
+    """A signal stopped a sweep's job in a worker that is not SLURM's: the job fails in one line (Hydra prints it
+    when the sweep ends, exit 1; the sweep's other jobs run) and the same sweep command resumes it. Under SLURM
+    the job's process exits 143 instead (above): submitit writes no result, so the sweep keeps waiting while SLURM
+    requeues the job (preemption, ``scontrol requeue``), and the requeued job resumes from the checkpoint; a
+    result written here would make the sweep count the job as done (submitit: done once a result file exists)."""
+    log.warning("%s", line)  # to the job's log and the sweep's console
+    lock.release(out)
+    raise SweepJobError(line) from None
 
 
 def _torch_out_of_memory(e: BaseException) -> bool:

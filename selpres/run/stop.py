@@ -3,17 +3,19 @@
 Under SLURM, preemption and ``scontrol requeue`` send SIGTERM and SIGKILL ``KillWait`` seconds later, and
 ``--signal=USR1@<s>`` sends SIGUSR1 before the time limit. Python's default ends the job at once, unsaved: the
 re-run resumed from the last periodic checkpoint, and a launcher that ignored the signal (submitit) kept training
-unsaved for the whole grace period. Here the handler (installed by ``python train.py``, :func:`install`) only
-records the signal while the training loop runs: the loop finishes the epoch under way (shuffles are per epoch,
-so a checkpoint between epochs is the only exact one), writes a checkpoint and raises :class:`Terminated`, which
-the command line reports in one line with status 143 (128 + 15, as a shell reports a SIGTERM). Outside the loop
-(set-up, Hydra writing its record) the handler raises :class:`Terminated` where the process is, and what this
-run created is removed, as for Ctrl-C.
+unsaved for the whole grace period. Here the handler (installed by ``python train.py`` and, for a sweep's job in a
+launcher's worker process where ``train.py`` never ran, by ``run_job``: :func:`install`) only records the signal
+while the training loop runs: the loop finishes the epoch under way (shuffles are per epoch, so a checkpoint
+between epochs is the only exact one), writes a checkpoint and raises :class:`Terminated`, which the command line
+reports in one line with status 143 (128 + 15, as a shell reports a SIGTERM); a sweep's job ends as
+``selpres.run.cli`` says. Outside the loop (set-up, Hydra writing its record) the handler raises
+:class:`Terminated` where the process is, and what this run created is removed, as for Ctrl-C.
 """
 
 from __future__ import annotations
 
 import signal
+import threading
 from contextlib import contextmanager
 
 SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
@@ -38,9 +40,28 @@ def _handler(signum, frame) -> None:
 
 
 def install() -> None:
-    """Handle SIGTERM and SIGUSR1 in this process (call from the main thread)."""
+    """Handle SIGTERM and SIGUSR1 in this process (call from the main thread), forgetting an earlier job's signal."""
+    _state["signal"] = None
     for s in SIGNALS:
         signal.signal(s, _handler)
+
+
+@contextmanager
+def handling():
+    """SIGTERM and SIGUSR1 handled here for one job, then the handlers from before it again: a sweep's worker
+    (loky, submitit) runs its launcher's code between jobs. Only the main thread may set a handler; a job in
+    another thread runs without."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = {s: signal.getsignal(s) for s in SIGNALS}
+    install()
+    try:
+        yield
+    finally:
+        for s, handler in before.items():
+            if handler is not None:  # None: set outside Python, cannot be put back
+                signal.signal(s, handler)
 
 
 def requested() -> int | None:
