@@ -19,7 +19,7 @@ they cannot, replica-batched in eager torch with a hand-written backward (checke
   ``counts[r]`` entries of ``order[r]`` and a mini-batch's loss is the mean of ``weights · loss`` over its
   patterns (InfoBatch's rescaled loss); a replica with nothing left in a mini-batch does not step. (The
   online engines do the same for the paper's network, so pruning jobs with sigmoid units and SGD at a
-  constant rate run there, on the native kernel: ``selpres.run.checks.minibatch_reason``.)
+  constant rate run there, on the native kernel: ``selpres.run.optimizer.minibatch_reason``.)
 
 Loss per pattern: ``mse`` over the outputs (``reduction=mean``: the online engines' loss; ``sum``:
 Rumelhart's ½Σe², for configs written for batch mode). ``last_losses`` holds every presented pattern's loss

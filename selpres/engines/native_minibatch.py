@@ -14,9 +14,9 @@ one; :class:`selpres.native.KernelUnavailable` where it cannot run) or ``fast`` 
 with ``fallback_reason`` saying why, and one warning logged). Evaluation (``predict``, ``squared_errors``) runs
 the torch engine's forward pass on the unpacked weights, so both engines score alike.
 
-It is a :class:`MiniBatchEngine` (the loop sets ``spent``, the rate's clock, on every mini-batch engine) but
-shares no state with it: weights and the optimizer's moments live packed for the kernel, 4 replicas per
-vector as the online native engine packs them (its ``_pack``/``_unpack``/``_lanes`` are used as they are).
+It shares no state with the torch engine: weights and the optimizer's moments live packed for the kernel, 4
+replicas per vector as the online native engine packs them (its ``_pack``/``_unpack``/``_lanes`` are used as they
+are); like every engine it answers the one epoch call, the rate's clock ``spent`` included.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import torch
 from selpres.engines.inputs import check_inputs, check_patterns, pruned_epoch_args, pruned_mean
 from selpres.engines.minibatch import LR_SCHEDULES, MiniBatchEngine
 from selpres.engines.model import forward_replicas
-from selpres.engines.online import NativeEngine, _default_threads
+from selpres.engines.online import NativeEngine, ScoredByPredict, _default_threads
 from selpres.native import KernelUnavailable
 from selpres.native.staging import stage
 
@@ -59,7 +59,7 @@ def native_reason(rule: str, activation: str, lr_schedule: str, reduction: str, 
     return None
 
 
-class NativeMiniBatchEngine(MiniBatchEngine):
+class NativeMiniBatchEngine(ScoredByPredict):
     """R replicas, mini-batches of ``batch_size``, ``rule`` in sgd/adam/adamw, on the native kernel."""
 
     name = NAME
@@ -173,7 +173,7 @@ class NativeMiniBatchEngine(MiniBatchEngine):
         self.spent = state["spent"].clone()
 
 
-def make_minibatch_engine(name: str, *args, threads: int | None = None) -> MiniBatchEngine:
+def make_minibatch_engine(name: str, *args, threads: int | None = None) -> MiniBatchEngine | NativeMiniBatchEngine:
     """``name``: ``torch`` (the torch mini-batch engine), ``native`` (the kernel; raises
     :class:`KernelUnavailable` where it cannot run) or ``fast`` (the kernel, else the torch engine with
     ``fallback_reason`` set and one warning logged). ``args``: both engines' (sizes, params, rule, hparams,
