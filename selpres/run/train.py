@@ -37,6 +37,9 @@ from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
 log = logging.getLogger("selpres")
 
 
+WORK = ("select", "shuffle", "train")  # a method's own phases (Clock.work)
+
+
 class Clock:
     """Seconds per named phase of a job (``with clock("eval"): ...``), accumulated over resumes."""
 
@@ -56,6 +59,11 @@ class Clock:
         """Count the seconds of an earlier process of this job (from its checkpoint)."""
         for k, v in earlier.items():
             self.seconds[k] += v
+
+    def work(self) -> float:
+        """The method's own seconds so far: choosing, shuffling and training (not evaluation, logging or saving),
+        so that wall time to a given error can be read off the curve."""
+        return sum(self.seconds[k] for k in WORK)
 
     def snapshot(self) -> dict:
         """The phases so far, and ``total``: wall seconds of this job, earlier processes included."""
@@ -188,7 +196,7 @@ def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
     tracker.replay(progress.history)
     job = Job(cfg, prob, engine, progress, chash, out, ckpts, tracker)
     if not progress.history:  # the untrained network: every curve starts at 0 presentations
-        record(job, curve_point(engine, prob, job.cadence, None, None, progress))
+        record(job, {**curve_point(engine, prob, job.cadence, None, None, progress), "work_seconds": 0.0})
     return job
 
 
@@ -229,6 +237,7 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
         # a replica that presented nothing this epoch (its budget spent) has a NaN loss, not a diverged one
         mark_diverged(progress, job.engine, loss if pr is None else torch.nan_to_num(loss, nan=0.0), ep.index)
         rec = curve_point(job.engine, prob, job.cadence, ep, loss, progress)
+    rec["work_seconds"] = clock.work()
     with clock("log"):
         record(job, rec)
     return rec
