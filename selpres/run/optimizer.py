@@ -127,7 +127,7 @@ def minibatch_reason(cfg: DictConfig) -> str | None:
         why.append(f"optim.lr_schedule={spec.lr_schedule}")
     if not why:
         return None
-    return "the native kernel runs sigmoid units and SGD at a constant rate only; this job has " + ", ".join(why)
+    return "the online kernel runs sigmoid units and SGD at a constant rate only; this job has " + ", ".join(why)
 
 
 def check_optim(cfg: DictConfig) -> OptimSpec:

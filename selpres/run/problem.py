@@ -172,7 +172,7 @@ def job_engine(cfg: DictConfig, prob: Problem):
     o = optim_spec(cfg)
     kind = engine_kind(cfg)
     if kind == "minibatch":  # the native mini-batch kernel (fast, native) or the torch mini-batch engine (torch)
-        log.info("engine %s runs a mini-batch engine: %s", cfg.engine.value, minibatch_reason(cfg))
+        log.info("engine=%s: the mini-batch update (%s)", cfg.engine.value, minibatch_reason(cfg))
         try:
             return make_minibatch_engine(
                 cfg.engine.value,
