@@ -1,8 +1,14 @@
-"""Writes configs/design/modern/: the 24 design points of experiment=modern (2 arms x 2 regimes x 6 methods).
+"""Writes configs/design/modern/: the design points of experiment=modern (2 arms x 2 regimes x 12 methods).
 
 Run again after changing a value below; every file states its cost. The costs are worked out here the way
 selpres.presentation.proportions applies the paper's counts to n (fractions c/1002 of n, rounded half up;
 a budget b scaled to b n / 1002), so the budget-form methods cost what selective presentation costs.
+
+The epochs N of each arm and regime come from the learning curves of experiment=modern_curve (conventional
+training at doubling budgets on the validation draw, scripts/make_modern_curve_designs.py): the budget where
+doubling it changes the final held-out RMS by less than 10 %, or the largest that fits the study's time; the
+Adam rates from experiment=modern_lr at those budgets. Both are read off with ``selpres-report`` and written
+below by hand, with the date: they are decisions, taken once on data the study does not report.
 """
 
 from __future__ import annotations
@@ -13,12 +19,36 @@ from pathlib import Path
 
 OUT = Path(__file__).resolve().parents[1] / "selpres" / "configs" / "design" / "modern"
 PAPER_N, PAPER_SIZES = 1002, (50, 100, 400, 800)
-# arm -> (robot, topology, n, epochs N): N sized so that the whole experiment fits 15 min on 2 shared cores
-ARMS = {"two_link": ("two_link", "6-13-2", 10_000, 20), "puma560": ("puma560", "18-40-6", 100_000, 5)}
-# regime -> (what it is, the lines it sets); the Adam rate is the one experiment=modern_lr chose on the
-# validation draw (data.test_seed=1), not on the test sets
-ADAM_LR = {"two_link": 0.01, "puma560": 0.003}  # experiment=modern_lr, 2026-12-01: lowest mean validation RMS
-METHODS = ("conventional", "selective", "matched", "random_growth", "infobatch", "selective_backprop")
+# arm -> (robot, topology, n)
+ARMS = {"two_link": ("two_link", "6-13-2", 10_000), "puma560": ("puma560", "18-40-6", 100_000)}
+REGIMES = ("paper", "adam")
+# (arm, regime) -> the study's epochs N (a multiple of 5: selective presentation's five stages of N/5 epochs)
+# experiment=modern_curve, 2026-12-03: the smallest N whose doubling moves the median held-out RMS by < 10 %
+# (two-link paper -7.6 % at 160, two-link Adam -2.4 % at 80, PUMA paper -3.3 % at 80, PUMA Adam -0.8 % at 20)
+EPOCHS = {("two_link", "paper"): 160, ("two_link", "adam"): 80, ("puma560", "paper"): 80, ("puma560", "adam"): 20}
+# arm -> the Adam rate chosen by experiment=modern_lr on the validation draw (data.test_seed=1), not on the test sets
+# (experiment=modern_lr, 2026-12-03, at the budgets above, 12 seeds: the lowest mean validation RMS of
+# {0.001, 0.003, 0.01, 0.03}; two-link 1.19 Nm at 0.003 against 1.62 at 0.01, PUMA 1.36 at 0.003 against 1.50 at 0.001)
+ADAM_LR = {"two_link": 0.003, "puma560": 0.003}
+# the held-out curve: about this many points per run (Selective Backprop's cost to reach an error is read off it)
+CURVE_POINTS = 40
+# method -> (the schedule it runs, its form): "full" trains for conventional's N epochs (the method's own claim,
+# at its own saving), "budget" is stopped at selective presentation's cost (compute-matched), "staged" runs the
+# five stages of N/5 epochs
+METHODS = {
+    "conventional": ("conventional", "full"),
+    "selective": ("selective", "staged"),
+    "matched": ("matched", "budget"),
+    "random_growth": ("random_growth", "staged"),
+    "infobatch": ("infobatch", "budget"),
+    "infobatch_full": ("infobatch", "full"),
+    "selective_backprop": ("selective_backprop", "budget"),
+    "selective_backprop_full": ("selective_backprop", "full"),
+    "seta": ("seta", "budget"),
+    "seta_full": ("seta", "full"),
+    "seta_random": ("seta_random", "budget"),
+    "seta_random_full": ("seta_random", "full"),
+}
 
 
 def half_up(x: float) -> int:
@@ -36,47 +66,64 @@ def paper_budget(target: int, n: int) -> tuple[int, int]:
     return b, half_up(b * n / PAPER_N)
 
 
-def regime_lines(regime: str, arm: str) -> tuple[list[str], list[str], str]:
+def regime_lines(regime: str, arm: str, lr: float | None = None) -> tuple[list[str], list[str], str]:
     if regime == "paper":
         return [], [], "the paper's regime: sigmoid units, online SGD (batch 1), lr 0.15, momentum 0.9, constant"
-    lines = ["model:", "  activation: relu", "optim:", f"  lr: {ADAM_LR[arm]}"]
+    lr = ADAM_LR[arm] if lr is None else lr
+    lines = ["model:", "  activation: relu", "optim:", f"  lr: {lr}"]
     what = (
-        f"mini-batch Adam (batch 32), ReLU hidden units, linear output, lr {ADAM_LR[arm]} (chosen on the "
-        "validation draw by experiment=modern_lr) cosine-decayed to zero over the run's own budget"
+        f"mini-batch Adam (batch 32), ReLU hidden units, linear output, lr {lr} (chosen on the validation draw by "
+        "experiment=modern_lr) cosine-decayed to zero over the run's own budget"
     )
     return ["  - override /optim: adam_minibatch"], lines, what
 
 
+def header(arm: str, what: str, line: str, script: str = "make_modern_designs.py") -> list[str]:
+    robot, topology, n = ARMS[arm]
+    return [
+        "# @package _global_",
+        f"# generated by scripts/{script}: edit it there, not here",
+        f"# arm {arm} (n = {n:,}), {what};",
+        f"# {line}",
+        "defaults:",
+        f"  - override /robot: {robot}",
+        f"  - override /topology: {topology}",
+    ]
+
+
+def every(N: int) -> int:
+    return max(1, N // CURVE_POINTS)
+
+
 def design(arm: str, regime: str, method: str) -> str:
-    robot, topology, n, N = ARMS[arm]
+    n, N = ARMS[arm][2], EPOCHS[(arm, regime)]
+    schedule, form = METHODS[method]
     sel = selective_cost(n, N)
     b, scaled = paper_budget(sel, n)
     stage = N // 5
-    sched = {
-        "conventional": ([f"epochs: [{N}]"], f"{n * N:,} presentations (N = {N} epochs of n = {n:,})"),
-        "selective": ([f"epochs: [{stage}, {stage}, {stage}, {stage}, {stage}]"], f"{sel:,} presentations"),
-        "random_growth": ([f"epochs: [{stage}, {stage}, {stage}, {stage}, {stage}]"], f"{sel:,} presentations"),
-        "matched": ([f"budget: {b}"], f"{scaled:,} presentations (budget {b} scaled by n/1002), selective's"),
-        "infobatch": (["epochs: null", f"budget: {b}"], f"{scaled:,} (stopped at selective's cost)"),
-        "selective_backprop": (["epochs: null", f"budget: {b}"], f"{scaled:,} (forward passes at 1/3 included)"),
-    }[method]
-    overrides, lines, what = regime_lines(regime, arm)
+    lines, cost = {
+        "full": ([f"epochs: [{N}]"], f"conventional's N = {N} epochs of n = {n:,} ({n * N:,} presentations"),
+        "staged": ([f"epochs: [{stage}, {stage}, {stage}, {stage}, {stage}]"], f"{sel:,} presentations"),
+        "budget": (["epochs: null", f"budget: {b}"], f"{scaled:,} presentations (budget {b} scaled by n/1002)"),
+    }[form]
+    if form == "full":
+        cost += ")" if method == "conventional" else " at most; its own saving is recorded)"
+    if schedule != "conventional" and form == "budget" and method != "matched":
+        cost += ", stopped at selective's cost"
+    overrides, reg, what = regime_lines(regime, arm)
     return "\n".join(
         [
-            "# @package _global_",
-            "# generated by scripts/make_modern_designs.py: edit it there, not here",
-            f"# experiment=modern, arm {arm} (n = {n:,}), {what};",
-            f"# method {method}: cost {sched[1]}",
-            "defaults:",
-            f"  - override /robot: {robot}",
-            f"  - override /topology: {topology}",
-            f"  - override /schedule: {method}",
+            *header(arm, what, f"experiment=modern, method {method}: {cost}"),
+            f"  - override /schedule: {schedule}",
             *overrides,
             "data:",
             f"  n: {n}",
             "schedule:",
-            *(f"  {line}" for line in sched[0]),
-            *lines,
+            *([f"  name: {method}"] if method != schedule else []),
+            *(f"  {line}" for line in lines),
+            "eval:",
+            f"  every: {every(N)}",
+            *reg,
             "",
         ]
     )
@@ -85,10 +132,10 @@ def design(arm: str, regime: str, method: str) -> str:
 def main(out: Path = OUT) -> None:
     out.mkdir(parents=True, exist_ok=True)
     for arm in ARMS:
-        for regime in ("paper", "adam"):
+        for regime in REGIMES:
             for method in METHODS:
                 (out / f"{arm}_{regime}_{method}.yaml").write_text(design(arm, regime, method))
-    print(f"wrote {len(ARMS) * 2 * len(METHODS)} files into {out}")
+    print(f"wrote {len(ARMS) * len(REGIMES) * len(METHODS)} files into {out}")
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ from selpres.report.build import Report
 from selpres.report.compare import Options
 from selpres.report.context import Context
 from selpres.run.specs import data_spec, robot_spec
-from selpres.run.stats import holm, t_test
+from selpres.run.stats import holm, t_test, tost
 from selpres.run.train import train
 from selpres.studies import modern
 
@@ -31,6 +31,14 @@ def sweep(tmp_path_factory):
         "selective_backprop": ["schedule=selective_backprop"],
     }.items():
         train(cfg_of(*ov, *COMMON), s / name)
+    # at full cost: the reference, and two methods judged on their own claims
+    full = [*COMMON[:3], "schedule.epochs=[6]"]
+    for name, ov in {
+        "conventional": ["schedule=conventional"],
+        "infobatch_full": ["schedule=infobatch", "schedule.name=infobatch_full"],
+        "selective_backprop_full": ["schedule=selective_backprop", "schedule.name=selective_backprop_full"],
+    }.items():
+        train(cfg_of(*ov, *full), s / name)
     return s
 
 
@@ -41,7 +49,10 @@ def _seeds(sweep, name, key="overall"):
 
 def test_rivals_against_the_matched_partner_paired_by_seed_with_holm(sweep):
     ctx = Context.load(sweep, Options())
-    rows = modern.verdict_rows(modern.cells(ctx), ctx.options)
+    cs = modern.cells(ctx)
+    rows, claims = modern.verdict_rows(cs, ctx.options), modern.claim_rows(cs, ctx.options)
+    modern.judge(rows, claims, ctx.options)
+    # the methods at full cost are not of the partner's cost: they are judged on their claims instead
     assert [r["comparison"] for r in rows] == ["infobatch − matched", "selective_backprop − matched"]
     m, _ = _seeds(sweep, "matched")
     ps = []
@@ -51,7 +62,10 @@ def test_rivals_against_the_matched_partner_paired_by_seed_with_holm(sweep):
         assert r["rms_diff_mean"] == pytest.approx(sum(d) / len(d), abs=1e-15)
         assert r["cost_ratio"] == pytest.approx(1.0, abs=2e-3)  # stopped at the same total cost
         ps.append(t_test(d)["p"])
-        assert r["rms_family_size"] == 2
+        assert r["rms_family_size"] == 3  # the family: both comparisons and the one tested claim
+    c, _ = _seeds(sweep, "conventional")
+    a, _ = _seeds(sweep, "infobatch_full")
+    ps.append(t_test([a[s] - c[s] for s in sorted(c)])["p"])
     for r, p in zip(rows, holm(ps)):
         assert r["rms_p_holm"] == pytest.approx(p)
     diffs = [r["rms_diff_mean"] for r in rows]
@@ -61,6 +75,47 @@ def test_rivals_against_the_matched_partner_paired_by_seed_with_holm(sweep):
         "held-out RMS: of 2 comparisons with compute-matched training, after Holm's correction "
         f"{better} better, {worse} worse" in modern.headline(rows)
     )
+
+
+def test_lossless_claim_is_tost_within_a_share_of_the_references_mean(sweep):
+    ctx = Context.load(sweep, Options())
+    cs = modern.cells(ctx)
+    rows, claims = modern.verdict_rows(cs, ctx.options), modern.claim_rows(cs, ctx.options)
+    modern.judge(rows, claims, ctx.options)
+    (row,) = [r for r in claims if r["claim"] == "lossless"]
+    c, conv = _seeds(sweep, "conventional")
+    a, res = _seeds(sweep, "infobatch_full")
+    d = [a[s] - c[s] for s in sorted(c)]
+    m = 0.05 * sum(c.values()) / len(c)  # 5 % of conventional's mean, not the method's
+    assert row["rms_margin"] == pytest.approx(m, rel=1e-12)
+    assert row["rms_tost_p"] == pytest.approx(tost(d, m)["p"], rel=1e-12)
+    assert row["cost_share"] == pytest.approx(modern.job_cost(res) / conv["schedule"]["presentations"], rel=1e-12)
+    assert row["cost_share"] < 1  # InfoBatch's own saving
+    holds = row["rms_p_holm"] < 0.05 and sum(d) < 0 or row["rms_tost_p_holm"] < 0.05
+    assert row["claim_rms"] == ("holds" if holds else "contradicted" if row["rms_p_holm"] < 0.05 else "not shown")
+
+
+def test_speedup_is_read_off_the_curves_seed_by_seed():
+    ref = modern.Cell("a", "r", "conventional", curves={0: [(0, 0, 5.0), (100, 1.0, 2.0), (200, 2.0, 1.0)],
+                                                       1: [(0, 0, 5.0), (200, 4.0, 2.0)]})  # fmt: skip
+    sb = modern.Cell("a", "r", "sb", curves={0: [(0, 0, 5.0), (50, 0.2, 1.5), (120, 0.5, 0.9)],
+                                            1: [(0, 0, 5.0), (300, 3.0, 2.5)]})  # fmt: skip
+    got = modern.speedup(sb, ref)
+    assert got == {"seeds": 2, "reached": 1, "cost_to_reach_share": 0.6, "wall_to_reach_share": 0.25}
+
+
+def test_the_curve_records_the_methods_own_seconds(sweep):
+    _, res = _seeds(sweep, "selective_backprop_full")
+    work = [rec["work_seconds"] for rec in res["curves"]]
+    assert work[0] == 0.0 and all(b >= a for a, b in zip(work, work[1:])) and work[-1] > 0
+    w = res["wall_seconds"]
+    assert work[-1] == pytest.approx(w["select"] + w["shuffle"] + w["train"], rel=1e-9)
+    assert modern.job_work(res) == pytest.approx(work[-1], rel=1e-9)
+    # Selective Backprop at full cost on its curves: its cost to reach conventional's final error, seed by seed
+    ctx = Context.load(sweep, Options())
+    cs = modern.cells(ctx)
+    (row,) = [r for r in modern.claim_rows(cs, ctx.options) if r["claim"] == "speedup"]
+    assert row["seeds"] == 3 and 0 <= row["reached"] <= 3
 
 
 def test_nmse_is_mse_over_the_heldout_targets_variance(sweep):
@@ -82,4 +137,6 @@ def test_report_shows_the_section_and_draws_the_figure(sweep, tmp_path):
     rep = Report.build(sweep, Options())
     files = rep.write(tmp_path)
     assert "modern_error_cost.png" in files and (tmp_path / "modern_error_cost.png").stat().st_size > 10_000
+    assert (tmp_path / "modern_error_wall.png").stat().st_size > 10_000
+    assert "Each method on its own claim" in rep.markdown and "modern_claims.csv" in files
     assert "Modern training and data pruning" in rep.markdown

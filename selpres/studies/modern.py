@@ -15,163 +15,35 @@ targets' variance (1 = predicting the mean).
 
 from __future__ import annotations
 
-import functools
-import math
-from dataclasses import dataclass, field
 from pathlib import Path
 
-from omegaconf import OmegaConf
-
-from selpres.report.compare import Options, adjust_family, outcome, paired, paired_columns, reading
+from selpres.report.compare import Options, outcome, paired, paired_columns
 from selpres.report.context import Context, Section
-from selpres.report.families import optim_target
 from selpres.report.markdown import table
 from selpres.run.stats import summarize
+from selpres.studies._modern_cells import (  # noqa: F401  (the study's API, read here by the tests)
+    DESIGN,
+    METRICS,
+    Cell,
+    Design,
+    _arm_regimes,
+    _order,
+    arm_of,
+    cells,
+    heldout_nmse,
+    job_cost,
+    job_curves,
+    job_work,
+    regime_of,
+)
+from selpres.studies._modern_claims import claim_rows, claims_markdown, judge, speedup  # noqa: F401
 
-METRICS = (("rms", "held-out RMS", "Nm"), ("nmse", "held-out nMSE", ""))
 DODGE = 0.07  # methods of one cost are drawn side by side within ±7 % of their cost
-DESIGN_FILE = Path(__file__).with_suffix(".yaml")  # modern.yaml: the study's roles and display names
-
-
-@dataclass(frozen=True)
-class Design:
-    """The study's roles and display names (``modern.yaml``): which recorded method is the reference and which the
-    compute-matched partner, the rows' order, and how arms, optimizers and activations are shown."""
-
-    reference: str
-    partner: str
-    order: tuple[str, ...] = ()
-    arms: dict = field(default_factory=dict)
-    optimizers: dict = field(default_factory=dict)
-    activations: dict = field(default_factory=dict)
-
-    @classmethod
-    def load(cls, path: Path = DESIGN_FILE) -> Design:
-        d = OmegaConf.to_container(OmegaConf.load(path))
-        return cls(**{**d, "order": tuple(d.get("order") or ())})
-
-    def methods(self, found) -> list[str]:
-        """The methods of a sweep in the rows' order: the listed ones first, then the others by name."""
-        found = set(found)
-        listed = [m for m in self.order if m in found]
-        return listed + sorted(found - set(listed))
-
-    def rivals(self, found) -> list[str]:
-        """Every method compared with the partner: all but the reference and the partner itself."""
-        return [m for m in self.methods(found) if m not in (self.reference, self.partner)]
-
-
-DESIGN = Design.load()
-
-
-def arm_of(cfg: dict, design: Design = DESIGN) -> str:
-    r = cfg["robot"]
-    key = r.get("name") or (r.get("path") and Path(r["path"]).stem) or r.get("_target_") or r.get("kind")
-    return design.arms.get(str(key), str(key))
-
-
-def regime_of(cfg: dict, design: Design = DESIGN) -> str:
-    o, act = cfg["optim"], cfg.get("model", {}).get("activation", "sigmoid")
-    name, b = optim_target(o), o["batch_size"]
-    if name == "sgd" and b == 1 and act == "sigmoid" and o.get("lr_schedule", "constant") == "constant":
-        return f"paper: sigmoid, online SGD (lr {o['lr']:g}, momentum {o.get('momentum') or 0:g})"
-    # the rate is left out: it is chosen per arm (on a validation draw), and shown in the table's lr column
-    sched = f", {o['lr_schedule']} lr" if o.get("lr_schedule") else ""
-    return f"{design.optimizers.get(name, name)} (batch {b}{sched}), {design.activations.get(act, act)}"
-
-
-@functools.lru_cache(maxsize=8)
-def _heldout_variance(robot_json: str, data_json: str) -> tuple[float, ...]:
-    import json
-
-    from selpres.data.task import load_task
-    from selpres.run.specs import data_spec, robot_spec
-
-    task = load_task(robot_spec(json.loads(robot_json)), data_spec(json.loads(data_json)))
-    return tuple(task.tests.heldout.Y.var(0, unbiased=False).tolist())
-
-
-def heldout_nmse(job) -> dict[int, float]:
-    """Per seed, held-out nMSE overall. Reads ``replica_results[r]["final"]["heldout"]["nmse"]["overall"]``
-    where results.json holds it (selpres.run.floor, issue 21); else the same quantity from the per-joint RMS
-    and the variance of the held-out targets, rebuilt from the job's config (one helper: swap it when every
-    results.json carries nMSE)."""
-    import json
-
-    out, var = {}, None
-    for rep in job.replicas:
-        fin = rep["final"]
-        if fin is None or fin["heldout"]["nm"].get("overall") is None:
-            continue
-        if "nmse" in fin["heldout"] and fin["heldout"]["nmse"].get("overall") is not None:
-            out[rep["seed"]] = fin["heldout"]["nmse"]["overall"]
-            continue
-        if var is None:
-            cfg = job.results["config"]
-            var = _heldout_variance(json.dumps(cfg["robot"], sort_keys=True), json.dumps(cfg["data"], sort_keys=True))
-        joints = [k for k in fin["heldout"]["nm"] if k != "overall"]
-        per = [fin["heldout"]["nm"][j] ** 2 / v for j, v in zip(joints, var) if v > 0]
-        out[rep["seed"]] = sum(per) / len(per)
-    return out
-
-
-@dataclass
-class Cell:
-    arm: str
-    regime: str
-    method: str
-    costs: list[float] = field(default_factory=list)
-    rms: dict[int, float] = field(default_factory=dict)
-    nmse: dict[int, float] = field(default_factory=dict)
-    engines: set[str] = field(default_factory=set)
-    lrs: set[float] = field(default_factory=set)
-
-    @property
-    def cost(self) -> float | None:
-        return sum(self.costs) / len(self.costs) if self.costs else None
-
-    def values(self, metric: str) -> dict[int, float]:
-        return self.rms if metric == "rms" else self.nmse
-
-
-def job_cost(res: dict) -> float:
-    """Total cost in presentations: training plus forward passes charged for choosing (pruning: each replica's
-    exact cost, averaged)."""
-    if res.get("pruning"):
-        c = res["pruning"]["cost"]
-        return sum(c) / len(c)
-    return res["schedule"]["presentations"] + (res.get("selection_presentations") or 0)
-
-
-def cells(ctx: Context, design: Design = DESIGN) -> dict[tuple[str, str, str], Cell]:
-    """Every finished job's replicas in its (arm, regime, method) cell; the method is the schedule's recorded name."""
-    out: dict[tuple[str, str, str], Cell] = {}
-    for job in ctx.jobs:
-        res = job.results
-        if job.status not in ("complete", "diverged") or not res:
-            continue
-        cfg = res["config"]
-        key = (arm_of(cfg, design), regime_of(cfg, design), res["schedule"]["name"])
-        c = out.setdefault(key, Cell(*key))
-        c.costs.append(job_cost(res))
-        c.engines.add(res.get("engine", "?"))
-        c.lrs.add(cfg["optim"]["lr"])
-        for rep in job.replicas:
-            v = rep["final"]["heldout"]["nm"]["overall"] if rep["final"] else None
-            if v is not None and math.isfinite(v):
-                c.rms[rep["seed"]] = v
-        c.nmse.update(heldout_nmse(job))
-    return out
 
 
 def applies(ctx: Context) -> bool:
     """A sweep with a pruning rival or a modern regime beside the paper's."""
     return any(job.results and job.results.get("pruning") for job in ctx.jobs)
-
-
-def _order(methods: list[str]):
-    """Rows by arm, the paper's regime first, then the methods in the design's order."""
-    return lambda key: (key[0], not key[1].startswith("paper"), key[1], methods.index(key[2]))
 
 
 def summary_rows(cs: dict, design: Design = DESIGN) -> list[dict]:
@@ -183,6 +55,10 @@ def summary_rows(cs: dict, design: Design = DESIGN) -> list[dict]:
             "regime": c.regime,
             "method": c.method,
             "cost": c.cost,
+            "wall_s": c.wall,
+            "wall_min_s": min(c.work) if c.work else None,
+            "wall_max_s": max(c.work) if c.work else None,
+            "jobs": len(c.costs),
             "lr": ",".join(f"{v:g}" for v in sorted(c.lrs)),
             "engine": ",".join(sorted(c.engines)),
         }
@@ -195,29 +71,24 @@ def summary_rows(cs: dict, design: Design = DESIGN) -> list[dict]:
 
 
 def verdict_rows(cs: dict, options: Options, design: Design = DESIGN) -> list[dict]:
-    """Every rival against its compute-matched partner, both metrics; Holm over each metric's family."""
-    rows, found = [], {m: [] for m, _, _ in METRICS}
+    """Every rival of the partner's cost (within ``design.matched_within``) against the partner, both metrics,
+    paired by seed; the p-values are Holm-adjusted by :func:`judge` over the whole family."""
+    rows = []
     methods = design.methods(m for _, _, m in cs)
-    for arm, regime in sorted({(a, r) for a, r, _ in cs}, key=lambda k: _order(methods)((*k, methods[0]))):
+    for arm, regime in _arm_regimes(cs, design):
         partner = cs.get((arm, regime, design.partner))
         for method in design.rivals(methods):
             c = cs.get((arm, regime, method))
-            if c is None or partner is None:
+            if c is None or partner is None or not partner.cost:
                 continue
+            if abs(c.cost / partner.cost - 1) > design.matched_within:
+                continue  # not of the partner's cost: judged on its own claim, if it makes one
             row = {"arm": arm, "regime": regime, "comparison": f"{method} − {design.partner}"}
-            row["cost_ratio"] = c.cost / partner.cost if partner.cost else None
-            for metric, _, _ in METRICS:
-                v = paired(c.values(metric), partner.values(metric), options.margin)
+            row["cost_ratio"] = c.cost / partner.cost
+            row["_tests"] = {m: paired(c.values(m), partner.values(m), options.margin) for m, _, _ in METRICS}
+            for metric, v in row["_tests"].items():
                 row.update(paired_columns(metric, v))
-                found[metric].append((row, v))
             rows.append(row)
-    holm = Options(options.margin, holm=True)
-    for metric, _, unit in METRICS:
-        adjust_family(found[metric], metric, holm)
-        for row, v in found[metric]:
-            row[f"reading_{metric}"] = reading(
-                {**v, "holm": True}, name=row["comparison"].split(" ")[0], unit=unit or ""
-            )
     return rows
 
 
@@ -237,6 +108,7 @@ def summary_markdown(rows: list[dict]) -> str:
             r["method"],
             r["lr"],
             f"{r['cost']:,.0f}" if r["cost"] is not None else "–",
+            _wall(r),
             _iv(r["rms_mean"], r["rms_lo"], r["rms_hi"]),
             _iv(r["nmse_mean"], r["nmse_lo"], r["nmse_hi"], 4),
             str(r["rms_n"]),
@@ -249,6 +121,7 @@ def summary_markdown(rows: list[dict]) -> str:
         "method",
         "lr",
         "total cost (presentations)",
+        "wall s per job [min, max]",
         "held-out RMS, Nm [95 %]",
         "held-out nMSE [95 %]",
         "seeds",
@@ -256,13 +129,22 @@ def summary_markdown(rows: list[dict]) -> str:
     return table(head, body)
 
 
+def _wall(r: dict) -> str:
+    if r.get("wall_s") is None:
+        return "–"
+    if r["jobs"] < 2:
+        return f"{r['wall_s']:.2f}"
+    return f"{r['wall_s']:.2f} [{r['wall_min_s']:.2f}, {r['wall_max_s']:.2f}]"
+
+
 def verdict_markdown(rows: list[dict]) -> str:
     body = [[r["arm"], r["regime"], r["comparison"], r["reading_rms"], r["reading_nmse"]] for r in rows]
     return table(["arm", "regime", "Δ (paired by seed)", "held-out RMS (Nm)", "held-out nMSE"], body)
 
 
-def headline(rows: list[dict]) -> str:
-    """The counts of each reading after Holm's correction (the adjusted p-values of the rows)."""
+def headline(rows: list[dict], claims: list[dict] = ()) -> str:
+    """The counts of each reading after Holm's correction (the adjusted p-values of the rows), and of each claim's
+    verdict on held-out RMS."""
     out = []
     for metric, name, _ in METRICS:
         tested = [r for r in rows if r.get(f"{metric}_p_holm") is not None]
@@ -283,25 +165,42 @@ def headline(rows: list[dict]) -> str:
         out.append(
             f"{name}: of {len(tested)} comparisons with compute-matched training, after Holm's correction {counts}"
         )
-    return "**Against compute-matched training** — " + "; ".join(out) + "."
+    text = "**Against compute-matched training** — " + "; ".join(out) + "."
+    tested = [r for r in claims if r.get("claim_rms")]
+    if tested:
+        verdicts = [r["claim_rms"] for r in tested]
+        counts = ", ".join(f"{verdicts.count(k)} {k}" for k in ("holds", "not shown", "contradicted"))
+        text += f" **Each on its own claim** (held-out RMS, the same family) — of {len(tested)}: {counts}."
+    return text
 
 
 def note(options: Options, design: Design = DESIGN) -> str:
     return (
         "Total cost: back-propagated presentations plus forward passes charged for choosing at "
-        "`schedule.selection_cost` of a presentation (Selective Backprop's; InfoBatch's scores come from its "
-        "training passes); InfoBatch and Selective Backprop are stopped at the selective budget "
-        f"(`schedule.budget`). The partner `{design.partner}` is conventional training scheduled for that budget (its "
-        "cosine learning rate reaches zero at its own end), not a prefix of the longer conventional run. "
+        "`schedule.selection_cost` of a presentation (Selective Backprop's; the pruning policies' scores come "
+        "from their training passes). Wall: the method's own seconds per job (choosing, k-means and scoring "
+        "included; preparing data and evaluating, which all share, left out), for all the job's seeds at once, "
+        "the mean over its jobs and [min, max] over them (the seed blocks: repeats of the same method). "
+        "Methods named `…_full` train for conventional training's epochs at their own saving; the others of "
+        "selective presentation's cost are stopped at it (`schedule.budget`). "
+        f"**Compute-matched:** the partner `{design.partner}` is conventional training scheduled for that cost "
+        "(its cosine learning rate reaches zero at its own end), not a prefix of the longer run; every method "
+        f"within {design.matched_within * 100:g} % of its cost is compared with it. "
         f"Δ = method − {design.partner}, paired by seed; Δ < 0: the method has the lower error. Margin m = "
         f"{options.margin.describe('the method')}. Readings: *better/worse* when the Holm-adjusted paired "
         "t-test rejects Δ = 0, *equivalent within ±m* when the Holm-adjusted TOST rejects |Δ| ≥ m, else *no "
-        "detectable difference*; the family is every comparison of one metric in this table."
+        f"detectable difference*. **Own claims**, against `{design.reference}` at its full cost, m a share of "
+        f"its mean: *comparable* holds when the paired t-test finds the method better or a one-sided test "
+        "rejects Δ ≥ +m (non-inferior); *lossless* holds when TOST rejects |Δ| ≥ m (or the method is better); "
+        "*speedup* (no test: read off the held-out curves) holds when every seed's curve reaches that seed's "
+        f"final `{design.reference}` curve value and the median cost to get there is below {design.reference}'s. "
+        "Holm's family, per metric: every compute-matched comparison and every tested claim in the sweep."
     )
 
 
-def plot_error_cost(rows: list[dict], path: Path, design: Design = DESIGN) -> None:
-    """Final held-out RMS (Nm) with 95 % intervals against total cost: one panel per (regime, arm), the legend
+def plot_error_cost(rows: list[dict], path: Path, design: Design = DESIGN, axis: str = "cost") -> None:
+    """Final held-out RMS (Nm) with 95 % intervals against total cost (``axis="cost"``) or against the method's
+    wall seconds per job (``axis="wall"``, with its [min, max] over the jobs): one panel per (regime, arm), the legend
     outside the panels. A method keeps its colour whichever others ran (the design's listed methods hold theirs);
     the methods other than the reference are drawn side by side within ±DODGE of their cost."""
     from matplotlib.ticker import FuncFormatter
@@ -332,12 +231,18 @@ def plot_error_cost(rows: list[dict], path: Path, design: Design = DESIGN) -> No
                 colour, marker = styles[r["method"]]
                 lo, hi = r["rms_lo"], r["rms_hi"]
                 yerr = None if lo is None else [[r["rms_mean"] - lo], [hi - r["rms_mean"]]]
+                x, xerr = r["cost"], None
+                if axis == "wall":
+                    if r.get("wall_s") is None:
+                        continue
+                    x, xerr = r["wall_s"], [[r["wall_s"] - r["wall_min_s"]], [r["wall_max_s"] - r["wall_s"]]]
                 k = side.index(r["method"]) if r["method"] in side else None  # the reference at its own cost
                 dodge = 1.0 if k is None else 1 + step * (k - (len(side) - 1) / 2)
                 ax.errorbar(
-                    r["cost"] * dodge,
+                    x * (dodge if axis == "cost" else 1.0),
                     r["rms_mean"],
                     yerr=yerr,
+                    xerr=xerr,
                     fmt=marker,
                     color=colour,
                     capsize=4,
@@ -345,9 +250,11 @@ def plot_error_cost(rows: list[dict], path: Path, design: Design = DESIGN) -> No
                     label=r["method"],
                 )
             ax.set_title(f"{arm}\n{regime}", fontsize=9)
-            ax.set_xlabel("total cost (presentations)")
+            ax.set_xlabel("total cost (presentations)" if axis == "cost" else "the method's wall seconds per job")
+            if axis == "wall":
+                ax.set_xscale("log")
             ax.set_ylabel("final held-out RMS (Nm), mean [95 %]")
-            ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:,.0f}"))
+            ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:,.0f}" if axis == "cost" else f"{v:g}"))
             ax.tick_params(axis="x", labelrotation=20)
             ax.grid(alpha=0.3)
     handles = {}
@@ -363,21 +270,34 @@ def section(ctx: Context, design: Design = DESIGN) -> Section | None:
         return None
     cs = cells(ctx, design)
     summary = summary_rows(cs, design)
-    verdicts = verdict_rows(cs, ctx.options, design)
+    verdicts, claims = verdict_rows(cs, ctx.options, design), claim_rows(cs, ctx.options, design)
+    judge(verdicts, claims, ctx.options)
+    blocks = [headline(verdicts, claims), summary_markdown(summary)]
+    if claims:
+        blocks += [
+            "**Each method on its own claim**, against conventional training at full cost:",
+            claims_markdown(claims, design),
+        ]
+    blocks += [
+        "**Against compute-matched training**:",
+        verdict_markdown(verdicts),
+        note(ctx.options, design),
+        "![final held-out RMS against total cost, per regime and arm](modern_error_cost.png)\n\n"
+        "Each point: the mean over the paired seeds with its 95 % t-interval; methods of one cost are drawn "
+        "side by side (within ±7 % of their cost; conventional training at its own) so their intervals "
+        "can be told apart.",
+        "![final held-out RMS against the method's wall seconds per job](modern_error_wall.png)\n\n"
+        "The same errors against the method's own wall seconds per job (log scale; [min, max] over its jobs): "
+        "cheaper in presentations is not always faster on this machine.",
+    ]
     return Section(
         "Modern training and data pruning: error against total cost",
-        [
-            headline(verdicts),
-            summary_markdown(summary),
-            verdict_markdown(verdicts),
-            note(ctx.options, design),
-            "![final held-out RMS against total cost, per regime and arm](modern_error_cost.png)\n\n"
-            "Each point: the mean over the paired seeds with its 95 % t-interval; methods of one cost are drawn "
-            "side by side (within ±7 % of their cost; conventional training at its own) so their intervals "
-            "can be told apart.",
-        ],
-        csv={"modern.csv": summary, "modern_verdict.csv": verdicts},
-        figures={"modern_error_cost.png": ("error against cost", lambda p: plot_error_cost(summary, p, design))},
+        blocks,
+        csv={"modern.csv": summary, "modern_verdict.csv": verdicts, "modern_claims.csv": claims},
+        figures={
+            "modern_error_cost.png": ("error against cost", lambda p: plot_error_cost(summary, p, design)),
+            "modern_error_wall.png": ("error against wall", lambda p: plot_error_cost(summary, p, design, "wall")),
+        },
     )
 
 

@@ -1,0 +1,38 @@
+"""The learning curves that size the modern study (selpres.studies.modern_curve): the budget is read off by hand."""
+
+from __future__ import annotations
+
+import pytest
+
+from selpres.studies import modern_curve
+
+
+def point(*rms):
+    return {"rms": dict(enumerate(rms)), "cost": 100, "wall": [1.0, 3.0], "lr": {0.15}}
+
+
+def test_the_chosen_budget_is_the_first_whose_doubling_moves_the_median_less_than_ten_percent():
+    found = {
+        # medians 4.0, 2.0, 1.9, 1.8: 5 -> 10 halves it, 10 -> 20 is -5 %: N = 10. The means (a stalled seed at 9 Nm
+        # in the N = 20 run only) would move +66 % there.
+        ("arm", "paper"): {5: point(3.9, 4.0, 4.1), 10: point(1.9, 2.0, 2.1), 20: point(1.8, 1.9, 9.0),
+                           40: point(1.7, 1.8, 1.9)},
+        # never within 10 %: the largest run is marked
+        ("arm", "adam"): {5: point(4.0, 4.0, 4.0), 10: point(3.0, 3.0, 3.0)},
+    }  # fmt: skip
+    rows = modern_curve.curve_rows(found)
+    paper = [r for r in rows if r["regime"] == "paper"]
+    assert [r["epochs"] for r in paper] == [5, 10, 20, 40]
+    assert [r["chosen"] for r in paper] == [False, True, False, False]
+    assert paper[1]["change_at_doubling"] == pytest.approx(1.9 / 2.0 - 1)
+    assert paper[2]["rms_mean"] == pytest.approx((1.8 + 1.9 + 9.0) / 3) and paper[2]["rms_median"] == 1.9
+    assert paper[0]["wall_s"] == 2.0 and paper[-1]["change_at_doubling"] is None
+    adam = [r for r in rows if r["regime"] == "adam"]
+    assert [r["chosen"] for r in adam] == [False, False] and [r["largest"] for r in adam] == [False, True]
+    assert "**chosen**" in modern_curve.markdown(rows) and "largest run" in modern_curve.markdown(rows)
+
+
+def test_a_gap_in_the_doublings_chooses_nothing_across_it():
+    found = {("arm", "paper"): {5: point(2.0), 20: point(1.95), 40: point(1.0)}}
+    rows = modern_curve.curve_rows(found)
+    assert [r["chosen"] for r in rows] == [False, False, False]  # 5 -> 20 is not a doubling; 20 -> 40 halves
