@@ -6,9 +6,12 @@ lines, and the library works without the studies (nothing imports them; the repo
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
+
+import yaml
 
 from conftest import REPO
 
@@ -121,6 +124,57 @@ def test_the_core_and_the_report_import_without_the_studies():
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["[]", "[]"]
+
+
+def design_names() -> set[str]:
+    """The methods and arms the studies' designs name (``selpres/studies/*.yaml``: roles, rows' order, the methods
+    a paper lacks, arms' display names)."""
+    names: set[str] = set()
+    for path in (REPO / "selpres" / "studies").glob("*.yaml"):
+        d = yaml.safe_load(path.read_text())
+        names |= {d[k] for k in ("reference", "baseline", "partner") if isinstance(d.get(k), str)}
+        names |= {*(d.get("order") or []), *(d.get("not_in_paper") or {}), *(d.get("arms") or {})}
+    return names
+
+
+def named_in_code(source: str, names: set[str]) -> list[tuple[int, str]]:
+    """(line, name) for every one of ``names`` a string in ``source``'s code holds as a word (f-strings included;
+    docstrings are prose and left out)."""
+    tree = ast.parse(source)
+    scopes = (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)
+    docs = {
+        id(n.body[0].value)
+        for n in ast.walk(tree)
+        if isinstance(n, scopes)
+        and n.body
+        and isinstance(n.body[0], ast.Expr)
+        and isinstance(n.body[0].value, ast.Constant)
+    }
+    return [
+        (node.lineno, name)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs
+        for name in sorted(names)
+        if re.search(rf"(?<![\w-]){re.escape(name)}(?![\w-])", node.value)
+    ]
+
+
+def test_the_shared_report_code_names_no_method_or_arm():
+    """Issue 25, point 6: which method is a verdict's reference, which runs are targets and the order of rows are a
+    study's (its design, selpres/studies/<name>.yaml), so the report's code holds none of the names the designs
+    use; a block takes them as arguments."""
+    names = design_names()
+    assert {"conventional", "selective", "matched", "random_growth", "infobatch", "two_link"} <= names
+    found = [
+        f"{path.relative_to(REPO)}:{line} names {name}"
+        for path, module in modules()
+        if module.startswith("selpres.report")
+        for line, name in named_in_code(path.read_text(), names)
+    ]
+    assert found == []
+    # and the check sees one, in a constant or an f-string, but not in a docstring or inside a longer name
+    code = '"""selective is prose."""\nREF = "selective"\nx = f"{REF} vs matched"\ny = "selective_backprop"\n'
+    assert named_in_code(code, {"selective", "matched"}) == [(2, "selective"), (3, "matched")]
 
 
 def config_imports(source: str) -> list[tuple[int, str]]:

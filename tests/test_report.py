@@ -12,12 +12,12 @@ import pytest
 
 from selpres.report import aggregate, load_jobs
 from selpres.report.__main__ import main
-from selpres.report.compare import Margin, Options, reading, time_to_target_rows, verdict_rows
+from selpres.report.compare import Margin, Options, reading, verdict_rows
 from selpres.report.context import Context
 from selpres.report.jobs import job_folders
-from selpres.report.paper import paper_setting
-from selpres.report.sections.table1 import table1_rows
 from selpres.run.stats import t_quantile
+from selpres.studies._paper import paper_setting
+from selpres.studies.table1 import ORDER, table1_rows, time_to_target_rows
 
 SCHED = {
     "conventional": ([1002], [150]),
@@ -174,9 +174,11 @@ def sweep(tmp_path):
 
 
 def test_paired_difference_and_interval_by_hand(sweep):
-    groups, tops, methods = aggregate(load_jobs(sweep))
+    groups, tops, methods = aggregate(load_jobs(sweep), ORDER)  # Table 1's order (studies/table1.yaml)
     assert tops == ["6-4-2", "6-8-2"] and methods == ["conventional", "selective", "matched", "random_growth"]
-    rows = {(r["topology"], r["comparison"]): r for r in verdict_rows(groups, tops, methods)}
+    # the report knows no method: without a study's order, by name
+    assert aggregate(load_jobs(sweep))[2] == ["conventional", "matched", "random_growth", "selective"]
+    rows = {(r["topology"], r["comparison"]): r for r in verdict_rows(groups, tops, methods, "selective")}
     v = rows[("6-4-2", "selective vs conventional")]
     d = [a - b for a, b in zip(SEL, CON)]
     mean = sum(d) / 5
@@ -213,11 +215,11 @@ def test_paired_difference_and_interval_by_hand(sweep):
 def test_reading_wording_three_readings_never_merged():
     base = {"n": 30, "other_mean": 0.1, "margin": 0.004, "ci90": [-0.0013, 0.0018]}
     worse = {**base, "mean": 0.02, "ci95": [0.01, 0.03], "p": 0.001, "p_tost": 0.9}
-    assert reading(worse) == "selective worse by 0.0200 Nm (20.0 %; 95 % interval [+0.0100, +0.0300])"
+    assert reading(worse, "selective") == "selective worse by 0.0200 Nm (20.0 %; 95 % interval [+0.0100, +0.0300])"
     same = {**base, "mean": 0.0003, "ci95": [-0.0016, 0.0021], "p": 0.76, "p_tost": 0.01}
-    assert reading(same) == "equivalent within ±0.0040 Nm (90 % interval [-0.0013, +0.0018])"
+    assert reading(same, "selective") == "equivalent within ±0.0040 Nm (90 % interval [-0.0013, +0.0018])"
     unsure = {**base, "mean": -0.0014, "ci95": [-0.0039, 0.0010], "p": 0.24, "p_tost": 0.42}
-    assert reading(unsure) == (
+    assert reading(unsure, "selective") == (
         "no detectable difference (95 % interval [-0.0039, +0.0010]); not shown equivalent within ±0.0040 Nm"
     )
     small = {**base, "mean": -0.001, "ci95": [-0.0018, -0.0002], "p": 0.02, "p_tost": 0.001}
@@ -227,11 +229,11 @@ def test_reading_wording_three_readings_never_merged():
     )
     # after Holm's correction an interval that excludes 0 no longer reads as a difference, and says why
     held = {**base, "mean": 0.0014, "ci95": [0.0002, 0.0025], "p": 0.074, "p_tost": 0.8, "holm": True}
-    assert reading(held) == (
+    assert reading(held, "selective") == (
         "no detectable difference after Holm's correction (95 % interval "
         "[+0.0002, +0.0025]; Holm p = 0.074); not shown equivalent within ±0.0040 Nm"
     )
-    assert reading({"n": 1, "mean": 0.02, "ci95": [None, None], "p": None}).startswith("too few pairs (1)")
+    assert reading({"n": 1, "mean": 0.02, "ci95": [None, None], "p": None}, "selective").startswith("too few pairs (1)")
 
 
 # three seeds (df = 2, where the t CDF is 1/2 + t / (2√(t² + 2))): selective − other = 0, 0.1, 0.2
@@ -242,24 +244,26 @@ def test_equivalence_and_t_test_end_to_end_by_hand(tmp_path):
     s = tmp_path / "sw"
     write_job(s, "selective", "6-4-2", results("selective", "6-4-2", SEL3))
     write_job(s, "matched", "6-4-2", results("matched", "6-4-2", OTHER3))
-    groups, tops, methods = aggregate(load_jobs(s))
-    (v,) = verdict_rows(groups, tops, methods)  # default margin: 5 % of selective's mean 2.0 = 0.1
+    groups, tops, methods = aggregate(load_jobs(s), ORDER)
+    (v,) = verdict_rows(groups, tops, methods, "selective")  # default margin: 5 % of selective's mean 2.0 = 0.1
     assert v["heldout_margin"] == pytest.approx(0.1)
     assert v["heldout_p"] == pytest.approx(1 - math.sqrt(3 / 5), abs=1e-9)  # t = √3
     assert v["heldout_tost_p"] == pytest.approx(0.5, abs=1e-9)  # the mean sits on the margin: t_upper = 0
     assert v["heldout_family_size"] == 1
     assert v["reading_heldout"].startswith("no detectable difference (95 % interval")
-    (v,) = verdict_rows(groups, tops, methods, Options(margin=Margin(0.3, relative=False)))
+    (v,) = verdict_rows(groups, tops, methods, "selective", Options(margin=Margin(0.3, relative=False)))
     # p_upper = F(−2√3) = 1/2 − √(3/14) = 0.0370900 > p_lower = 1/2 − √(12/50): equivalent within ±0.3
     assert v["heldout_tost_p"] == pytest.approx(0.5 - math.sqrt(3 / 14), abs=1e-9)
     assert v["reading_heldout"] == "equivalent within ±0.3000 Nm (90 % interval [-0.0686, +0.2686])"
 
 
 def test_holm_adjusts_within_the_family_of_one_metric(sweep):
-    groups, tops, methods = aggregate(load_jobs(sweep))
-    plain = {r["comparison"]: r for r in verdict_rows(groups, tops, methods) if r["topology"] == "6-4-2"}
+    groups, tops, methods = aggregate(load_jobs(sweep), ORDER)
+    plain = {r["comparison"]: r for r in verdict_rows(groups, tops, methods, "selective") if r["topology"] == "6-4-2"}
     rows = {
-        r["comparison"]: r for r in verdict_rows(groups, tops, methods, Options(holm=True)) if r["topology"] == "6-4-2"
+        r["comparison"]: r
+        for r in verdict_rows(groups, tops, methods, "selective", Options(holm=True))
+        if r["topology"] == "6-4-2"
     }
     con, rg = (plain[f"selective vs {m}"]["heldout_p"] for m in ("conventional", "random_growth"))
     assert con < rg  # by hand: k = 2 tested pairs (matched failed, 6-8-2 has no conventional)
@@ -295,8 +299,8 @@ def test_pairs_only_seeds_complete_in_both(tmp_path):
     s = tmp_path / "sw"
     write_job(s, "selective", "6-4-2", results("selective", "6-4-2", SEL, diverged=(0, 3)))
     write_job(s, "conventional", "6-4-2", results("conventional", "6-4-2", CON[:4] + [0.2], diverged=(4,)))
-    groups, tops, methods = aggregate(load_jobs(s))
-    (v,) = verdict_rows(groups, tops, methods)
+    groups, tops, methods = aggregate(load_jobs(s), ORDER)
+    (v,) = verdict_rows(groups, tops, methods, "selective")
     d = [SEL[i] - CON[i] for i in (1, 2)]
     assert v["heldout_pairs"] == 2
     assert v["heldout_diff_mean"] == pytest.approx(sum(d) / 2)
@@ -315,7 +319,7 @@ def test_time_to_target_on_known_curve(tmp_path):
     write_job(s, "conventional", "6-4-2", results("conventional", "6-4-2", [0.1, 0.12], curves=con_curve))
     write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.1, 0.11], curves=sel_curve))
     write_job(s, "random_growth", "6-4-2", results("random_growth", "6-4-2", [0.2, 0.2], curves=rg_curve))
-    groups, tops, methods = aggregate(load_jobs(s))
+    groups, tops, methods = aggregate(load_jobs(s), ORDER)
     all_rows = time_to_target_rows(groups, tops, methods)
     rows = {r["method"]: r for r in all_rows if r["target_method"] == "conventional"}
     assert rows["conventional"]["target_heldout_curve_rms_nm"] == pytest.approx(0.11)
@@ -423,11 +427,11 @@ def test_jobs_of_one_schedule_name_that_differ_become_separate_methods(tmp_path)
             }
             d = write_job(s, "selective", topology, res)
             d.rename(d.with_name(d.name + f",sizes={sizes[0]}"))
-    groups, tops, methods = aggregate(load_jobs(s))
+    groups, tops, methods = aggregate(load_jobs(s), ORDER)
     assert methods == ["selective schedule.sizes=[100,1002]", "selective schedule.sizes=[50,1002]"]
     assert tops == ["6-4-2", "6-8-2"]  # topology alone never splits a method
     assert all(len(g.by_seed) == 2 for g in groups.values())  # nothing pooled across the two size lists
-    rows = verdict_rows(groups, tops, methods)  # only selective variants: each compared with the first
+    rows = verdict_rows(groups, tops, methods, "selective")  # only selective variants: each compared with the first
     expected = "selective schedule.sizes=[50,1002] vs selective schedule.sizes=[100,1002]"
     assert {r["comparison"] for r in rows} == {expected}
 
@@ -441,7 +445,7 @@ def test_an_optimizers_own_parameters_are_left_out_of_other_optimizers_labels(tm
         res["config"] = {"schedule": {"name": "conventional"}, "optim": optim}
         d = write_job(s, "conventional", "6-4-2", res)
         d.rename(d.with_name(d.name + f",optim={optim['name']}"))
-    _, _, methods = aggregate(load_jobs(s))
+    _, _, methods = aggregate(load_jobs(s), ORDER)
     assert methods == [  # results written before optim._target_ named the optimizer optim.name
         "conventional optim._target_=paper optim.lr=0.15 optim.momentum=0.9",
         "conventional optim._target_=quickprop optim.lr=0.001 optim.mu=1.75",
@@ -455,13 +459,13 @@ def test_jobs_pool_by_seed_union(tmp_path):
     d.rename(d.with_name("a_" + d.name))
     d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.1, 0.2, 0.3, 0.4]))
     d.rename(d.with_name("b_" + d.name))
-    groups, _, _ = aggregate(load_jobs(s))
+    groups, _, _ = aggregate(load_jobs(s), ORDER)
     g = groups[("6-4-2", "selective")]
     assert sorted(g.values("heldout").items()) == [(0, 0.1), (1, 0.2), (2, 0.3), (3, 0.4)]
     assert g.warnings == []
     d = write_job(s, "selective", "6-4-2", results("selective", "6-4-2", [0.9]))  # seed 0, other numbers
     d.rename(d.with_name("c_" + d.name))
-    g = aggregate(load_jobs(s))[0][("6-4-2", "selective")]
+    g = aggregate(load_jobs(s), ORDER)[0][("6-4-2", "selective")]
     assert g.values("heldout")[0] == 0.1 and any("seed 0 disagrees" in w for w in g.warnings)
 
 
@@ -489,7 +493,7 @@ def test_paper_setting_names_what_matched_and_random_growth_borrow(sweep):
     """Matched and random growth are not in the paper: the row says whose setting they borrow, never "yes"."""
     s = sweep.parent / "sw2"
     write_job(s, "matched", "6-4-2", results("matched", "6-4-2", CON))
-    groups, tops, methods = aggregate(load_jobs(sweep) + load_jobs(s))
+    groups, tops, methods = aggregate(load_jobs(sweep) + load_jobs(s), ORDER)
     t1 = {(r["method"], r["topology"]): r for r in table1_rows(groups, tops, methods)}
     assert t1[("conventional", "6-4-2")]["paper_setting"] == "yes"
     assert t1[("selective", "6-4-2")]["paper_setting"] == "yes"

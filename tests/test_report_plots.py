@@ -11,8 +11,8 @@ from scipy import stats
 from test_report import CON, SEL, results, write_job
 
 from selpres.report import aggregate, load_jobs
-from selpres.report.paper import PAPER
-from selpres.report.sections.plots import draw_cost, draw_curves, paper_ratio_rows
+from selpres.studies._table1_plots import PAPER, draw_table1_cost, draw_table1_curves, paper_ratio_rows
+from selpres.studies.table1 import ORDER
 
 
 @pytest.fixture
@@ -27,7 +27,7 @@ def sweep(tmp_path):
 
 
 def _grouped(sweep):
-    return aggregate(load_jobs(sweep))
+    return aggregate(load_jobs(sweep), ORDER)
 
 
 def _extent(artist, renderer):
@@ -56,7 +56,7 @@ def test_paper_ratio_is_ours_beside_the_papers_by_hand(sweep):
 
 def test_curves_keep_the_papers_values_off_the_nm_axis_and_the_legend_outside(sweep):
     groups, tops, methods = _grouped(sweep)
-    fig = draw_curves(groups, tops, methods)
+    fig = draw_table1_curves(groups, tops, methods)
     *panels, ratio = fig.axes
     assert len(panels) == len(tops) == 2
     paper_rms = {v for m in PAPER.values() for v in m["rms"].values()}
@@ -88,7 +88,7 @@ def test_single_topology_curves_fit_their_title_and_legend(sweep):
     """One topology: the narrowest figure, where the title used to run past both edges."""
     groups, tops, methods = _grouped(sweep)
     one = {k: g for k, g in groups.items() if k[0] == "6-4-2"}
-    fig = draw_curves(one, ["6-4-2"], methods)
+    fig = draw_table1_curves(one, ["6-4-2"], methods)
     fig.canvas.draw()
     renderer, page = fig.canvas.get_renderer(), fig.bbox
     for artist in (fig.legends[0], fig._suptitle, *(ax.title for ax in fig.axes)):
@@ -101,7 +101,7 @@ def test_single_topology_curves_fit_their_title_and_legend(sweep):
 
 def test_cost_figure_has_no_wall_time_panel_and_its_legend_is_readable(sweep):
     groups, tops, methods = _grouped(sweep)
-    fig = draw_cost(groups, tops, methods)
+    fig = draw_table1_cost(groups, tops, methods)
     (ax,) = fig.axes  # presentations only: a job's wall time is one measurement, no spread
     assert "units of t" in ax.get_ylabel()
     (legend,) = fig.legends

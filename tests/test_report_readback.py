@@ -78,18 +78,18 @@ def test_the_report_lists_what_a_job_wrote_wrong_and_builds_the_rest(tmp_path, c
 
 def test_a_section_that_still_fails_is_named_and_the_rest_written(tmp_path, capsys, monkeypatch):
     """The net under the checks: a section that raises is replaced by one line naming it; report.md is written."""
-    from selpres.report import build
-    from selpres.report.sections import plots
+    from selpres.studies import table1
 
     def broken(ctx):
         raise TypeError("'<=' not supported between instances of 'NoneType' and 'float'")
 
-    monkeypatch.setattr(build, "TABLE1_SECTIONS", [broken if s is plots.section else s for s in build.TABLE1_SECTIONS])
+    sections = [(name, broken if name == "plots" else make) for name, make in table1.GRID_SECTIONS]
+    monkeypatch.setattr(table1, "GRID_SECTIONS", sections)
     sweep, out = tmp_path / "sweep", tmp_path / "out"
     write_job(sweep, "selective", "6-4-2", results("selective", "6-4-2", SEL))
     write_job(sweep, "conventional", "6-4-2", results("conventional", "6-4-2", CON))
     assert main([str(sweep), "--out", str(out)]) == 0
     md = (out / "report.md").read_text()
-    assert "the test_report_readback section could not be built from these results: TypeError" in md
+    assert "the plots section could not be built from these results: TypeError" in md
     assert "## Runs" in md and "## Table 1" in md
     assert capsys.readouterr().err.count("could not be built") == 1

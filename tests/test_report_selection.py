@@ -12,8 +12,8 @@ from test_report import PAPER_SGD, write_setting
 from selpres.report import aggregate, load_jobs
 from selpres.report.build import Report
 from selpres.report.compare import Margin, Options
-from selpres.report.families import matched_partner
 from selpres.run.stats import t_test
+from selpres.studies._families import matched_partner
 from selpres.studies.selection import headline, selection_rows, shown
 
 T = "6-4-2"

@@ -10,8 +10,8 @@ from test_report import PAPER_SGD, results, write_job, write_setting
 
 from selpres.report import aggregate, load_jobs
 from selpres.report.build import Report
-from selpres.report.families import families, family_name, paper_conventional
-from selpres.report.sections.error_cost import grid, plane_rows
+from selpres.studies._error_cost import grid, plane_rows
+from selpres.studies._families import families, family_name, paper_conventional
 from selpres.studies._sensitivity import sensitivity_rows
 from selpres.studies.sensitivity import verdict_text
 

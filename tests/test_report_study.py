@@ -15,11 +15,11 @@ from test_report import write_setting
 from selpres.report import aggregate, load_jobs
 from selpres.report.__main__ import main
 from selpres.report.build import Report
-from selpres.report.compare import time_to_target_rows
-from selpres.report.families import families, paper_conventional
-from selpres.report.sections.error_cost import plane_rows
+from selpres.studies._error_cost import plane_rows
+from selpres.studies._families import families, paper_conventional
 from selpres.studies._sensitivity import sensitivity_rows
 from selpres.studies.sensitivity import verdict_text
+from selpres.studies.table1 import time_to_target_rows
 
 T = "6-4-2"
 # what configs/optim/*.yaml leave unset for an optimizer that does not use the key
@@ -277,11 +277,12 @@ def test_a_studys_report_leads_with_its_sections_and_stays_short(study, tmp_path
     readme = tmp_path / "README.md"
     readme.write_text("<!-- table1:begin -->\n<!-- table1:end -->\n")
     assert main([str(study), "--out", str(tmp_path / "out"), "--readme", str(readme)]) == 2
-    assert "is not Table 1's grid" in capsys.readouterr().err and not (tmp_path / "out").exists()
+    err = capsys.readouterr().err
+    assert "no study of the report" in err and "writes a README block" in err and not (tmp_path / "out").exists()
 
 
 def test_error_cost_plane_one_entry_per_family_legend_outside_frontier_drawn(study):
-    from selpres.report.sections.error_cost import draw_plane
+    from selpres.studies._error_cost import draw_plane
 
     groups, tops, _ = grouped(study)
     fams = families(groups, tops)
@@ -341,7 +342,7 @@ def test_a_family_with_no_finished_setting_has_an_infinite_level(study):
 def test_a_one_factor_at_a_time_design_gets_no_heat_map(study, tmp_path):
     """Selective presentation's 5 settings over 3 size lists × 5 epoch lists fill 5 of 15 cells: no map; SGD's
     full 2 × 2 grid gets one."""
-    from selpres.report.sections.error_cost import grid
+    from selpres.studies._error_cost import grid
 
     groups, tops, _ = grouped(study)
     fams = {f.name: f for f in families(groups, tops)}

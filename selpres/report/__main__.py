@@ -1,5 +1,5 @@
-"""``python -m selpres.report DIR [--out DIR] [--margin 5%] [--holm] [--readme README.md]``: the Table 1
-report of a sweep (also the ``selpres-report`` command)."""
+"""``python -m selpres.report DIR [--out DIR] [--margin 5%] [--holm] [--readme README.md]``: the report of a
+sweep (also the ``selpres-report`` command)."""
 
 from __future__ import annotations
 
@@ -30,15 +30,15 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         default=None,
         metavar="FILE",
-        help=f"also rewrite the block between {BEGIN} and {END} in FILE with the Table 1 section "
-        "generated from this report (nothing is written if the markers are missing)",
+        help=f"also rewrite the block between {BEGIN} and {END} in FILE with the one this report's study "
+        "writes (Table 1's: its numbers and verdicts; nothing is written if the markers are missing)",
     )
     ap.add_argument(
         "--margin",
         default="5%",
-        help="equivalence margin m of the verdicts: a percentage of selective's (in the "
-        "selection verdict: the staged run's) mean final RMS over the paired seeds (default "
-        "5%%) or a value in Nm (e.g. 0.002)",
+        help="equivalence margin m of the verdicts: a percentage of the mean final RMS, over the paired "
+        "seeds, of the method each verdict is about (Table 1's reference; in the selection verdict the "
+        "staged run) (default 5%%) or a value in Nm (e.g. 0.002)",
     )
     ap.add_argument(
         "--holm",
@@ -62,11 +62,12 @@ def main(argv: list[str] | None = None) -> int:
             return _error(str(e))
     out = a.out if a.out is not None else a.dir / "report"
     report = Report.build(a.dir, options)
-    if a.readme is not None and not report.ctx.table1_like:
+    if a.readme is not None and not report.has_readme:
         return _error(
-            f"--readme {a.readme}: {a.dir} is not Table 1's grid of the paper's methods (its "
-            "methods are labelled by swept settings), so it has no Table 1 block to write; run the "
-            "report without --readme, or with it on a Table 1 sweep such as outputs/sweeps/table1"
+            f"--readme {a.readme}: no study of the report of {a.dir} writes a README block (Table 1's does, "
+            "for its grid of the paper's methods; a sweep that labels its methods by swept settings is not "
+            "that grid); run the report without --readme, or with it on a Table 1 sweep such as "
+            "outputs/sweeps/table1"
         )
     files = report.write(out)
     print(report.markdown, end="")
@@ -77,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         command = " ".join(
             ["python -m selpres.report", shlex.quote(str(a.dir)), *flags, "--readme", shlex.quote(str(a.readme))]
         )
-        changed = update_readme(a.readme, report, command)
+        changed = update_readme(a.readme, report.readme_block(command))
         state = "rewritten" if changed else "already up to date"
         print(f"{a.readme}: Table 1 block {state}", file=sys.stderr)
     return 0

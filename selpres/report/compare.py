@@ -5,7 +5,8 @@ A verdict has three readings that are never merged: *better/worse by …* (the p
 zero difference), *equivalent within ±m* (two one-sided tests reject a difference of m or more) and *no
 detectable difference* (neither: an interval that contains 0 cannot rule out a real effect).
 
-Rows are plain dicts, one CSV row each; the sections render them.
+Rows are plain dicts, one CSV row each; the sections render them. Which method is the reference of a verdict,
+and which runs are the targets of time to target, is the study's to say (its design): nothing here names one.
 """
 
 from __future__ import annotations
@@ -14,8 +15,7 @@ import math
 from dataclasses import dataclass, field
 
 from selpres.errors import ConfigError
-from selpres.report.families import paper_conventional, paper_run
-from selpres.report.groups import BASELINE, REFERENCE, SETS, Group, base
+from selpres.report.groups import SETS, Group, base
 from selpres.report.markdown import signed_interval
 from selpres.run.stats import holm, summarize, t_test, tost
 
@@ -24,8 +24,8 @@ ALPHA = 0.05  # every test's level: 95 % intervals for differences, 90 % interva
 
 @dataclass(frozen=True)
 class Margin:
-    """The equivalence margin m: a fraction of the reference method's (selective's) mean final error over
-    the paired seeds, or a fixed value in Nm. An equivalence verdict means nothing without it, so the
+    """The equivalence margin m: a fraction of the mean final error, over the paired seeds, of the method a
+    verdict is about (its reference), or a fixed value in Nm. An equivalence verdict means nothing without it, so the
     report prints the margin used beside every verdict."""
 
     value: float = 0.05
@@ -33,7 +33,7 @@ class Margin:
 
     @classmethod
     def parse(cls, text: str) -> Margin:
-        """ "5%" (of the reference's mean) or "0.002" (Nm)."""
+        """ "5%" (of the reference method's mean) or "0.002" (Nm)."""
         t = str(text).strip()
         rel = t.endswith("%")
         try:
@@ -44,7 +44,8 @@ class Margin:
             raise ConfigError(
                 "--margin",
                 text,
-                f"a percentage of {REFERENCE}'s mean such as 5% (0 < p < 100) or a value in Nm such as 0.002 (> 0)",
+                "a percentage of the compared method's mean such as 5% (0 < p < 100) or a value in Nm such as "
+                "0.002 (> 0)",
             )
         return cls(v / 100, True) if rel else cls(v, False)
 
@@ -53,7 +54,7 @@ class Margin:
             return self.value
         return None if ref_mean is None else self.value * abs(ref_mean)
 
-    def describe(self, of: str = REFERENCE) -> str:
+    def describe(self, of: str) -> str:
         """The margin in words; ``of``: whose mean a relative margin is a fraction of."""
         if self.relative:
             return f"{self.value * 100:g} % of {of}'s mean final RMS over the paired seeds (per row and metric)"
@@ -78,7 +79,7 @@ def outcome(v: dict) -> str:
     return "equivalent" if v.get("p_tost") is not None and v["p_tost"] < ALPHA else "no detectable difference"
 
 
-def reading(v: dict, name: str = REFERENCE, unit: str = "Nm") -> str:
+def reading(v: dict, name: str, unit: str = "Nm") -> str:
     """Plain words for a paired difference name − other (negative = ``name`` has the lower error).
 
     ``v``: n, mean, ci95 and other_mean of the differences; margin, p (paired t) and p_tost, already
@@ -126,24 +127,25 @@ def paired(a: dict[int, float], b: dict[int, float], margin: Margin = Margin()) 
     }
 
 
-def comparisons(methods: list[str]) -> list[tuple[str, str]]:
-    """(a, b) pairs to compare as a − b: every selective variant against every other method; a sweep of
-    selective variants alone compares each variant with the first."""
-    refs = [m for m in methods if base(m) == REFERENCE]
-    others = [m for m in methods if base(m) != REFERENCE]
+def comparisons(methods: list[str], reference: str) -> list[tuple[str, str]]:
+    """(a, b) pairs to compare as a − b: every variant of the ``reference`` method (its label starts with its
+    name) against every other method; a sweep of the reference's variants alone compares each with the first."""
+    refs = [m for m in methods if base(m) == reference]
+    others = [m for m in methods if base(m) != reference]
     if others:
         return [(r, o) for r in refs for o in others]
     return [(r, refs[0]) for r in refs[1:]]
 
 
-def verdict_rows(groups, topologies, methods, options: Options = Options()) -> list[dict]:
-    """Selective against every other method, per topology, paired by seed, held-out and test-10 (Nm).
+def verdict_rows(groups, topologies, methods, reference: str, options: Options = Options()) -> list[dict]:
+    """The ``reference`` method against every other (:func:`comparisons`), per topology, paired by seed,
+    held-out and test-10 (Nm).
 
     A family is one metric across the whole table (all topologies and comparisons); its size is recorded,
     and with ``options.holm`` the t-test and TOST p-values are Holm-adjusted within it."""
     rows, found = [], []  # found: (row, set, paired(...)) for every comparison with results on both sides
     for t in topologies:
-        for a, b in comparisons(methods):
+        for a, b in comparisons(methods, reference):
             ga, gb = groups.get((t, a)), groups.get((t, b))
             row = {"topology": t, "comparison": f"{a} vs {b}"}
             rows.append(row)
@@ -211,8 +213,9 @@ def mean_curve(g: Group) -> list[tuple[int, float, dict]]:
     return out
 
 
-def reach(curve: list, target: float, base_cost: float | None) -> dict:
-    """Where a mean curve first gets to ``target``: the curve point at or below it and the one before."""
+def reach(curve: list, target: float, base_cost: float | None, base_name: str = "base") -> dict:
+    """Where a mean curve first gets to ``target``: the curve point at or below it and the one before, and its
+    cost as a fraction of ``base_cost`` (``fraction_of_<base_name>_cost``)."""
     hit = next((i for i, (_, v, _) in enumerate(curve) if v <= target), None)
     if not curve:
         return {"reached": "no curve"}
@@ -223,24 +226,24 @@ def reach(curve: list, target: float, base_cost: float | None) -> dict:
         "reached": "yes",
         "presentations_to_target": pres,
         "previous_curve_point": curve[hit - 1][0] if hit else 0,
-        "fraction_of_conventional_cost": pres / base_cost if base_cost else None,
+        f"fraction_of_{base_name}_cost": pres / base_cost if base_cost else None,
     }
 
 
-def time_to_target_rows(groups, topologies, methods) -> list[dict]:
-    """Presentations each method needs until its mean held-out curve first reaches a target: the final value
-    of the paper's conventional run (the issue's question; :func:`paper_conventional`, whatever its label),
-    and that of the paper's selective run, else of the run named "selective" (how long the other methods
-    take to get as far as selective presentation does: the speed-up in honest form). A target absent from
-    every topology gives no rows; absent from one, a "no target" row there."""
+def time_to_target_rows(
+    groups, topologies, methods, targets: list[tuple[str, dict]], base: dict, base_name: str
+) -> list[dict]:
+    """Presentations each method needs until its mean held-out curve first reaches a target. ``targets``: a
+    study's [(what the target is called, {topology: the run whose final mean curve value is the target, or
+    None})]; ``base``: {topology: the run whose total presentations the costs are fractions of}, called
+    ``base_name`` in the columns. A target absent from every topology gives no rows; absent from one, a "no
+    target" row there."""
     rows = []
-    conventional = {t: paper_conventional(groups, t) for t in topologies}
-    selective = {t: paper_run(groups, t, REFERENCE) or groups.get((t, REFERENCE)) for t in topologies}
-    for kind, found in ((BASELINE, conventional), (REFERENCE, selective)):
+    for kind, found in targets:
         if not any(found.values()):
             continue
         for t in topologies:
-            tgt, base_group = found[t], conventional[t]
+            tgt, base_group = found[t], base[t]
             target_method = tgt.schedule if tgt else kind
             tgt_curve = mean_curve(tgt) if tgt else []
             base_curve = mean_curve(base_group) if base_group else []
@@ -263,10 +266,10 @@ def time_to_target_rows(groups, topologies, methods) -> list[dict]:
                     "topology": t,
                     "method": m,
                     "target_heldout_curve_rms_nm": target,
-                    f"{BASELINE}_presentations": base_cost,
+                    f"{base_name}_presentations": base_cost,
                     "final_curve_rms_nm": curve[-1][1] if curve else None,
                     "method_presentations": g.sched["presentations"] if g and g.sched else None,
                 }
-                row.update(reach(curve, target, base_cost))
+                row.update(reach(curve, target, base_cost, base_name))
                 rows.append(row)
     return rows

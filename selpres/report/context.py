@@ -5,18 +5,22 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from omegaconf import OmegaConf
 
 from selpres.report.compare import Options
 from selpres.report.groups import Group, aggregate
 from selpres.report.jobs import Job, load_jobs
-from selpres.report.paper import PAPER
+
+if TYPE_CHECKING:
+    from selpres.report.build import Report
 
 
 @dataclass
 class Context:
-    """A sweep, loaded and grouped once for all sections."""
+    """A sweep, loaded and grouped once for all sections; ``order``: the order of the methods' rows, a study's
+    (:func:`selpres.report.build.study_order`), the methods it does not list after them by name."""
 
     sweep: Path
     jobs: list[Job]
@@ -25,18 +29,19 @@ class Context:
     methods: list[str]
     options: Options = field(default_factory=Options)
     experiment: str | None = None  # the study the sweep ran (``experiment=NAME``), None when it names none
+    order: tuple[str, ...] = ()
 
     @classmethod
-    def load(cls, sweep: Path, options: Options | None = None) -> Context:
+    def load(cls, sweep: Path, options: Options | None = None, order: tuple[str, ...] = ()) -> Context:
         jobs = load_jobs(sweep)
-        return cls(sweep, jobs, *aggregate(jobs), options=options or Options(), experiment=experiment_of(sweep))
-
-    @property
-    def table1_like(self) -> bool:
-        """Whether the sweep is Table 1's grid: the paper's methods (with our matched and random growth), one
-        setting each per topology. A sweep that labels its methods by swept settings (a study of parameters)
-        is not, and its report leads with the sections it is about."""
-        return any(m in PAPER for m in self.methods) and all(" " not in m for m in self.methods)
+        return cls(
+            sweep,
+            jobs,
+            *aggregate(jobs, order),
+            options=options or Options(),
+            experiment=experiment_of(sweep),
+            order=tuple(order),
+        )
 
     @property
     def warnings(self) -> list[str]:
@@ -63,12 +68,16 @@ def experiment_of(sweep: Path) -> str | None:
 @dataclass
 class Section:
     """One ``##`` section of report.md: its Markdown blocks, the CSV files behind them (file name -> rows)
-    and its figures (file name -> (caption, draw(path)))."""
+    and its figures (file name -> (caption, draw(path))). A study's section may also give the report its title
+    (``heading``; the first section's that has one) and the README block ``--readme`` writes (``readme(report,
+    command)``: the block's Markdown, from the built report; the command that made it is named in it)."""
 
     title: str
     blocks: list[str]
     csv: dict[str, list[dict]] = field(default_factory=dict)
     figures: dict[str, tuple[str, Callable[[Path], None]]] = field(default_factory=dict)
+    heading: str | None = None
+    readme: Callable[[Report, str], str] | None = None
 
     def markdown(self) -> str:
         return "\n\n".join([f"## {self.title}", *self.blocks])

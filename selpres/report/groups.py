@@ -1,7 +1,8 @@
 """Grouping: a method label per job, and the replicas of each (topology, method) pooled by seed.
 
 Replica r of a job with seed s is the run with seed s + r, so jobs of one method pool by seed: the union
-of their seeds, each seed once (a seed seen twice must give the same numbers, else it is a warning).
+of their seeds, each seed once (a seed seen twice must give the same numbers, else it is a warning). No method
+is named here: a label is what the job recorded, and the order of rows is a study's (its ``ORDER``, handed in).
 """
 
 from __future__ import annotations
@@ -13,9 +14,6 @@ from dataclasses import dataclass, field
 from selpres.report.jobs import Job
 from selpres.storage import flatten
 
-REFERENCE = "selective"  # the method every verdict compares against the others
-BASELINE = "conventional"  # the method whose final curve value is the time-to-target target
-METHOD_ORDER = ["conventional", "selective", "matched", "random_growth"]
 SETS = (("test10", "test-10"), ("heldout", "held-out"))  # results.json key, name in the report
 UNITS = (("nm", "Nm"), ("scaled", "scaled"))
 
@@ -130,8 +128,10 @@ def _add_job(g: Group, job: Job) -> None:
         ]
 
 
-def method_rank(name: str) -> tuple:
-    return (METHOD_ORDER.index(name) if name in METHOD_ORDER else len(METHOD_ORDER), name)
+def method_rank(name: str, order: tuple[str, ...] = ()) -> tuple:
+    """Where a method's rows go: the names listed in ``order`` (a study's) first, in that order, then the rest
+    by name."""
+    return (order.index(name) if name in order else len(order), name)
 
 
 def topology_rank(t: str) -> tuple:
@@ -139,14 +139,19 @@ def topology_rank(t: str) -> tuple:
 
 
 def base(method: str) -> str:
-    """The schedule name a method label starts with ("selective schedule.sizes=[…]" -> "selective")."""
+    """The schedule name a method label starts with ("<name> schedule.sizes=[…]" -> "<name>")."""
     return method.split(" ", 1)[0]
+
+
+def optim_target(optim: dict) -> str | None:
+    """The optimizer a results.json config names: ``optim._target_``, or ``optim.name`` in results written before."""
+    return optim.get("_target_", optim.get("name"))
 
 
 def settings(job: Job) -> dict[str, str]:
     """The job's resolved config as flat key -> compact JSON text, without the keys that never make two
-    jobs different methods: what a method label, a family's swept parameters and a compute-matched
-    partner are read from."""
+    jobs different methods: what a method label, a family's swept parameters and a partner at the same
+    cost are read from."""
     if not (job.results and "config" in job.results):
         return {}
     flat = flatten(job.results["config"])
@@ -173,8 +178,8 @@ ROBOT = "robot."  # an arm's settings: its name, kind, links, masses, ... (confi
 
 
 def arm_name(f: dict[str, str]) -> str:
-    """What an arm is called in a label: ``robot.name`` (puma560, planar3), else its URDF file, else its source
-    (two_link, whose file sets no name; ``robot.kind`` in results from before issue 25)."""
+    """What an arm is called in a label: ``robot.name``, else its URDF file, else its source (for an arm whose
+    file sets no name; ``robot.kind`` in results from before issue 25)."""
     for key in ("robot.name", "robot.path", "robot._target_", "robot.kind"):
         if (v := json.loads(f.get(key, "null"))) is not None:
             return str(v)
@@ -185,7 +190,7 @@ def arm_label(members: list[tuple[Job, dict[str, str]]], keys: list[str]) -> dic
     """id(job) -> the robot part of its label, when the arm differs between jobs of one schedule name:
     ``robot=<name>`` instead of the arm spelled out (its links run to thousands of characters), plus any
     robot key that differs between arms of one name (a mass overridden), so labels stay distinct. Nothing
-    where each topology has one arm (experiment=large: 6-13-2 the two-link arm, 18-40-6 the PUMA): groups
+    where each topology has one arm (a sweep over arms, each with its own network): groups
     are keyed by topology already, and a label naming the arm would make a grid of (topology, method) whose
     other-arm cells do not exist."""
     robot_keys = [k for k in keys if k.startswith(ROBOT)]
@@ -224,13 +229,16 @@ def label_methods(jobs: list[Job]) -> None:
                 j.schedule = name + " " + text
 
 
-def aggregate(jobs: list[Job]) -> tuple[dict[tuple[str, str], Group], list[str], list[str]]:
-    """Groups keyed (topology, method), and the sorted topologies and methods seen in the sweep."""
+def aggregate(
+    jobs: list[Job], order: tuple[str, ...] = ()
+) -> tuple[dict[tuple[str, str], Group], list[str], list[str]]:
+    """Groups keyed (topology, method), and the sorted topologies and methods seen in the sweep (methods in a
+    study's ``order``, see :func:`method_rank`)."""
     label_methods(jobs)
     groups: dict[tuple[str, str], Group] = {}
     for job in sorted(jobs, key=lambda j: str(j.path)):
         key = (job.topology or "?", job.schedule or "?")
         _add_job(groups.setdefault(key, Group(*key)), job)
     topologies = sorted({t for t, _ in groups}, key=topology_rank)
-    methods = sorted({m for _, m in groups}, key=method_rank)
+    methods = sorted({m for _, m in groups}, key=lambda m: method_rank(m, tuple(order)))
     return groups, topologies, methods

@@ -7,7 +7,9 @@ from __future__ import annotations
 import math
 
 from selpres.report.compare import mean_curve, paired, reach
-from selpres.report.families import (
+from selpres.report.groups import Group
+from selpres.run.stats import median, summarize
+from selpres.studies._families import (
     Family,
     at_fixed_other_parameters,
     at_paper_total_epochs,
@@ -18,8 +20,6 @@ from selpres.report.families import (
     schedule_terms,
     stages,
 )
-from selpres.report.groups import Group
-from selpres.run.stats import median, summarize
 
 TOLERANCE = 0.10  # "within 10 % of its own best" (issue 10, item 3); a level within it is "the best level"
 FAMILY, PAPER_TOTAL, FIXED = "family", "at the paper's total epochs", "at fixed other parameters"

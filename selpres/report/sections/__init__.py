@@ -1,5 +1,7 @@
-"""The report's generic sections, one module each; every module has ``section(ctx: Context) -> Section``.
+"""The report's section blocks, one module each: what a study composes (``verdict``: a reference against every
+other method; ``time_to_target``: its tables; ``plots``: error and cost figures, with room for a study's panel and
+marks), and the one generic section every report ends with (``runs``, ``section(ctx) -> Section``).
 
-They read any sweep; a study's own section is a module of :mod:`selpres.studies`. The order they appear in lives
-in :mod:`selpres.report.build`.
+A block takes what a study is about (the reference, the targets, the methods to draw) as arguments; the studies'
+sections are :mod:`selpres.studies`'. The order of the report lives in :mod:`selpres.report.build`.
 """

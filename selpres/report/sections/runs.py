@@ -36,11 +36,15 @@ def crossed(sweep: Path) -> bool:
     return len(swept) >= 2
 
 
-def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path) -> list[dict]:
-    """Every job folder with its status, plus (topology, method) cells of the sweep's grid with no folder."""
+def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path, order: tuple[str, ...] = ()) -> list[dict]:
+    """Every job folder with its status, by topology then method (in a study's ``order``), plus (topology, method)
+    cells of the sweep's grid with no folder."""
+
+    def rank(j: Job) -> tuple:
+        return topology_rank(j.topology or "?"), method_rank(j.schedule or "?", order), str(j.path)
+
     rows = []
-    order = sorted(jobs, key=lambda j: (topology_rank(j.topology or "?"), method_rank(j.schedule or "?"), str(j.path)))
-    for j in order:
+    for j in sorted(jobs, key=rank):
         row = {
             "job": str(j.path.relative_to(sweep)) if j.path != sweep else ".",
             "schedule": j.schedule,
@@ -113,5 +117,5 @@ def runs_markdown(rows: list[dict], warnings: list[str]) -> str:
 
 
 def section(ctx: Context) -> Section:
-    rows = runs_rows(ctx.jobs, ctx.groups, ctx.topologies, ctx.methods, ctx.sweep)
+    rows = runs_rows(ctx.jobs, ctx.groups, ctx.topologies, ctx.methods, ctx.sweep, ctx.order)
     return Section("Runs", [runs_markdown(rows, ctx.warnings)], csv={"runs.csv": rows})

@@ -1,23 +1,23 @@
-"""Time to target: the presentations each method needs to reach conventional's and selective's final
-held-out error (the speed-up, measured on the cost axis)."""
+"""Time to target: the presentations each method needs to reach a target error (the speed-up, measured on the
+cost axis), rendered from :func:`selpres.report.compare.time_to_target_rows`. The targets, and the run whose cost
+the others' are fractions of (its name: ``base``), are a study's."""
 
 from __future__ import annotations
 
-from selpres.report.compare import time_to_target_rows
-from selpres.report.context import Context, Section
-from selpres.report.families import families
-from selpres.report.groups import BASELINE, REFERENCE
 from selpres.report.markdown import fmt, table
 
-NOTE = (
-    "The held-out curve is scored every `eval.every` epochs and at stage ends, on the first "
-    "`eval.heldout_curve` held-out patterns; the first curve point at or below the target is reported, with "
-    "the previous curve point (the true crossing lies in between). Fraction = presentations ÷ the "
-    f"{BASELINE} run's total presentations."
-)
+
+def note(base: str) -> str:
+    return (
+        "The held-out curve is scored every `eval.every` epochs and at stage ends, on the first "
+        "`eval.heldout_curve` held-out patterns; the first curve point at or below the target is reported, with "
+        "the previous curve point (the true crossing lies in between). Fraction = presentations ÷ the "
+        f"{base} run's total presentations."
+    )
 
 
-def time_to_target_markdown(rows: list[dict]) -> str:
+def time_to_target_markdown(rows: list[dict], base: str) -> str:
+    """Every row: per target and topology, every method."""
     head = [
         "target",
         "topology",
@@ -25,7 +25,7 @@ def time_to_target_markdown(rows: list[dict]) -> str:
         "target (Nm)",
         "presentations to target",
         "(previous curve point)",
-        f"fraction of {BASELINE} cost",
+        f"fraction of {base} cost",
         "final curve RMS (Nm)",
     ]
     body = []
@@ -34,7 +34,7 @@ def time_to_target_markdown(rows: list[dict]) -> str:
             hit = [
                 f"{r['presentations_to_target']:,}",
                 f"{r['previous_curve_point']:,}",
-                fmt(r["fraction_of_conventional_cost"], 3),
+                fmt(r[f"fraction_of_{base}_cost"], 3),
             ]
         else:
             hit = [r.get("reached", ""), "", ""]
@@ -51,12 +51,9 @@ def time_to_target_markdown(rows: list[dict]) -> str:
     return table(head, body)
 
 
-def reached_markdown(rows: list[dict], ctx: Context) -> str:
-    """A study's version: per target, only the settings that reach it, fastest first, named by family and
-    setting; how many never do (every row is in time_to_target.csv)."""
-    names = {
-        (f.topology, g.schedule): (f.name, f.label(g)) for f in families(ctx.groups, ctx.topologies) for g in f.members
-    }
+def reached_markdown(rows: list[dict], names: dict[tuple[str, str], tuple[str, str]], base: str) -> str:
+    """A study of parameters' version: per target, only the settings that reach it, fastest first, named by
+    ``names`` ((topology, method) -> (family, setting)); how many never do (every row is in time_to_target.csv)."""
     blocks = []
     for key in dict.fromkeys((r["target_method"], r["topology"]) for r in rows):
         mine = [r for r in rows if (r["target_method"], r["topology"]) == key]
@@ -71,7 +68,7 @@ def reached_markdown(rows: list[dict], ctx: Context) -> str:
                 *names.get((r["topology"], r["method"]), (r["method"], "")),
                 f"{r['presentations_to_target']:,}",
                 f"{r['previous_curve_point']:,}",
-                fmt(r["fraction_of_conventional_cost"], 3),
+                fmt(r[f"fraction_of_{base}_cost"], 3),
                 f"{r['method_presentations']:,}",
                 fmt(r.get("final_curve_rms_nm")),
             ]
@@ -82,7 +79,7 @@ def reached_markdown(rows: list[dict], ctx: Context) -> str:
             "setting",
             "presentations to target",
             "(previous curve point)",
-            f"fraction of {BASELINE} cost",
+            f"fraction of {base} cost",
             "its own cost",
             "final curve RMS (Nm)",
         ]
@@ -101,16 +98,3 @@ def reached_markdown(rows: list[dict], ctx: Context) -> str:
             )
         )
     return "\n\n".join(blocks)
-
-
-def section(ctx: Context) -> Section:
-    rows = time_to_target_rows(ctx.groups, ctx.topologies, ctx.methods)
-    if ctx.table1_like:
-        title = f"Time to target (targets: {BASELINE}'s and {REFERENCE}'s final held-out curve RMS, mean over seeds)"
-        return Section(title, [time_to_target_markdown(rows), NOTE], csv={"time_to_target.csv": rows})
-    title = (
-        "Time to target (targets: the final held-out curve RMS of the paper's conventional run and of "
-        f"{REFERENCE} presentation, mean over seeds)"
-    )
-    none = f"No target: neither the paper's conventional run nor a {REFERENCE} run of the paper's is in this sweep."
-    return Section(title, [reached_markdown(rows, ctx) or none, NOTE], csv={"time_to_target.csv": rows})

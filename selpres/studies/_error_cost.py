@@ -5,7 +5,8 @@ coloured by family, over conventional training's mean learning curve: the fronti
 training reaches at each cost. A point above the frontier is beaten by conventional training stopped at
 the same cost. Heat maps show a family's two-parameter grids (lr × momentum, ε × μ, κ × φ, ...).
 
-Shown with the sensitivity section: when some family has more than one setting.
+Shown with the sensitivity section (:mod:`selpres.studies.sensitivity`): when some family has more than one
+setting.
 """
 
 from __future__ import annotations
@@ -17,10 +18,10 @@ from pathlib import Path
 
 from selpres.report.compare import mean_curve
 from selpres.report.context import Context, Section
-from selpres.report.families import Family, families, paper_conventional
 from selpres.report.groups import Group
 from selpres.report.sections.plots import family_styles, nm_log_axis, pyplot, save_png, thousands
 from selpres.run.stats import summarize
+from selpres.studies._families import Family, families, paper_conventional
 
 NOTE = (
     "Points: mean final held-out RMS over complete seeds (all held-out patterns), bars: its 95 % t-interval; "
