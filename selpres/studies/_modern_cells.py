@@ -12,7 +12,7 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from selpres.report.context import Context
-from selpres.report.families import optim_target
+from selpres.report.groups import optim_target
 
 METRICS = (("rms", "held-out RMS", "Nm"), ("nmse", "held-out nMSE", ""))
 DESIGN_FILE = Path(__file__).with_name("modern.yaml")  # modern.yaml: the study's roles and display names

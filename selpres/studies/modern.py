@@ -302,3 +302,4 @@ def section(ctx: Context, design: Design = DESIGN) -> Section | None:
 
 
 SECTION = section
+ORDER = DESIGN.order  # the runs table of a modern sweep lists its methods in the design's order
