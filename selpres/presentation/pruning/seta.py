@@ -15,15 +15,12 @@ clock's "select" phase, so it is in the job's measured wall time. G = 1 with win
 Random" control (``configs/schedule/seta_random.yaml``).
 
 **The k-means.** The published code calls scikit-learn's ``KMeans`` (Lloyd's iterations from k-means++ seeds: a
-local optimum). Here it is exact: clusters of an optimal 1-D k-means are contiguous in sorted order, so the optimum
-is a dynamic programme over split points of the sorted distinct scores (weighted by their multiplicities, so equal
-scores share a group), D_k(i) = min_j D_{k-1}(j) + SSE(j, i), SSE from prefix sums. The sum-of-squares cost obeys
-the quadrangle inequality, so the leftmost optimal split is monotone in i and each layer is solved by divide and
-conquer (Grønlund et al. 2017, "Fast exact k-means, k-medians and Bregman divergence clustering in 1D"): O(G n log n),
-vectorised one recursion depth at a time (about G log2 n array passes). Exact, deterministic (no seeds, no
-iterations to converge), and no new dependency; it can only differ from scikit-learn's where that stops at a worse
-local optimum. Published edge cases kept: G = 1 is one group; all scores equal (as every score is on the first epoch)
-split the draw into ``torch.chunk`` pieces in drawn order; fewer distinct scores than G give one group each.
+local optimum). Here it is exact (:mod:`selpres.presentation.kmeans`: a dynamic programme over split points of the
+sorted distinct scores, in C where it builds, else numpy, the same partition either way; results.json's
+``pruning.kmeans`` says which ran): deterministic, no seeds, no iterations to converge, and it can only differ from
+scikit-learn's where that stops at a worse local optimum. Published edge cases kept: G = 1 is one group; all scores
+equal (as every score is on the first epoch) split the draw into ``torch.chunk`` pieces in drawn order; fewer
+distinct scores than G give one group each.
 
 Choices the published code leaves to its sampler: annealing from epoch δN (as this package's InfoBatch: the
 published sampler anneals from epoch ⌊δN⌋ when δN is not whole; the same when it is) and, with a budget, per
@@ -34,70 +31,25 @@ epoch).
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import torch
 
 from selpres.errors import ConfigError
+from selpres.presentation.kmeans import kmeans_1d, kmeans_edges, kmeans_implementation
 from selpres.presentation.pruning._policy import KEY, Annealing, EpochChoice, Param, ScoredByLoss, pad
 from selpres.seeding import generator
 
+__all__ = ["POLICY", "SeTa", "kmeans_1d", "score_groups", "window_of"]  # kmeans_1d: its home is presentation.kmeans
 
-def _layer(prev: np.ndarray, prefix: tuple[np.ndarray, ...], k: int, d: int) -> tuple[np.ndarray, np.ndarray]:
-    """D_k(i) for i = k..d and its leftmost optimal split j, by divide and conquer over i, one depth at a time."""
-    D = np.full(d + 1, np.inf)
-    arg = np.zeros(d + 1, dtype=np.int64)
-    tasks = np.array([[k, d, k - 1, d - 1]], dtype=np.int64)  # rows: i_lo, i_hi, j_lo, j_hi
-    while len(tasks):
-        i_lo, i_hi, j_lo, j_hi = tasks.T
-        mid = (i_lo + i_hi) // 2
-        hi = np.minimum(j_hi, mid - 1)
-        lens = hi - j_lo + 1  # >= 1: j_lo <= i_lo - 1 <= mid - 1 throughout
-        starts = np.concatenate(([0], np.cumsum(lens)[:-1]))
-        j = np.repeat(j_lo - starts, lens) + np.arange(int(lens.sum()))  # each task's candidate splits
-        W, S, Q = prefix  # the SSE of distinct values j..mid-1: (Q - S^2 / W) over that range
-        ws, ss = np.repeat(W[mid], lens) - W[j], np.repeat(S[mid], lens) - S[j]
-        vals = prev[j] + ((np.repeat(Q[mid], lens) - Q[j]) - ss * ss / ws)
-        best = np.minimum.reduceat(vals, starts)
-        first = np.minimum.reduceat(np.where(vals == np.repeat(best, lens), np.arange(len(vals)), len(vals)), starts)
-        opt = j[first]
-        D[mid], arg[mid] = best, opt
-        left = np.stack([i_lo, mid - 1, j_lo, opt], 1)[mid - 1 >= i_lo]
-        right = np.stack([mid + 1, i_hi, opt, j_hi], 1)[mid + 1 <= i_hi]
-        tasks = np.concatenate([left, right])
-    return D, arg
-
-
-def kmeans_1d(values: np.ndarray, groups: int) -> np.ndarray:
-    """An optimal (least within-group sum of squares) partition of ``values`` into at most ``groups`` groups:
-    each value's group index, 0 = the lowest centre. Groups are contiguous in sorted order, equal values share one,
-    and there are min(groups, number of distinct values) of them."""
-    v, inverse, w = np.unique(np.asarray(values, dtype=np.float64), return_inverse=True, return_counts=True)
-    d = len(v)
-    G = min(groups, d)
-    x = v - v.mean()  # centred: the prefix sums lose less to cancellation
-    W = np.concatenate(([0.0], np.cumsum(w)))
-    S = np.concatenate(([0.0], np.cumsum(w * x)))
-    Q = np.concatenate(([0.0], np.cumsum(w * x * x)))
-
-    D = np.full(d + 1, np.inf)
-    D[1:] = Q[1:] - S[1:] ** 2 / W[1:]  # one group: the SSE of the distinct values 0..i-1
-    args = []
-    for k in range(2, G + 1):
-        D, arg = _layer(D, (W, S, Q), k, d)
-        args.append(arg)
-    bounds, end = [d], d  # backtrack the split points from the last group
-    for arg in reversed(args):
-        end = int(arg[end])
-        bounds.append(end)
-    starts = np.array([0, *sorted(bounds[1:])], dtype=np.int64)  # each group's first distinct value
-    group_of_distinct = np.searchsorted(starts, np.arange(d), side="right") - 1
-    return group_of_distinct[inverse.reshape(-1)]
+log = logging.getLogger(__name__)
 
 
 def score_groups(scores: torch.Tensor, groups: int) -> list[torch.Tensor]:
     """Positions in ``scores`` of each group, easiest (lowest centre) first, as the published code groups them."""
     m = len(scores)
-    if groups == 1:
+    if groups == 1 or not m:  # (nothing drawn: one empty group)
         return [torch.arange(m)]
     if m and bool((scores == scores[0]).all()):  # one value: no clustering to do, chunks in drawn order
         return list(torch.chunk(torch.arange(m), groups))
@@ -136,6 +88,40 @@ class SeTa(ScoredByLoss):
         self.keep = 1.0 - params["prune_ratio"]
         self.groups, self.window_scale = params["groups"], params["window_scale"]
         self.annealing = Annealing(params["delta"], len(ledger.seeds))
+        self._arrays: tuple[np.ndarray, ...] | None = None
+        if self.groups > 1 and kmeans_implementation() != "native":
+            log.warning("SeTa's k-means runs in numpy (slower, the same groups): %s", kmeans_implementation())
+
+    def describe(self) -> dict:
+        return {**super().describe(), "kmeans": kmeans_implementation() if self.groups > 1 else None}
+
+    def in_window(self, scores: np.ndarray, epoch: int) -> np.ndarray:
+        """Which of one replica's drawn patterns (their scores, in drawn order) the epoch's window holds: the set
+        :func:`score_groups` and :func:`window_of` give, found by the window's two score edges (the groups are
+        contiguous in sorted order) instead of one pass over the scores per group."""
+        m = len(scores)
+        if self.groups == 1 or not m or bool((scores == scores[0]).all()):  # no k-means: as score_groups
+            groups = score_groups(torch.from_numpy(scores), self.groups)
+            inside = np.zeros(m, dtype=bool)
+            for g in window_of(len(groups), epoch, self.window_scale):
+                inside[groups[g].numpy()] = True
+            return inside
+        edges = kmeans_edges(scores, self.groups).tolist()  # group g: the scores in [edges[g-1], edges[g])
+        w = window_of(len(edges) + 1, epoch, self.window_scale)
+        inside = np.ones(m, dtype=bool) if len(w) else np.zeros(m, dtype=bool)
+        if len(w) and w.start > 0:
+            inside &= scores >= edges[w.start - 1]
+        if len(w) and w.stop <= len(edges):
+            inside &= scores < edges[w.stop - 1]
+        return inside
+
+    def _scratch(self, n: int, size: int) -> tuple[np.ndarray, ...]:
+        """Arrays reused every epoch (a mask over U, the draw's scores, the window's patterns, the mask in the
+        epoch's shuffle): fresh ones of 10^5
+        entries are mapped in page by page each time, which cost a fifth of an epoch's choice at n = 10^5."""
+        if self._arrays is None or len(self._arrays[0]) != n or len(self._arrays[1]) != size:
+            self._arrays = (np.empty(n, dtype=bool), np.empty(size), np.empty(size, dtype=np.int64), np.empty(n, bool))
+        return self._arrays
 
     @classmethod
     def epoch_share(cls, params: dict, selection_cost: float) -> float:
@@ -148,18 +134,21 @@ class SeTa(ScoredByLoss):
     def choose(self, epoch: int, order: torch.Tensor, losses: torch.Tensor | None) -> EpochChoice:
         led = self.ledger
         rows, counts = [], []
+        scores = self.scores.numpy()  # numpy views throughout: torch's indexing cost more than the k-means here
+        size = int(led.n * self.keep)
+        mask, drawn_scores, picked, in_order = self._scratch(led.n, size)
         for r, seed in enumerate(led.seeds):
             gen = generator(seed, "pruning", epoch)
-            drawn = torch.randperm(led.n, generator=gen)[: int(led.n * self.keep)]
+            drawn = torch.randperm(led.n, generator=gen)[:size].numpy()
             if not self.annealing(r, epoch, led):
-                groups = score_groups(self.scores[r, drawn], self.groups)
-                window = [groups[g] for g in window_of(len(groups), epoch, self.window_scale)]
-                drawn = drawn[torch.cat(window)] if window else drawn[:0]
+                inside = self.in_window(np.take(scores[r], drawn, out=drawn_scores), epoch)
+                drawn = np.compress(inside, drawn, out=picked[: np.count_nonzero(inside)])
             if not len(drawn):  # as published: an empty selection presents one random pattern
-                drawn = torch.randint(led.n, (1,), generator=gen)
-            mask = torch.zeros(led.n, dtype=torch.bool)
+                drawn = torch.randint(led.n, (1,), generator=gen).numpy()
+            mask[:] = False
             mask[drawn] = True
-            kept = order[r][mask[order[r]]]  # shuffled: in the epoch's shuffle of U
+            shuffled = order[r].numpy()
+            kept = torch.from_numpy(shuffled[np.take(mask, shuffled, out=in_order[: len(shuffled)])])  # as shuffled
             led.left_out[r] += led.n - len(kept)
             rows.append(kept)
             counts.append(led.affordable(r, len(kept)))
