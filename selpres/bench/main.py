@@ -10,7 +10,8 @@ whole job (``selpres.run.train.train`` end to end at R = 1, 30, 1000
 beside the engine alone at the same R); the per-epoch shuffles (the native bucket sort against numpy's argsort
 of the same hashes); the priority orders' selection cost; the stage-wise orders' cost of choosing
 (``selpres.presentation.selection``: one enlargement batched against a per-replica loop, and whole jobs' "select"
-phase against "train"); the native kernel's build; exemplar-set
+phase against "train"); SeTa's selection (``selpres.bench.pruning``: its exact k-means in C against numpy, one call
+and whole jobs); the native kernel's build; exemplar-set
 generation; the command line's start-up (``selpres.bench.startup``); TensorBoard written by selpres against
 torch's SummaryWriter (``selpres.bench.tracking``, full run only). A "replica-run" is one conventional run
 of the paper: 150 epochs x 1002 single-pattern
@@ -38,6 +39,7 @@ from selpres.bench.engines import bench_batch_engines, bench_engines
 from selpres.bench.jobs import bench_jobs
 from selpres.bench.minibatch import rows as minibatch_rows
 from selpres.bench.presentation import bench_orders, bench_selection, bench_shuffles
+from selpres.bench.pruning import rows as pruning_rows
 from selpres.bench.sampler import bench_sampler
 from selpres.bench.startup import rows as startup_rows
 from selpres.bench.tracking import rows as tracking_rows
@@ -104,6 +106,8 @@ def main(argv: list[str] | None = None) -> int:
     bench_sampler(q)  # the Sampler in a DataLoader loop against RandomSampler (a row, not a pass or fail)
     bench_orders(q)
     jobs_ok = bench_selection(q, args.configs.resolve()) and jobs_ok
+    for line in pruning_rows(q, args.configs.resolve()):  # SeTa's k-means: C against numpy, one call and whole jobs
+        print(line, flush=True)
     if native:
         bench_compile()
     bench_exemplar_generation(q, args.configs)
