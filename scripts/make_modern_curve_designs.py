@@ -3,7 +3,8 @@
 Conventional training of each arm and regime at doubling budgets N, 2N, 4N, ... epochs, one job each, run by
 experiment=modern_curve on the validation draw (data.test_seed=1, seeds apart from the study's). The study's N is
 the budget where doubling it changes the final held-out RMS by less than 10 % (or the largest that fits); it is
-written into make_modern_designs.py (EPOCHS). The regimes and arms are that script's; the Adam rates are the ones the curves ran at (CURVE_LR).
+written into make_modern_designs.py (EPOCHS). The regimes and arms are that script's; the Adam rates are the ones
+the curves ran at (CURVE_LR).
 """
 
 from __future__ import annotations

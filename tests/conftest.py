@@ -59,8 +59,9 @@ def cfg_of(*overrides: str):
 
 
 def numbers(res: dict) -> dict:
-    """Everything in results.json that must be reproducible (wall times excluded)."""
-    return {k: res[k] for k in ("summary", "replica_results", "curves", "schedule", "config_hash")}
+    """Everything in results.json that must be reproducible (wall times excluded: the curves' work_seconds too)."""
+    curves = [{k: v for k, v in rec.items() if k != "work_seconds"} for rec in res["curves"]]
+    return {**{k: res[k] for k in ("summary", "replica_results", "schedule", "config_hash")}, "curves": curves}
 
 
 def _native_reason() -> str | None:

@@ -137,9 +137,4 @@ def test_without_the_kernel_a_seta_job_says_so_and_has_the_same_numbers(monkeypa
     K.native_kmeans.cache_clear()
     assert runs["1"]["pruning"]["kmeans"] == "numpy (disabled by SELPRES_NO_NATIVE)"
     if runs["0"]["pruning"]["kmeans"] == "native":
-        assert _untimed(numbers(runs["0"])) == _untimed(numbers(runs["1"]))
-
-
-def _untimed(nums: dict) -> dict:
-    """``numbers`` without the curves' clock readings (``work_seconds``: wall time, different every run)."""
-    return {**nums, "curves": [{k: v for k, v in rec.items() if k != "work_seconds"} for rec in nums["curves"]]}
+        assert numbers(runs["0"]) == numbers(runs["1"])
