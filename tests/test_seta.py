@@ -58,6 +58,21 @@ def test_the_window_slides_from_easy_to_hard_as_worked_out_by_hand(G, scale):
     ]
 
 
+def test_a_replica_whose_scores_are_not_finite_goes_on_as_if_they_were_equal():
+    # a diverged replica's losses are NaN or inf: the k-means cannot order them (it raised IndexError before); its
+    # epoch is the one of equal scores, the groups torch.chunk pieces in drawn order, and the other replica's is its own
+    n = 20
+    pr, alone = _seta(n, seeds=(3, 4)), _seta(n, seeds=(4,))
+    pr.policy.scores[0] = torch.tensor([float("nan"), float("inf")] + [1.0] * (n - 2), dtype=torch.float64)
+    pr.policy.scores[1] = alone.policy.scores[0] = torch.arange(n, dtype=torch.float64)
+    equal = _seta(n, seeds=(3,))  # every score 3.0, as on the first epoch
+    order = torch.stack([torch.randperm(n, generator=torch.Generator().manual_seed(s)) for s in (1, 2)])
+    for epoch in range(3):
+        got = _presented(pr, epoch, order)
+        assert got[0] == _presented(equal, epoch, order[:1])[0]
+        assert got[1] == _presented(alone, epoch, order[1:])[0]
+
+
 def _sse(x: np.ndarray, labels: np.ndarray) -> float:
     return float(sum(((x[labels == g] - x[labels == g].mean()) ** 2).sum() for g in np.unique(labels)))
 

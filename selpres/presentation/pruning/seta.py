@@ -100,6 +100,8 @@ class SeTa(ScoredByLoss):
         :func:`score_groups` and :func:`window_of` give, found by the window's two score edges (the groups are
         contiguous in sorted order) instead of one pass over the scores per group."""
         m = len(scores)
+        if not np.isfinite(scores).all():  # a diverged replica (its results are withheld): its scores say nothing,
+            scores = np.zeros_like(scores)  # so it goes on as if they were all equal, and the job with it
         if self.groups == 1 or not m or bool((scores == scores[0]).all()):  # no k-means: as score_groups
             groups = score_groups(torch.from_numpy(scores), self.groups)
             inside = np.zeros(m, dtype=bool)
