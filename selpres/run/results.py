@@ -21,7 +21,7 @@ from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.sampler import shuffle_implementation
 from selpres.run import floor
 from selpres.run.optimizer import optim_spec
-from selpres.run.specs import plain, task_specs
+from selpres.run.specs import recorded, task_specs
 from selpres.run.stats import summarize
 from selpres.storage import stable_hash
 
@@ -33,8 +33,9 @@ UNITS = ("nm", "scaled", "nmse")  # nmse: MSE ÷ the set's target variance (selp
 def job_hash(cfg: DictConfig) -> str:
     """Identity of a job's numbers: everything but the knobs that cannot change them, and the contents of the
     files its task reads (``selpres.data.task.task_files``: what the arm's source reads, a data file), so an edited
-    URDF or CSV is not taken for the finished job."""
-    c = plain(cfg)
+    URDF or CSV is not taken for the finished job. The config as results.json records it (``recorded``: the data node
+    typed by its route)."""
+    c = recorded(cfg)
     for k in NOT_IDENTITY:
         c.pop(k, None)
     c["file_sha256"] = [file_digest(p) if p.is_file() else None for p in task_files(*task_specs(cfg))]
@@ -152,7 +153,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         ),
         "replica_results": reps,
         "curves": progress.history,
-        "config": plain(cfg),
+        "config": recorded(cfg),
     }
 
 
