@@ -17,6 +17,7 @@ from omegaconf import DictConfig
 
 from selpres.data.file import file_digest
 from selpres.data.task import task_files
+from selpres.engines.activations import ACTIVATIONS
 from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.sampler import shuffle_implementation
 from selpres.run import floor
@@ -123,6 +124,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "engine": engine.name,  # what ran
         "optimizer": spec.path,  # the class whose rule ran (selpres.engines.optim, or the user's own)
         "optimizer_dropped": spec.dropped or None,  # keys of the optim group file the chosen class does not take
+        "activation": ACTIVATIONS.path_of(cfg.model.activation),  # the hidden units' class that ran (a user's too)
         "engine_requested": cfg.engine.value,
         "engine_fallback": engine.fallback_reason,  # why "fast" did not run natively (None if it did)
         "evaluation": engine.evaluation,  # e.g. "native, 8 lanes (AVX-512)": the same numbers, not the same speed
