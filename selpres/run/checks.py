@@ -121,9 +121,10 @@ def check_seed(cfg: DictConfig) -> None:
 
 
 def check_task(cfg: DictConfig) -> Shape:
-    """The robot and data configs: the data node's keys those its route reads (``selpres.run.specs.data_spec``), the
-    common ones in range, the route's own values (its ``check``); returns the shape of the task
-    (``selpres.data.task.task_shape``: builds the arm or reads a data file's header)."""
+    """The robot and data configs: the data node holds only keys its route reads, of the types it declares
+    (``selpres.run.specs.data_spec``), its required ones set, the common ones in range, the route's own values in
+    range (its ``check``); returns the shape of the task (``selpres.data.task.task_shape``: builds the arm or reads a
+    data file's header)."""
     robot, d = task_specs(cfg)
     route = ROUTES.get(d.kind)
     for k in required_of(route):

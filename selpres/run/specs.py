@@ -23,7 +23,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import ConfigKeyError, OmegaConfBaseException
 
 from selpres.arms.sources import as_choice
-from selpres.data.routes import ROUTES
+from selpres.data.routes import ROUTES, keys_of
 from selpres.data.spec import COMMON, CommonKeys, DataSpec
 from selpres.errors import ConfigError
 from selpres.registry import Choice
@@ -60,9 +60,8 @@ def data_spec(node: Any) -> DataSpec:
     kind = ROUTES.check(d.get("kind"))
     route = ROUTES.get(kind)
     typed = {**d, **_typed(CommonKeys, {k: d[k] for k in COMMON if k in d}, kind)}
-    keys = getattr(route, "Keys", None)
-    if dataclasses.is_dataclass(keys):
-        typed.update(_typed(keys, {k: d[k] for k in (f.name for f in dataclasses.fields(keys)) if k in d}, kind))
+    if keys_of(route):
+        typed.update(_typed(route.Keys, {k: d[k] for k in keys_of(route) if k in d}, kind))
     return DataSpec.of(typed)
 
 
