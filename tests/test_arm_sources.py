@@ -167,7 +167,7 @@ def test_data_routes_are_the_modules_and_say_what_they_read(tmp_path):
     assert T.route_keys() == {
         "file": ("path", "inputs", "outputs"),
         "grid": ("theta", "dtheta", "tau1", "tau2", "accel_limit"),
-        "sampled": ("n", "route", "draw", "seed", "q", "dq", "tau", "wrench", "accel_limit"),
+        "sampled": ("n", "route", "draw", "seed", "accel_limit", "q", "dq", "tau", "wrench"),
     }
     (tmp_path / "arm.dh").write_text("0.2 0 0 1 0 0 0 0 0 0\n")
     robot = Choice("urdf", {"path": str(tmp_path / "arm.dh")})  # a file-reading source: read only when used

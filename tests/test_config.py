@@ -101,7 +101,7 @@ def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, g
         == (len(prob.task.input_names), len(prob.task.output_names))
         == (prob.X.shape[1], prob.Y.shape[1])
     )
-    if cfg.data.kind.value == "grid":
+    if cfg.data.kind == "grid":
         assert n == 1002 and sizes[0] == 6 and sizes[-1] == 2  # the paper's exemplar set
     assert prob.schedule.n == n and prob.schedule.sizes[-1] == n
     assert len(prob.samplers) == len(prob.seeds) == cfg.replicas
@@ -187,7 +187,7 @@ def _compose_error(compose_cfg, *ov) -> str:
         ("topology=6-99-2", "topology"),  # unknown group option
         ("schedule=zigzag", "schedule"),
         ("engine=turbo", "engine"),  # bad enum values
-        ("data.scaling.mode=auto", "data.scaling.mode"),
+        ("data.thetaa=0", "data.thetaa"),  # the data node is open: a key its file lacks takes Hydra's +
     ],
 )
 def test_schema_rejects_at_compose(compose_cfg, override, key):
@@ -239,6 +239,15 @@ def _config_error(compose_cfg, *ov) -> ConfigError:
         (["data.heldout=0"], "data.heldout", "0"),
         (["data.test_from_exemplar=11"], "data.test_from_exemplar", "11"),
         (["data.scaling.lo=0.9", "data.scaling.hi=0.1"], "data.scaling", "0.9"),
+        # the data node is open: its route declares its keys' types, checked and converted as a schema would
+        (["data.scaling.mode=auto"], "data.scaling.mode", "one of exemplar, commanded"),
+        (["data.theta.lo=abc"], "data.theta.lo", "a number"),
+        (["data.theta=3"], "data.theta", "a node {lo: ..., hi: ..., step: ...}"),
+        (["+data.theta.lr=3"], "data.theta.lr", "one of the keys lo, hi, step of data.theta"),
+        (["~data.theta.step"], "data.theta.step", "a value: data.kind=grid reads it"),
+        (["data.test_patterns=1.5"], "data.test_patterns", "a whole number"),
+        (["+data.thetaa=1"], "data.thetaa", "unset (null) for data.kind=grid"),
+        (["data.kind=zigzag"], "data.kind", "one of file, grid, sampled, or a class by its import path"),
         (["schedule.strata_bins=0"], "schedule.strata_bins", "0"),
         (["schedule.order=zigzag"], "schedule.order", "zigzag"),  # an order is a registry name or import path
         (["eval.every=-1"], "eval.every", "-1"),

@@ -55,7 +55,7 @@ def test_one_command_runs_both_arms_each_with_its_network_every_n_and_schedule(j
         sizes = validate(c)  # the network fits the arm's task: 3N inputs, N outputs
         dof = {"two_link": 2, "puma560": 6}[arm_of(c)]
         assert (sizes[0], sizes[-1]) == (3 * dof, dof)
-        assert c.data.kind.value == "sampled" and c.data.heldout == 10_000
+        assert c.data.kind == "sampled" and c.data.heldout == 10_000
         assert c.seed == 0 and c.replicas >= 10  # the same seeds for every method: paired comparisons
 
 

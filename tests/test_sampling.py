@@ -188,7 +188,10 @@ def test_commanded_scaling_uses_the_boxes():
         (["data.n=2000000"], "data.n", "2000000"),
         (["data.accel_limit=0"], "data.accel_limit", "0.0"),
         (["data.heldout=1.5"], "data.heldout", "1.5"),
-        (["data.path=x.csv"], "data.path", "x.csv"),  # a key of another kind
+        (["+data.path=x.csv"], "data.path", "x.csv"),  # a key of another kind
+        (["data.route=sideways"], "data.route", "one of forward, inverse"),  # the route's own keys' types
+        (["data.n=1e3"], "data.n", "a whole number"),
+        (["data.wrench=[1,0,0,0,0,x]"], "data.wrench[5]", "a number"),
         (["data.draw=null"], "data.draw", "None"),
         (["data.scaling.mode=commanded"], "data.scaling.mode", "commanded"),  # no torque box
         (
@@ -211,7 +214,7 @@ def test_the_paper_grid_refuses_other_arms_and_says_what_to_use():
     from selpres.run.checks import validate
 
     # an arm's file picks data=sampled for it; asking for the paper's grid explicitly is refused
-    assert cfg_of("robot=puma560", "topology.layers=18-40-6").data.kind.value == "sampled"
+    assert cfg_of("robot=puma560", "topology.layers=18-40-6").data.kind == "sampled"
     with pytest.raises(ConfigError) as ei:
         validate(cfg_of("robot=puma560", "data=paper", "topology.layers=18-40-6"))
     assert ei.value.key == "data.kind" and "data=sampled" in str(ei.value) and "puma560" in str(ei.value)

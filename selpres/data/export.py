@@ -20,6 +20,7 @@ from selpres.arms.sources import as_choice, make_arm
 from selpres.arms.two_link import cfg_get
 from selpres.data.file import file_digest
 from selpres.data.paper import INPUT_NAMES, TARGET_NAMES, ExemplarSet, Patterns, TestSets
+from selpres.data.spec import DataSpec
 from selpres.registry import Choice
 from selpres.storage import atomic_write, stable_hash
 
@@ -34,6 +35,8 @@ def _plain(cfg: Any, fold: bool = True) -> Any:
     hash alike, enums by name."""
     if isinstance(cfg, Choice):
         cfg = {"_target_": cfg.target, **cfg.params}
+    elif isinstance(cfg, DataSpec):  # the flat node: common keys and the route's
+        cfg = cfg.as_dict()
     elif dataclasses.is_dataclass(cfg) and not isinstance(cfg, type):
         cfg = dataclasses.asdict(cfg)
     if isinstance(cfg, Mapping):

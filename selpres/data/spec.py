@@ -1,48 +1,92 @@
 """The data node as plain Python: what ``selpres.run`` hands this room in place of the composed config.
 
-``DataSpec`` holds a ``data`` node's keys (``selpres.run.config.DataConfig``) as plain values: strings for the
-enums, dicts for the grid ranges and the scaling, lists for boxes. The functions of this room read it by
-attribute (or ``cfg_get``, which also takes a plain dict, as tests and library users write one).
+A ``data`` node is open: ``kind`` names its route (a built-in of ``selpres.data.routes`` or a route class by its
+import path), the keys below (:class:`CommonKeys`) are every route's, and the rest are the route's own, declared
+by its ``Keys`` dataclass. ``DataSpec`` holds the common keys as fields and the route's keys in ``params``, as
+plain values (strings for enums, dicts for nested nodes, lists for boxes); the route's keys read by attribute as
+well (``data.n``, ``data.theta``), so the functions of this room read a spec as they read a plain dict
+(``cfg_get``). The dataclasses here say the types; ``selpres.run.specs`` checks a composed node against them
+(this room imports no omegaconf), so a new route's keys edit no schema.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from enum import Enum
 from typing import Any
 
-from selpres.registry import construct
+from selpres.data.routes import ROUTES, defaults_of, keys_of
+from selpres.errors import ConfigError
+
+
+class ScalingMode(Enum):
+    exemplar = "exemplar"  # each column's min/max over the exemplar set
+    commanded = "commanded"  # the configured boxes (a route that has them: Task.commanded)
+
+
+@dataclasses.dataclass
+class Scaling:
+    mode: ScalingMode
+    margin: float
+    lo: float
+    hi: float
+
+
+@dataclasses.dataclass
+class CommonKeys:
+    """The keys of every data node, whatever its route, with their types (``selpres.run.specs`` checks them)."""
+
+    kind: str  # the route: a built-in of selpres.data.routes or an import path
+    test_patterns: int  # the paper's metric: this many test patterns ...
+    test_from_exemplar: int  # ... of which this many from the exemplar set
+    heldout: Any  # a count, or a fraction (float in (0, 1)) of all patterns (a file: of its rows)
+    test_seed: int  # the test sets' draws
+    scaling: Scaling
+
+
+COMMON = tuple(f.name for f in dataclasses.fields(CommonKeys))
 
 
 @dataclasses.dataclass(frozen=True)
 class DataSpec:
-    kind: str  # grid | sampled | file (selpres.data.task)
+    kind: str  # a route of selpres.data.routes (grid | sampled | file) or a route class's import path
     test_patterns: int
     test_from_exemplar: int
     heldout: Any  # a count, or a fraction of the patterns
     test_seed: int
     scaling: Mapping[str, Any]  # {mode, margin, lo, hi}
-    theta: Mapping[str, float] | None = None  # grid: {lo, hi, step}
-    dtheta: Mapping[str, float] | None = None
-    tau1: Mapping[str, float] | None = None
-    tau2: Mapping[str, float] | None = None
-    accel_limit: float | None = None
-    n: int | None = None  # sampled
-    route: str | None = None
-    draw: str | None = None
-    seed: int | None = None
-    q: list | None = None
-    dq: list | None = None
-    tau: list | None = None
-    wrench: list | None = None
-    path: str | None = None  # file
-    inputs: list | None = None
-    outputs: list | None = None
+    params: Mapping[str, Any] = dataclasses.field(default_factory=dict)  # the route's own keys (its Keys)
+
+    def __getattr__(self, name: str) -> Any:
+        """A route's key by attribute (``data.n``); only for keys the route declares."""
+        if name.startswith("__"):
+            raise AttributeError(name)
+        params = self.__dict__.get("params", {})
+        if name in params:
+            return params[name]
+        raise AttributeError(f"data.{name}: not a key of data.kind={self.__dict__.get('kind')}")
 
     @classmethod
     def of(cls, node: Mapping[str, Any]) -> DataSpec:
-        """From a plain data node; a key this schema lacks is refused naming ``data.<key>``."""
-        return construct(cls, dict(node), "data")
+        """From a plain data node: ``kind`` checked by the registry, the common keys required; a key neither common
+        nor the route's is refused naming ``data.<key>`` unless it is unset (None: a results.json written when the
+        schema held every route's keys); a route's key it lacks (or holds as None) reads the route's default, None
+        for a key without one (``selpres.run.checks`` requires those). Types are converted by ``selpres.run.specs``."""
+        node = dict(node)
+        kind = ROUTES.check(node.get("kind"))
+        route = ROUTES.get(kind)
+        keys = keys_of(route)
+        for k, v in node.items():
+            if k not in COMMON and k not in keys and v is not None:
+                raise ConfigError(f"data.{k}", v, f"unset (null) for data.kind={kind}, which reads {list(keys)}")
+        for k in COMMON:
+            if node.get(k) is None:
+                raise ConfigError(f"data.{k}", None, f"a value: data.kind={kind} reads it")
+        defaults = defaults_of(route)
+        params = {k: defaults.get(k) if node.get(k) is None else node[k] for k in keys}
+        return cls(params=params, **{k: node[k] for k in COMMON})
 
     def as_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        """The flat node: the common keys and the route's (what :meth:`of` takes back)."""
+        return {**{k: getattr(self, k) for k in COMMON}, **self.params}

@@ -12,7 +12,8 @@ Takes specs, not configs: the robot as a ``selpres.registry.Choice`` (its source
 jobs of an in-process sweep (Hydra's basic launcher) build the data once, and kept on disk (``selpres.data.cache``),
 so the next job's process loads it; cached tensors are never modified in place. A task read from files (what the
 arm's source and the data route declare they read: :func:`task_files`) is keyed by their stamps and never stored,
-so an edited file is read again; a user's source class outside the package is keyed by its module's content too.
+so an edited file is read again; a user's source or route class outside the package is keyed by its module's content
+too.
 Problems a config causes here (a filter that keeps nothing, ranges with nothing to draw test patterns from) are
 ConfigErrors naming the key.
 """
@@ -34,7 +35,7 @@ from selpres.arms.two_link import cfg_get
 from selpres.data import export as E
 from selpres.data import paper as D
 from selpres.data.cache import cached
-from selpres.data.routes import ROUTES
+from selpres.data.routes import ROUTES, keys_of
 from selpres.data.spec import DataSpec
 from selpres.errors import ConfigError
 from selpres.registry import Choice
@@ -43,8 +44,8 @@ log = logging.getLogger("selpres")
 
 
 def route_keys() -> dict[str, tuple[str, ...]]:
-    """data.kind -> the DataSpec keys that route reads (the others must stay unset): from the routes themselves."""
-    return {name: ROUTES.get(name).KEYS for name in ROUTES.names}
+    """Built-in data.kind -> the keys that route reads besides the common ones (its ``Keys``)."""
+    return {name: keys_of(ROUTES.get(name)) for name in ROUTES.names}
 
 
 @dataclass(frozen=True)
@@ -121,9 +122,9 @@ def task_files(robot: Choice, data: DataSpec) -> list[Path]:
     return [*arm_files, *route.reads_files(data)]
 
 
-def _own_code(robot: Choice) -> str:
-    """sha256 of a user's source module (outside selpres, whose code the cache key holds already), else ""."""
-    cls = type(source_of(robot)) if "." in robot.target else None
+def _own_code(cls: type | None) -> str:
+    """sha256 of a user's module (an arm source or a data route outside selpres, whose code the cache key holds
+    already), else ""."""
     if cls is None or cls.__module__.split(".")[0] == "selpres":
         return ""
     try:
@@ -136,14 +137,16 @@ def load_task(robot: Choice, data: DataSpec) -> Task:
     """The task of a robot/data spec (cached); raises ConfigError, writes nothing."""
     stamp = [(str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in task_files(robot, data) if p.is_file()]
     robot_json = json.dumps({"_target_": robot.target, **robot.params}, sort_keys=True)
-    code = _own_code(robot) if ROUTES.get(data.kind).USES_ARM else ""
+    route = ROUTES.get(data.kind)
+    source = type(source_of(robot)) if route.USES_ARM and "." in robot.target else None
+    code = _own_code(source) + _own_code(route if "." in data.kind else None)
     return _task(robot_json, json.dumps(data.as_dict(), sort_keys=True), json.dumps(stamp), code)
 
 
 @functools.lru_cache(maxsize=4)
 def _task(robot_json: str, data_json: str, files: str, code: str) -> Task:
     """``files``: the (path, mtime, size) of the files read, so an edited file is read again; ``code``: the
-    digest of a user's source module."""
+    digests of a user's source and route modules."""
     params = json.loads(robot_json)
     robot, data = Choice(params.pop("_target_"), params), DataSpec.of(json.loads(data_json))
 
@@ -157,6 +160,7 @@ def _task(robot_json: str, data_json: str, files: str, code: str) -> Task:
         task.info["cache"] = "not stored (read from a file)"
     else:
         task = cached(robot_json + code, data_json, build, Task)
+    task.info["route_class"] = ROUTES.path_of(data.kind)  # the class that made it (a user's own by its path)
     i = task.info
     kept = (
         f" kept of {i['candidates']:,} candidates (acceptance {i['acceptance_rate']:.3g})" if "candidates" in i else ""

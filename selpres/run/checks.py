@@ -15,9 +15,9 @@ import math
 
 from omegaconf import DictConfig
 
-from selpres.data.paper import grid_points, heldout_count
-from selpres.data.sampled import MAX_N
-from selpres.data.task import Shape, route_keys, task_shape
+from selpres.data.paper import heldout_count
+from selpres.data.routes import ROUTES, required_of
+from selpres.data.task import Shape, task_shape
 from selpres.engines.activations import activation
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.errors import ConfigError
@@ -28,7 +28,6 @@ from selpres.run.estimate import refuse_before_task
 from selpres.run.optimizer import check_optim
 from selpres.run.specs import plain, task_specs
 
-MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
 MAX_SEED = 2**64 - 1  # torch.manual_seed's largest
 MAX_LAYER_WIDTH = 4096  # wider layers are refused: a guard against typos such as 6-13000-2
 
@@ -122,20 +121,15 @@ def check_seed(cfg: DictConfig) -> None:
 
 
 def check_task(cfg: DictConfig) -> Shape:
-    """The robot and data configs: keys each kind reads set, the others unset, values in range; returns
-    the shape of the task (``selpres.data.task.task_shape``: builds the arm or reads a data file's header)."""
-    d = cfg.data
-    kind = d.kind.value
-    keys = route_keys()
-    reads = keys[kind]
-    for other in keys.values():
-        for k in other:
-            if k not in reads and d[k] is not None:
-                raise ConfigError(f"data.{k}", d[k], f"unset (null) for data.kind={kind}, which reads {list(reads)}")
-    optional = ("q", "dq", "tau", "wrench")  # sampled: null = from the joint limits, no torque box, no wrench
-    for k in reads:
-        if d[k] is None and k not in optional:
-            raise ConfigError(f"data.{k}", None, f"a value: data.kind={kind} reads it")
+    """The robot and data configs: the data node holds only keys its route reads, of the types it declares
+    (``selpres.run.specs.data_spec``), its required ones set, the common ones in range, the route's own values in
+    range (its ``check``); returns the shape of the task (``selpres.data.task.task_shape``: builds the arm or reads a
+    data file's header)."""
+    robot, d = task_specs(cfg)
+    route = ROUTES.get(d.kind)
+    for k in required_of(route):
+        if d.params[k] is None:
+            raise ConfigError(f"data.{k}", None, f"a value: data.kind={d.kind} reads it")
     if d.test_patterns < 1:
         raise ConfigError("data.test_patterns", d.test_patterns, "a whole number >= 1")
     if not 0 <= d.test_from_exemplar <= d.test_patterns:
@@ -144,46 +138,12 @@ def check_task(cfg: DictConfig) -> Shape:
         )
     heldout_count(d.heldout, 1, "the patterns")  # type and range only: selpres.data.task counts a fraction
     s = d.scaling
-    if not (0 <= s.lo < s.hi <= 1):
-        raise ConfigError("data.scaling.lo", s.lo, f"0 <= lo < hi <= 1 (the sigmoid's range); hi = {s.hi}")
-    if s.margin < 0:
-        raise ConfigError("data.scaling.margin", s.margin, "a margin >= 0 (fraction of each column's range)")
-    if kind != "file" and not d.accel_limit > 0:
-        raise ConfigError("data.accel_limit", d.accel_limit, "a positive acceleration bound in rad/s²")
-    if kind == "grid":
-        _check_grid(d)
-    if kind == "sampled":
-        if not 1 <= d.n <= MAX_N:
-            raise ConfigError("data.n", d.n, f"a whole number of patterns in [1, {MAX_N:,}]")
-        if isinstance(d.heldout, int) and d.heldout > MAX_N:
-            raise ConfigError("data.heldout", d.heldout, f"at most {MAX_N:,} held-out patterns")
-    return task_shape(*task_specs(cfg))
-
-
-def _check_grid(d: DictConfig) -> None:
-    """The paper's grid: whole steps, and not so many candidates that building it would exhaust memory."""
-    points = {}
-    for k in ("theta", "dtheta", "tau1", "tau2"):
-        r = d[k]
-        if not r.step > 0:
-            raise ConfigError(f"data.{k}.step", r.step, "a positive grid step")
-        if not r.hi >= r.lo:
-            raise ConfigError(f"data.{k}.hi", r.hi, f"a value >= data.{k}.lo = {r.lo}")
-        try:
-            points[k] = grid_points(r.lo, r.hi, r.step, f"data.{k}")
-        except ValueError:
-            raise ConfigError(
-                f"data.{k}.step", r.step, f"a step that divides hi - lo = {r.hi - r.lo:g} into whole steps"
-            ) from None
-    candidates = points["theta"] ** 2 * points["dtheta"] ** 2 * points["tau1"] * points["tau2"]
-    if candidates > MAX_GRID_CANDIDATES:
-        finest = max(points, key=points.get)
-        raise ConfigError(
-            f"data.{finest}.step",
-            d[finest].step,
-            f"a coarser step: the grid (θ² × θ̇² × τ1 × τ2 points) would have {candidates:,} candidates, "
-            f"at most {MAX_GRID_CANDIDATES:,} are allowed (the paper's has 1,050,625)",
-        )
+    if not (0 <= s["lo"] < s["hi"] <= 1):
+        raise ConfigError("data.scaling.lo", s["lo"], f"0 <= lo < hi <= 1 (the sigmoid's range); hi = {s['hi']}")
+    if s["margin"] < 0:
+        raise ConfigError("data.scaling.margin", s["margin"], "a margin >= 0 (fraction of each column's range)")
+    getattr(route(), "check", lambda data: None)(d)  # the route's own values (ranges, sizes)
+    return task_shape(robot, d)
 
 
 def check_topology(layers: str, shape: Shape) -> tuple[int, ...]:

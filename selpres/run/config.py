@@ -4,7 +4,9 @@ The dataclasses are registered in Hydra's ConfigStore as ``selpres_schema`` and 
 ``configs/train.yaml``'s defaults, so omegaconf itself rejects unknown keys and wrong types with a
 message naming the key. Every value a user reads lives in YAML: a field is ``MISSING`` here when a
 config file supplies it, so no default is written twice. Checks that need more than a type (ranges,
-values against each other and against the data) live in :mod:`selpres.run.checks`.
+values against each other and against the data) live in :mod:`selpres.run.checks`. The nodes that name a
+registry's choice (``robot``, ``data``, ``optim``, ``schedule.pruning``) are open here: the chosen class declares
+or checks its own keys, so a new choice edits no schema.
 """
 
 from __future__ import annotations
@@ -25,71 +27,6 @@ class EngineName(Enum):
     fast = "fast"  # native if the kernel can be built and run here, else torch (the fallback is recorded)
     native = "native"  # AVX2 C kernel, 4 replicas a vector, built with the system C compiler at first use
     torch = "torch"  # replica-batched eager PyTorch: the pure-torch fallback
-
-
-class ScalingMode(Enum):
-    exemplar = "exemplar"
-    commanded = "commanded"
-
-
-@dataclass
-class GridRange:
-    lo: float = MISSING
-    hi: float = MISSING
-    step: float = MISSING
-
-
-@dataclass
-class ScalingConfig:
-    mode: ScalingMode = MISSING
-    margin: float = MISSING
-    lo: float = MISSING
-    hi: float = MISSING
-
-
-class DataKind(Enum):
-    grid = "grid"  # the paper's section 5.1 (robot=two_link): a grid of θ, θ̇, τ kept if |θ̈| <= limit
-    sampled = "sampled"  # any arm, any n: random or low-discrepancy draws (selpres.data.sampled)
-    file = "file"  # the user's own table, CSV or .npz (selpres.data.file)
-
-
-class Route(Enum):
-    forward = "forward"  # the paper's route: q, q̇, τ drawn, q̈ simulated (eq. 5), |q̈| > accel_limit dropped
-    inverse = "inverse"  # q, q̇, q̈ drawn, τ from eq. (4); kept unless data.tau bounds it
-
-
-class Draw(Enum):
-    uniform = "uniform"  # pseudo-random points (a seeded torch.Generator)
-    sobol = "sobol"  # scrambled Sobol points (torch.quasirandom.SobolEngine): every prefix low-discrepancy
-
-
-@dataclass
-class DataConfig:
-    """One schema for every data kind: the group file sets ``kind`` and its keys; the others stay None
-    (``selpres.run.checks`` refuses a key a kind does not read, naming it)."""
-
-    kind: DataKind = MISSING
-    theta: Optional[GridRange] = None  # grid: both joints' angles (rad) and rates (rad/s), the torque boxes
-    dtheta: Optional[GridRange] = None
-    tau1: Optional[GridRange] = None
-    tau2: Optional[GridRange] = None
-    accel_limit: Optional[float] = None  # grid, sampled: |q̈| bound (rad/s²): a filter or q̈'s box (inverse)
-    n: Optional[int] = None  # sampled: exemplar set size
-    route: Optional[Route] = None
-    draw: Optional[Draw] = None
-    seed: Optional[int] = None  # sampled: the exemplar set's draws (the test sets draw from test_seed)
-    q: Optional[List[Any]] = None  # sampled: [lo, hi] for every joint or one per joint; q null: joint limits
-    dq: Optional[List[Any]] = None
-    tau: Optional[List[Any]] = None  # sampled: torque box (forward: drawn from it; inverse: a filter)
-    wrench: Optional[List[float]] = None  # sampled: constant k of eq. (4), base frame, (force, moment)
-    path: Optional[str] = None  # file: a CSV with a header row, or an .npz
-    inputs: Optional[List[str]] = None  # file: the columns the network reads, in this order
-    outputs: Optional[List[str]] = None  # file: the columns it predicts
-    test_patterns: int = MISSING
-    test_from_exemplar: int = MISSING
-    heldout: Any = MISSING  # a count, or a fraction (float in (0, 1)) of all patterns (file: of the rows)
-    test_seed: int = MISSING
-    scaling: ScalingConfig = field(default_factory=ScalingConfig)
 
 
 @dataclass
@@ -142,7 +79,10 @@ class TrainConfig:
     # an open node {_target_: two_link|serial|urdf|package.module.Class, <its parameters>}: the arm source's class
     # checks its own keys (selpres.arms.sources), so a new source edits no schema
     robot: Dict[str, Any] = field(default_factory=dict)
-    data: DataConfig = field(default_factory=DataConfig)
+    # an open node {kind: grid|sampled|file|package.module.Class, <the common keys>, <the route's keys>}: the route
+    # (selpres.data.routes) declares its keys and their types, which selpres.run.specs checks, so a new route edits
+    # no schema
+    data: Dict[str, Any] = field(default_factory=dict)
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
     topology: TopologyConfig = field(default_factory=TopologyConfig)
     # open: ``_target_`` (selpres.engines.optim.OPTIMIZERS: a built-in or an import path) and the optimizer's own

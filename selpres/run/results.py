@@ -17,11 +17,12 @@ from omegaconf import DictConfig
 
 from selpres.data.file import file_digest
 from selpres.data.task import task_files
+from selpres.engines.activations import ACTIVATIONS
 from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.sampler import shuffle_implementation
 from selpres.run import floor
 from selpres.run.optimizer import optim_spec
-from selpres.run.specs import plain, task_specs
+from selpres.run.specs import recorded, task_specs
 from selpres.run.stats import summarize
 from selpres.storage import stable_hash
 
@@ -33,8 +34,9 @@ UNITS = ("nm", "scaled", "nmse")  # nmse: MSE ÷ the set's target variance (selp
 def job_hash(cfg: DictConfig) -> str:
     """Identity of a job's numbers: everything but the knobs that cannot change them, and the contents of the
     files its task reads (``selpres.data.task.task_files``: what the arm's source reads, a data file), so an edited
-    URDF or CSV is not taken for the finished job."""
-    c = plain(cfg)
+    URDF or CSV is not taken for the finished job. The config as results.json records it (``recorded``: the data node
+    typed by its route)."""
+    c = recorded(cfg)
     for k in NOT_IDENTITY:
         c.pop(k, None)
     c["file_sha256"] = [file_digest(p) if p.is_file() else None for p in task_files(*task_specs(cfg))]
@@ -122,6 +124,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "engine": engine.name,  # what ran
         "optimizer": spec.path,  # the class whose rule ran (selpres.engines.optim, or the user's own)
         "optimizer_dropped": spec.dropped or None,  # keys of the optim group file the chosen class does not take
+        "activation": ACTIVATIONS.path_of(cfg.model.activation),  # the hidden units' class that ran (a user's too)
         "engine_requested": cfg.engine.value,
         "engine_fallback": engine.fallback_reason,  # why "fast" did not run natively (None if it did)
         "evaluation": engine.evaluation,  # e.g. "native, 8 lanes (AVX-512)": the same numbers, not the same speed
@@ -152,7 +155,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         ),
         "replica_results": reps,
         "curves": progress.history,
-        "config": plain(cfg),
+        "config": recorded(cfg),
     }
 
 

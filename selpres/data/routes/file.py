@@ -5,7 +5,7 @@ rest from the held-out rows. The file is what the task is read from (``reads_fil
 from __future__ import annotations
 
 import logging
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import torch
@@ -22,7 +22,12 @@ log = logging.getLogger("selpres")
 
 
 class File(DataRoute):
-    KEYS = ("path", "inputs", "outputs")
+    @dataclass
+    class Keys:
+        path: str  # a CSV with a header row, or an .npz
+        inputs: list[str]  # the columns the network reads, in this order
+        outputs: list[str]  # the columns it predicts
+
     USES_ARM = False
 
     def reads_files(self, data: DataSpec) -> list[Path]:

@@ -3,7 +3,7 @@ was computed (1002 patterns; the 10-pattern and held-out test sets of ``selpres.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 from selpres.arms.sources import SOURCES, make_arm
 from selpres.arms.two_link import TwoLinkArm
@@ -14,9 +14,50 @@ from selpres.data.task import Shape, Task, check_test_split
 from selpres.errors import ConfigError
 from selpres.registry import Choice
 
+MAX_GRID_CANDIDATES = 50_000_000  # ~3 GB of float64 work arrays in build_exemplar_set
+
+
+@dataclass
+class Range:
+    lo: float
+    hi: float
+    step: float
+
 
 class Grid(DataRoute):
-    KEYS = ("theta", "dtheta", "tau1", "tau2", "accel_limit")
+    @dataclass
+    class Keys:
+        theta: Range  # both joints' angles (rad) and rates (rad/s), the torque boxes (Nm)
+        dtheta: Range
+        tau1: Range
+        tau2: Range
+        accel_limit: float  # keep rows with both |θ̈| <= accel_limit (rad/s²)
+
+    def check(self, data: DataSpec) -> None:
+        """A positive filter, whole steps, and not so many candidates that building the grid would exhaust memory."""
+        if not data.accel_limit > 0:
+            raise ConfigError("data.accel_limit", data.accel_limit, "a positive acceleration bound in rad/s²")
+        points = {}
+        for k in ("theta", "dtheta", "tau1", "tau2"):
+            r = data.params[k]
+            if not r["step"] > 0:
+                raise ConfigError(f"data.{k}.step", r["step"], "a positive grid step")
+            if not r["hi"] >= r["lo"]:
+                raise ConfigError(f"data.{k}.hi", r["hi"], f"a value >= data.{k}.lo = {r['lo']}")
+            try:
+                points[k] = D.grid_points(r["lo"], r["hi"], r["step"], f"data.{k}")
+            except ValueError:
+                why = f"a step that divides hi - lo = {r['hi'] - r['lo']:g} into whole steps"
+                raise ConfigError(f"data.{k}.step", r["step"], why) from None
+        candidates = points["theta"] ** 2 * points["dtheta"] ** 2 * points["tau1"] * points["tau2"]
+        if candidates > MAX_GRID_CANDIDATES:
+            finest = max(points, key=points.get)
+            raise ConfigError(
+                f"data.{finest}.step",
+                data.params[finest]["step"],
+                f"a coarser step: the grid (θ² × θ̇² × τ1 × τ2 points) would have {candidates:,} candidates, "
+                f"at most {MAX_GRID_CANDIDATES:,} are allowed (the paper's has 1,050,625)",
+            )
 
     def shape(self, robot: Choice, data: DataSpec) -> Shape:
         arm = make_arm(robot)

@@ -4,7 +4,9 @@ inverse, uniform or Sobol points); test sets drawn the same way from ``data.test
 from __future__ import annotations
 
 import logging
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from enum import Enum
+from typing import Any
 
 import torch
 
@@ -14,13 +16,42 @@ from selpres.data import sampled as S
 from selpres.data.routes import DataRoute
 from selpres.data.spec import DataSpec
 from selpres.data.task import Shape, Task, check_test_split
+from selpres.errors import ConfigError
 from selpres.registry import Choice
 
 log = logging.getLogger("selpres")
 
 
+class Route(Enum):
+    forward = "forward"  # the paper's route: q, q̇, τ drawn, q̈ simulated (eq. 5), |q̈| > accel_limit dropped
+    inverse = "inverse"  # q, q̇, q̈ drawn, τ from eq. (4); kept unless data.tau bounds it
+
+
+class Draw(Enum):
+    uniform = "uniform"  # pseudo-random points (a seeded torch.Generator)
+    sobol = "sobol"  # scrambled Sobol points (torch.quasirandom.SobolEngine): every prefix low-discrepancy
+
+
 class Sampled(DataRoute):
-    KEYS = ("n", "route", "draw", "seed", "q", "dq", "tau", "wrench", "accel_limit")
+    @dataclass
+    class Keys:
+        n: int  # exemplar set size
+        route: Route
+        draw: Draw
+        seed: int  # the exemplar set's draws (the test sets draw from test_seed)
+        accel_limit: float  # |q̈| bound (rad/s²): q̈'s box (inverse) or a filter (forward)
+        q: list[Any] | None = None  # [lo, hi] for every joint or one per joint; null: the joint limits
+        dq: list[Any] | None = None
+        tau: list[Any] | None = None  # torque box (forward: drawn from it; inverse: a filter)
+        wrench: list[float] | None = None  # constant k of eq. (4), base frame, (force, moment)
+
+    def check(self, data: DataSpec) -> None:
+        if not data.accel_limit > 0:
+            raise ConfigError("data.accel_limit", data.accel_limit, "a positive acceleration bound in rad/s²")
+        if not 1 <= data.n <= S.MAX_N:
+            raise ConfigError("data.n", data.n, f"a whole number of patterns in [1, {S.MAX_N:,}]")
+        if isinstance(data.heldout, int) and data.heldout > S.MAX_N:
+            raise ConfigError("data.heldout", data.heldout, f"at most {S.MAX_N:,} held-out patterns")
 
     def shape(self, robot: Choice, data: DataSpec) -> Shape:
         arm = make_arm(robot)
