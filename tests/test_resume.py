@@ -15,7 +15,7 @@ import torch
 
 from selpres.run.checkpoint import read as read_checkpoint
 
-from conftest import requires_native
+from conftest import numbers, requires_native
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.slow  # subprocesses
@@ -95,7 +95,8 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
 
     a = json.loads((killed / "results.json").read_text())
     b = json.loads((straight / "results.json").read_text())
-    for key in ("summary", "replica_results", "curves", "presentations_done", "selection_presentations", "config_hash"):
+    assert numbers(a) == numbers(b)  # the curves without their wall seconds
+    for key in ("presentations_done", "selection_presentations"):
         assert a[key] == b[key], key
     wa = torch.load(killed / "weights.pt")["params"]
     wb = torch.load(straight / "weights.pt")["params"]

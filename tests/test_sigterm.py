@@ -12,6 +12,8 @@ import pytest
 import torch
 from test_resume import newest_checkpoint, run
 
+from conftest import numbers
+
 pytestmark = pytest.mark.slow  # subprocesses
 # checkpoints at stage ends only (checkpoint.every=1000): stage 4 runs epochs 5..44, 0.05-0.4 s each on the
 # reference engine (machine and load), so a signal 0.6 s into it finds no periodic checkpoint newer than epoch 4
@@ -50,8 +52,8 @@ def test_a_signal_mid_stage_checkpoints_there_and_the_rerun_resumes_it_exactly(t
     a = json.loads((out / "results.json").read_text())
     b = json.loads((straight / "results.json").read_text())
     assert a["resumed_from_epoch"] == epoch
-    for key in ("summary", "replica_results", "curves", "presentations_done", "config_hash"):
-        assert a[key] == b[key], key
+    assert numbers(a) == numbers(b)  # the curves without their wall seconds
+    assert a["presentations_done"] == b["presentations_done"]
     wa, wb = torch.load(out / "weights.pt")["params"], torch.load(straight / "weights.pt")["params"]
     assert all(torch.equal(x, y) for x, y in zip(wa, wb))
 

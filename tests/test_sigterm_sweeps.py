@@ -21,6 +21,8 @@ from test_sigterm import ARGS, STAGE_ENDS
 
 from selpres.run.lock import LOCK
 
+from conftest import numbers
+
 pytestmark = pytest.mark.slow  # subprocesses
 JOB = [*ARGS, "threads=1", "seed=0"]  # one job: the sweep of one point
 
@@ -71,7 +73,7 @@ def test_a_sigterm_to_a_sweep_job_checkpoints_and_the_same_sweep_resumes_it_exac
     a = json.loads((job / "results.json").read_text())
     b = json.loads((straight / "results.json").read_text())
     assert a["resumed_from_epoch"] == epoch
-    for key in ("summary", "replica_results", "curves", "presentations_done", "config_hash"):
-        assert a[key] == b[key], key
+    assert numbers(a) == numbers(b)  # the curves without their wall seconds
+    assert a["presentations_done"] == b["presentations_done"]
     wa, wb = torch.load(job / "weights.pt")["params"], torch.load(straight / "weights.pt")["params"]
     assert all(torch.equal(x, y) for x, y in zip(wa, wb))
