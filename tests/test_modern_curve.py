@@ -36,3 +36,8 @@ def test_a_gap_in_the_doublings_chooses_nothing_across_it():
     found = {("arm", "paper"): {5: point(2.0), 20: point(1.95), 40: point(1.0)}}
     rows = modern_curve.curve_rows(found)
     assert [r["chosen"] for r in rows] == [False, False, False]  # 5 -> 20 is not a doubling; 20 -> 40 halves
+
+
+def test_a_sweep_is_a_learning_curve_from_three_doublings_on():
+    cases = ([], [5], [5, 10], [5, 10, 20], [5, 20, 40], [5, 10, 30, 60, 120])
+    assert [modern_curve._doublings(Ns) for Ns in cases] == [0, 1, 2, 3, 2, 3]

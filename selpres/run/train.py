@@ -63,7 +63,7 @@ class Clock:
     def work(self) -> float:
         """The method's own seconds so far: choosing, shuffling and training (not evaluation, logging or saving),
         so that wall time to a given error can be read off the curve."""
-        return sum(self.seconds[k] for k in WORK)
+        return sum(self.seconds.get(k, 0.0) for k in WORK)  # .get: a phase that never ran is not recorded
 
     def snapshot(self) -> dict:
         """The phases so far, and ``total``: wall seconds of this job, earlier processes included."""

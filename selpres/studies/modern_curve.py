@@ -33,6 +33,8 @@ def budgets(ctx: Context) -> dict[tuple[str, str], dict[int, dict]]:
         if len(epochs) != 1 or res["schedule"].get("name") != DESIGN.reference:
             continue
         cfg = res["config"]
+        if not isinstance(cfg.get("robot"), dict) or not isinstance(cfg.get("optim"), dict):
+            continue  # results older than the open robot and optim nodes: not this study's
         key = (arm_of(cfg), regime_of(cfg))
         point = out.setdefault(key, {}).setdefault(epochs[0], {"rms": {}, "cost": None, "wall": [], "lr": set()})
         point["cost"] = res["schedule"]["presentations"]
@@ -47,8 +49,18 @@ def budgets(ctx: Context) -> dict[tuple[str, str], dict[int, dict]]:
 
 
 def applies(ctx: Context) -> bool:
-    """At least one arm and regime with two or more budgets of conventional training, and nothing pruned."""
-    return any(len(b) >= 2 for b in budgets(ctx).values())
+    """The sweep is a learning curve: for some arm and regime, one-stage conventional training at three or more
+    budgets each double the one before (N, 2N, 4N, ...)."""
+    return any(_doublings(sorted(b)) >= 3 for b in budgets(ctx).values())
+
+
+def _doublings(Ns: list[int]) -> int:
+    """The longest run of budgets each twice the one before."""
+    best = run = 1 if Ns else 0
+    for a, b in zip(Ns, Ns[1:]):
+        run = run + 1 if b == 2 * a else 1
+        best = max(best, run)
+    return best
 
 
 def curve_rows(found: dict) -> list[dict]:
