@@ -14,14 +14,19 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 	$(BIN)/pip install -q -c constraints.txt -e '.[test,slurm,search,lightning,robots]'
 	touch $@
 
+# the suite on PYTEST_WORKERS processes (pytest-xdist; 0: in this process), a test file per worker at a time, so a
+# file's module-scoped fixtures (a wheel build, a trained run) are built once: `make test PYTEST_WORKERS=0` is serial
+PYTEST_WORKERS ?= 2
+XDIST := -n $(PYTEST_WORKERS) --dist loadfile
+
 test: setup            ## the whole suite (what CI runs, with lint and the fallback tier)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest $(XDIST)
 
 test-fast: setup       ## the edit loop: no subprocesses, sweeps or exhaustive grids (2-3 minutes here)
-	$(BIN)/python -m pytest -m "not slow"
+	$(BIN)/python -m pytest $(XDIST) -m "not slow"
 
 test-fallback: setup   ## the fast tier with the native kernel disabled: the pure-torch path stays green
-	SELPRES_NO_NATIVE=1 $(BIN)/python -m pytest -m "not slow"
+	SELPRES_NO_NATIVE=1 $(BIN)/python -m pytest $(XDIST) -m "not slow"
 
 lint: setup
 	$(BIN)/ruff check .

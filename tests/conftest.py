@@ -9,10 +9,18 @@ import tempfile
 from pathlib import Path
 
 import pytest
+import torch
 from omegaconf import OmegaConf
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "selpres" / "configs"
+
+# One torch thread in the test processes and the jobs they start (OMP_NUM_THREADS set beforehand wins): the suite's
+# tensors are tiny, and a second intra-op thread only waits for a core: a 6-5-2 backward took 58 ms with 2 threads
+# and 2 ms with 1 on a busy 2-core machine, and `make test` already runs two workers (pytest-xdist) on two cores.
+# Thread counts that matter are passed explicitly (tests/test_engine.py, tests/test_kernels.py: threads 1, 2, 3).
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))  # this process's torch read the variable on import
 
 # the tests' own data cache (selpres.data.cache), shared by this session's jobs and the processes they start,
 # never the user's ~/.cache; a test about building data turns it off (monkeypatch.setenv("SELPRES_DATA_CACHE", "off"))

@@ -246,6 +246,40 @@ def test_ctrl_c_during_set_up_keeps_the_users_folder(tmp_path):
     assert _snapshot(folder) == before
 
 
+# a Ctrl-C delivered from inside numpy's first import (a meta-path finder signals the process when numpy is looked up)
+NUMPY_CTRL_C = """
+import os, runpy, signal, sys
+class CtrlC:
+    def find_spec(self, name, path=None, target=None):
+        if name == "numpy":
+            sys.meta_path.remove(self)
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+sys.meta_path.insert(0, CtrlC())
+sys.argv = sys.argv[1:]
+runpy.run_path("train.py", run_name="__main__")
+"""
+
+
+def test_a_ctrl_c_inside_the_first_numpy_import_stops_the_job(tmp_path):
+    """torch's C start-up imports numpy and clears an error raised inside that import: a Ctrl-C landing there
+    was lost (the job ran to the end, exit 0) or left numpy half-imported (exit 1). The job imports numpy itself
+    first (selpres.run.main), so the Ctrl-C is one line and exit 130, wherever numpy is first imported."""
+    folder = tmp_path / "run"
+    p = subprocess.run(
+        [sys.executable, "-c", NUMPY_CTRL_C, *_cmd(folder, *TINY)[1:]],
+        cwd=REPO,
+        env={k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"},
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # as a terminal delivers it (see above)
+    )
+    assert p.returncode == 130, p.stdout + p.stderr
+    assert p.stderr.strip().splitlines()[-1] == "interrupted" and "Traceback" not in p.stderr, p.stderr
+    assert not (folder / "results.json").exists()
+
+
 # ------------------------------------------------------------------ a stale checkpoint is set aside, said and recorded
 def test_a_checkpoint_of_another_config_is_moved_aside_with_a_warning(tmp_path):
     folder = tmp_path / "run"

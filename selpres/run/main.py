@@ -26,6 +26,10 @@ except KeyboardInterrupt:
 @hydra.main(version_base="1.3", config_path=str(CONFIG_DIR), config_name="train")
 def train_job(cfg: DictConfig) -> float:
     """Hydra's task function: one job (or one job of a sweep); the mean held-out RMS for sweepers such as Optuna."""
+    # numpy before torch: torch's C start-up imports numpy itself, and a Ctrl-C landing in that import is cleared
+    # there ("Failed to initialize NumPy"): the job ran on (exit 0) or failed on a half-imported numpy (exit 1)
+    import numpy  # noqa: F401
+
     from selpres.run.cli import run_job  # torch and the loop only for a job, not for --help or --cfg
 
     return run_job(cfg)
