@@ -22,6 +22,8 @@ import time
 
 import numpy as np
 
+from selpres.bench.common import median_seconds
+
 JOBS = {  # name: the overrides of ``python train.py``
     "two-link n=1e4": [
         "+design/modern=two_link_paper_conventional",
@@ -64,12 +66,7 @@ def numpy_kmeans():
 
 def cpu_ms(fn, repeats: int) -> float:
     """Median CPU milliseconds of this thread per call."""
-    times = []
-    for _ in range(repeats):
-        t = time.thread_time()
-        fn()
-        times.append(time.thread_time() - t)
-    return statistics.median(times) * 1e3
+    return median_seconds(fn, repeats, time.thread_time) * 1e3
 
 
 def kmeans_rows(quick: bool):

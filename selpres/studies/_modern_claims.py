@@ -133,7 +133,8 @@ def claims_markdown(rows: list[dict], design: Design = DESIGN) -> str:
                 f"{_pct(r['cost_to_reach_share'])} of {design.reference}'s, median wall "
                 f"{_pct(r['wall_to_reach_share'])}"
             )
-            verdict = "holds" if r["reached"] == r["seeds"] and (r["cost_to_reach_share"] or 2) < 1 else "not shown"
+            cheaper = r["cost_to_reach_share"] is not None and r["cost_to_reach_share"] < 1
+            verdict = "holds" if r["reached"] == r["seeds"] and cheaper else "not shown"
             body.append(
                 [
                     r["arm"],

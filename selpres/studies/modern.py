@@ -1,16 +1,17 @@
-"""Modern training and data pruning (issue 22): every method's final held-out error against its total cost, per
-arm and training regime, and each against conventional training scheduled for the same cost.
+"""Modern training and data pruning (issues 22, 28, 31): every method's final held-out error against its total cost
+and its wall seconds, per arm and training regime; each against conventional training scheduled for the same cost,
+and each that makes a published claim judged on it (``_modern_claims``).
 
-A cell is (arm, regime, method): the arm from ``robot`` (its name, else its file's or its kind), the regime from
-the optimizer, its mini-batch and the hidden units (the paper's: sigmoid, online SGD), the method from the
-schedule's name the job recorded: a pruning policy no code here knows (SeTa, ...) or a new arm gets its rows as
-it is. The study's design (``modern.yaml`` beside this module) names the roles: the *reference* (training at full
-cost, compared with nothing) and the *partner*, one-stage conventional training *scheduled* for the same total
-cost (its cosine learning rate, where there is one, decays to zero at that budget), against which every other
-method of the same arm and regime is compared, paired by seed. The family for Holm's correction is every such
-comparison of one metric in the sweep; the readings are the report's three (compare.reading), at the report's
-margin (``--margin``, by default 5 % of the method's own mean). nMSE = mean over joints of MSE ÷ the held-out
-targets' variance (1 = predicting the mean).
+A cell is (arm, regime, method): the arm from ``robot`` (its name, else its file's or its kind), the regime from the
+optimizer, its mini-batch and the hidden units (the paper's: sigmoid, online SGD), the method from the schedule's
+name the job recorded: a pruning policy no code here knows or a new arm gets its rows as it is. The study's design
+(``modern.yaml`` beside this module) names the roles: the *reference* (training at full cost, compared with nothing)
+and the *partner*, one-stage conventional training *scheduled* for the same total cost (its cosine learning rate,
+where there is one, decays to zero at that budget), against which every other method of the same arm and regime and
+of the partner's cost is compared, paired by seed. The family for Holm's correction is every such comparison and
+every tested claim of one metric in the sweep; the readings are the report's three (compare.reading), at the
+report's margin (``--margin``, by default 5 % of the method's own mean). nMSE = mean over joints of MSE ÷ the held-
+out targets' variance (1 = predicting the mean).
 """
 
 from __future__ import annotations

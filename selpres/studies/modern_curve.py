@@ -48,10 +48,10 @@ def budgets(ctx: Context) -> dict[tuple[str, str], dict[int, dict]]:
     return out
 
 
-def applies(ctx: Context) -> bool:
-    """The sweep is a learning curve: for some arm and regime, one-stage conventional training at three or more
-    budgets each double the one before (N, 2N, 4N, ...)."""
-    return any(_doublings(sorted(b)) >= 3 for b in budgets(ctx).values())
+def applies(found: dict) -> bool:
+    """The sweep (its :func:`budgets`) is a learning curve: for some arm and regime, one-stage conventional training
+    at three or more budgets each double the one before (N, 2N, 4N, ...)."""
+    return any(_doublings(sorted(b)) >= 3 for b in found.values())
 
 
 def _doublings(Ns: list[int]) -> int:
@@ -127,9 +127,10 @@ def markdown(rows: list[dict]) -> str:
 
 
 def section(ctx: Context) -> Section | None:
-    if not applies(ctx):
+    found = budgets(ctx)
+    if not applies(found):
         return None
-    rows = curve_rows(budgets(ctx))
+    rows = curve_rows(found)
     return Section(
         "Learning curves: the budget where conventional training has converged",
         [
