@@ -3,7 +3,7 @@ each arm and regime at doubling budgets, on the validation draw, and the budget 
 held-out RMS by less than ``TOLERANCE`` (the study's N), else the largest run, said plainly.
 
 The rule reads the *median* over the seeds, not the mean: with Adam + ReLU one or two of twelve seeds stall near
-the error of predicting the mean at every budget (a dead-unit failure, not slow convergence), and the mean then
+the error of predicting the mean at every budget (more budget does not cure it), and the mean then
 moves with how many stalled rather than with the budget. The table shows both.
 
 A job is one budget (its epochs N); the arm and regime are read as the modern study reads them
