@@ -22,17 +22,16 @@ from selpres.engines.native_minibatch import make_minibatch_engine
 from selpres.engines.online import make_engine
 from selpres.engines.optim import check_hparams, with_defaults
 from selpres.errors import ConfigError
-from selpres.presentation.orders import make_order
+from selpres.presentation.build import SelectorSpec, build_selector, plan
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
-from selpres.presentation.pruning._job import Pruning, pruning_plan
 from selpres.presentation.sampler import SelectivePresentation
-from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
-from selpres.presentation.selection import StageSelection, stage_selection
+from selpres.presentation.schedule import EpochPlan, Schedule
+from selpres.presentation.selector import Ledger, Selector
 from selpres.run.checks import pruning_spec, validate
 from selpres.run.estimate import refuse_job
 from selpres.run.optimizer import minibatch_reason, optim_spec
 from selpres.run.specs import plain, task_specs
-from selpres.seeding import derive_seed, generator
+from selpres.seeding import derive_seed
 
 log = logging.getLogger("selpres")
 
@@ -48,13 +47,17 @@ class Problem:
     X: torch.Tensor  # exemplar inputs, scaled
     Y: torch.Tensor  # exemplar targets, scaled
     tests: dict  # name -> (X scaled, Y in Nm)
-    samplers: list[SelectivePresentation]
     init_params: list[torch.Tensor]
-    selection: StageSelection | None = None  # a stage-wise order (loss_high, reselect, ...): A_k chosen per stage
+    selector: Selector  # what decides every epoch's presentations (selpres.presentation.selector)
+    ledger: Ledger  # what the replicas have cost so far: charged by the selector and the loop, checkpointed
     task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
     schedule_note: str | None = None  # how a named schedule's counts were applied to this n (None: as given)
-    pruning: Pruning | None = None  # a pruning policy (schedule.pruning): each epoch's patterns chosen by loss
     budget: float | None = None  # the run's own planned cost (presentations): the cosine schedule's horizon
+
+    @property
+    def samplers(self) -> list[SelectivePresentation]:
+        """Each replica's sampler of the schedule's nested sets (whose shuffles every selector presents from)."""
+        return self.selector.source.samplers
 
     @functools.cached_property
     def plan(self) -> list[EpochPlan]:
@@ -93,17 +96,9 @@ def prepare(cfg: DictConfig) -> Problem:
     refuse_job(cfg, sizes, schedule, task.n, largest_test, torch_eval)  # before any replica's state is made
     seed = int(cfg.seed)  # read once: an OmegaConf access costs ~20 us, 1000 of them 23 ms at R = 1000
     seeds = [seed + r for r in range(cfg.replicas)]
-    order = make_order(cfg.schedule.order, cfg.schedule.strata_bins)
-    orders = order.orders(task.exemplar.X, [generator(s, "subset") for s in seeds])
-    samplers = [SelectivePresentation(order=order, schedule=schedule, seed=s) for order, s in zip(orders, seeds)]
     X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
-    pruning, budget = None, schedule.presentations + order.planned_charge(schedule.sizes, cfg.schedule.selection_cost)
-    spec = pruning_spec(cfg.schedule)
-    if spec is not None:
-        fitted = fit_schedule(cfg.schedule.sizes, cfg.schedule.budget, task.n)[1]
-        epochs = None if cfg.schedule.epochs is None else int(cfg.schedule.epochs[0])
-        pruning = Pruning(*spec, task.n, seeds, fitted, epochs, float(cfg.schedule.selection_cost))
-        budget = fitted if fitted is not None else task.n * epochs
+    fitted = fit_schedule(cfg.schedule.sizes, cfg.schedule.budget, task.n)[1]  # presentations per replica, or None
+    selector, ledger = build_selector(selector_spec(cfg), schedule, seeds, task.exemplar.X, X, Y, fitted)
     return Problem(
         sizes=sizes,
         schedule=schedule,
@@ -112,30 +107,32 @@ def prepare(cfg: DictConfig) -> Problem:
         X=X,
         Y=Y,
         tests=task.scaled_tests(),
-        samplers=samplers,
         init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
-        selection=stage_selection(order, schedule, seeds, task.exemplar.X, X, Y, cfg.schedule.selection_cost, samplers),
+        selector=selector,
+        ledger=ledger,
         task=task,
         schedule_note=note,
-        pruning=pruning,
-        budget=budget,
+        budget=fitted if fitted is not None else schedule.presentations + selector.planned_charge(schedule),
     )
 
 
+def selector_spec(cfg: DictConfig) -> SelectorSpec:
+    """``schedule.*`` as the plain spec the presentation room builds a job's selector from."""
+    s = cfg.schedule
+    target, params = pruning_spec(s) or (None, {})
+    return SelectorSpec(str(s.order), int(s.strata_bins), float(s.selection_cost), target, params)
+
+
 def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
-    """The schedule on the task's n: the paper's counts by their proportions when n is not 1002
-    (``selpres.presentation.proportions``, logged), refusals with the fraction form, and a data file too short for
-    the schedule named as such."""
+    """The schedule on the task's n, as the job's selector plans it: the paper's counts by their proportions when n
+    is not 1002 (``selpres.presentation.proportions``, logged), refusals with the fraction form, and a data file too
+    short for the schedule named as such."""
     sch = plain(cfg.schedule)
     sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
     if note:
         log.info(note)
-    spec = pruning_spec(cfg.schedule)
-    if spec is not None:  # checked in validate: sizes [1.0], a budget or one epoch count
-        epochs = None if sch["epochs"] is None else int(sch["epochs"][0])
-        return pruning_plan(*spec, task.n, budget, epochs, float(cfg.schedule.selection_cost)), note
     try:
-        return build_schedule(sizes, sch["epochs"], task.n, budget), note
+        return plan(selector_spec(cfg), sizes, sch["epochs"], task.n, budget), note
     except ConfigError as e:
         if e.key == "schedule.sizes" and task.info.get("kind") == "file":
             i = task.info

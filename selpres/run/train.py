@@ -1,9 +1,10 @@
 """The training loop: one job trains R replicas of one (schedule, topology) through every stage.
 
 Read top to bottom: ``prepare`` (``selpres.run.problem``) turns a config into a validated problem (data,
-schedule, samplers, initial weights) without writing anything; ``train`` runs the epochs of the schedule's
-plan, asking each replica's sampler for its presentation order and the engine for the updates, scores the test sets,
-logs, checkpoints, and returns the results that ``results.json`` holds.
+schedule, the selector and its ledger, initial weights) without writing anything; ``train`` runs the epochs of the
+schedule's plan, asking the selector what each replica presents (``selpres.presentation.selector``: the same
+question of every method) and the engine for the updates, charges the ledger, scores the test sets, logs,
+checkpoints, and returns the results that ``results.json`` holds.
 """
 
 from __future__ import annotations
@@ -23,8 +24,9 @@ import torch
 from omegaconf import DictConfig
 
 from selpres.data import paper as D
-from selpres.presentation.sampler import epoch_orders, shuffle_implementation
+from selpres.presentation.sampler import shuffle_implementation
 from selpres.presentation.schedule import EpochPlan
+from selpres.presentation.selector import Network
 from selpres.run import floor, lock, orphan, stop
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
@@ -41,19 +43,30 @@ WORK = ("select", "shuffle", "train")  # a method's own phases (Clock.work)
 
 
 class Clock:
-    """Seconds per named phase of a job (``with clock("eval"): ...``), accumulated over resumes."""
+    """Seconds per named phase of a job (``with clock("eval"): ...``), accumulated over resumes. A method's own
+    phases (``WORK``) nest: one opened inside another (the shuffles inside choosing) takes its seconds from the
+    outer one, so each second is counted once."""
 
     def __init__(self):
         self.seconds: dict[str, float] = defaultdict(float)
         self._t0 = time.perf_counter()
+        self._inner: list[float] = []  # seconds of nested work phases, per open work phase
 
     @contextmanager
     def __call__(self, phase: str):
-        t0 = time.perf_counter()
+        t0, work = time.perf_counter(), phase in WORK
+        if work:
+            self._inner.append(0.0)
         try:
             yield
         finally:
-            self.seconds[phase] += time.perf_counter() - t0
+            dt = time.perf_counter() - t0
+            if work:
+                self.seconds[phase] += dt - self._inner.pop()
+                if self._inner:
+                    self._inner[-1] += dt
+            else:
+                self.seconds[phase] += dt
 
     def add(self, earlier: dict) -> None:
         """Count the seconds of an earlier process of this job (from its checkpoint)."""
@@ -155,12 +168,7 @@ class Job:
     out: Path | None
     ckpts: Checkpoints | None
     tracker: Tracker
-
-    @functools.cached_property
-    def orders_buffer(self) -> torch.Tensor:
-        """Where every epoch's presentation orders are written ([R * the largest epoch], reused)."""
-        largest = max(st.size if st.epochs else st.extra for st in self.prob.schedule.stages)
-        return torch.empty(len(self.prob.seeds) * largest, dtype=torch.int64)
+    net: Network  # the replicas' networks as the selector may ask them, and the clock
 
     @functools.cached_property
     def cadence(self) -> Cadence:
@@ -185,8 +193,8 @@ def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
         log.warning("the per-epoch shuffles run in numpy (slower, the same permutations): %s", shuffle_implementation())
     out = Path(out_dir) if out_dir is not None else None
     chash = results_json.job_hash(cfg)
-    # a pruning job's scores are not checkpointed (recorded as results.json's pruning.checkpointed): it restarts
-    ckpts = Checkpoints(out, chash) if out is not None and cfg.checkpoint.enabled and not prob.pruning else None
+    parts = {"selector": prob.selector, "ledger": prob.ledger}  # every method's state: every job resumes exactly
+    ckpts = Checkpoints(out, chash, parts) if out is not None and cfg.checkpoint.enabled else None
     if ckpts and cfg.overwrite:
         ckpts.discard()
     progress = ckpts.resume(engine, len(prob.seeds)) if ckpts else Progress.fresh(len(prob.seeds))
@@ -194,7 +202,7 @@ def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
     # the event file goes into the job's own folder: TensorBoard names the run by it (the overrides), not '…/tb'
     tracker = Tracker(out if out else Path("tb"), cfg.logging.tensorboard and out is not None, cfg.logging.per_replica)
     tracker.replay(progress.history)
-    job = Job(cfg, prob, engine, progress, chash, out, ckpts, tracker)
+    job = Job(cfg, prob, engine, progress, chash, out, ckpts, tracker, Network(engine, prob.X, prob.Y, clock))
     if not progress.history:  # the untrained network: every curve starts at 0 presentations
         record(job, {**curve_point(engine, prob, job.cadence, None, None, progress), "work_seconds": 0.0})
     return job
@@ -206,36 +214,24 @@ def record(job: Job, rec: dict) -> None:
 
 
 def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
-    """One epoch, of every schedule: (at a stage start of a stage-wise order) the choice of A_i, every replica's
-    shuffle of its current A_i, (a pruning policy, selpres.presentation.pruning) the patterns each replica presents
-    and their weights, the engine's one epoch call, then the costs and scoring."""
-    prob, progress, pr = job.prob, job.progress, job.prob.pruning
-    if prob.selection is not None:
-        with clock("select"):
-            prob.selection.begin_epoch(ep, job.engine, progress)
-    with clock("shuffle"):
-        for s in prob.samplers:
-            s.set_epoch(ep.index)
-        order = epoch_orders(prob.samplers, job.orders_buffer)
-    weights = counts = None
-    spent = float(progress.presentations)  # the job's cost so far: a rate schedule's clock
-    if pr is not None:
-        with clock("select"):
-            choice = pr.choose(ep.index, order, job.engine, prob.X, prob.Y)
-        order, weights, counts, spent = choice.order, choice.weights, choice.counts, pr.spent
+    """One epoch, of every method: the selector's presentations (each replica's patterns and weights; what
+    choosing them cost is charged to the ledger), the engine's one epoch call, the ledger charged with what was
+    presented, the selector shown the losses, then scoring."""
+    prob, progress, ledger = job.prob, job.progress, job.prob.ledger
+    with clock("select"):
+        shown = prob.selector.select(ep, ledger, job.net)
     with clock("train"):
-        loss = job.engine.train_epoch(prob.X, prob.Y, order, weights=weights, counts=counts, spent=spent)
+        loss = job.engine.train_epoch(
+            prob.X, prob.Y, shown.order, weights=shown.weights, counts=shown.counts, spent=ledger.clock()
+        )
+    ledger.record(shown, ep)
+    prob.selector.observe(shown, job.engine.last_losses)
     progress.epoch = ep.index + 1
-    if pr is None:
-        progress.presentations += ep.presentations
-    else:
-        pr.finish(choice, job.engine.last_losses)
-        # whole presentations on the curve, as for every schedule (each replica's exact cost: results' pruning)
-        progress.presentations = round(float(pr.spent.mean()))
-        progress.selection_presentations = round(float(pr.charged.mean()))
+    # whole presentations on the curve (each replica's exact cost: results.json's cost)
+    progress.presentations = round(ledger.mean("spent"))
+    progress.selection_presentations = round(ledger.mean("charged"))
     with clock("eval"):
-        # a replica that presented nothing this epoch (its budget spent) has a NaN loss, not a diverged one
-        mark_diverged(progress, job.engine, loss if pr is None else torch.nan_to_num(loss, nan=0.0), ep.index)
+        mark_diverged(progress, job.engine, shown.presented(loss), ep.index)
         rec = curve_point(job.engine, prob, job.cadence, ep, loss, progress)
     rec["work_seconds"] = clock.work()
     with clock("log"):
@@ -259,7 +255,7 @@ def train(
         with clock("loop"), stop.loop():
             for ep in job.prob.plan[job.progress.epoch :]:
                 rec = run_epoch(job, ep, clock)
-                spent = job.prob.pruning is not None and job.prob.pruning.exhausted  # every replica spent its budget
+                spent = job.prob.ledger.exhausted  # every replica spent its budget
                 if on_stage_end is not None and (ep.index in job.prob.stage_ends or spent):
                     on_stage_end(rec, job.prob)
                 if job.progress.all_diverged:  # nothing left to train: stop the job here
@@ -315,11 +311,14 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
         "sizes": str(prob.schedule.sizes),
         "epochs": str(prob.schedule.epochs),
         "order": cfg.schedule.order,
+        "selector": results["selector"]["name"],  # what chose the epochs (a user's class by its import path)
+        "cost_ratio": results["cost"]["cost_ratio"],  # measured: presented and charged over conventional's
         "engine": results["engine"],
         "engine_requested": results["engine_requested"],
     }
     floor_nm = {f"final/floor_{k}_nm_overall": v["nm"]["overall"] for k, v in results["floor"].items()}
-    job.tracker.close(hp, {**{f"final/{k}": v["mean"] for k, v in results["summary"].items()}, **floor_nm})
+    cost = {"final/cost_ratio": results["cost"]["cost_ratio"], "final/cost": results["cost"]["presentations"]}
+    job.tracker.close(hp, {**{f"final/{k}": v["mean"] for k, v in results["summary"].items()}, **floor_nm, **cost})
     if job.ckpts:
         job.ckpts.discard()
     return results
