@@ -49,12 +49,16 @@ ENGINES = {
         "schedule.epochs=null",
         "schedule.budget=9000",
     ],
+    # a user's own selector (examples/extending/my_selector.py) on the paper's stages: its scores are its state
+    "user_selector": [
+        "engine=reference", "schedule.pruning={_target_:my_selector.LossWeighted}", "schedule.epochs=[1,1,2,3,3]"
+    ],
     "infobatch_adam": [
         "optim=adam_minibatch", "model.activation=relu", "schedule=infobatch", "schedule.epochs=[150]", "replicas=4"
     ],
 }  # fmt: skip
 EPOCHS = {"reference": 10, "native": 214, "loss_high": 10, "minibatch": 74, "infobatch": 19, "seta": 12}
-EPOCHS.update(selective_backprop=math.ceil(7000 / (1002 / 3)) + 1, user_policy=19, infobatch_adam=150)
+EPOCHS.update(selective_backprop=math.ceil(7000 / (1002 / 3)) + 1, user_policy=19, infobatch_adam=150, user_selector=10)
 
 
 def run(out: Path, args: list[str], wait: bool = True) -> subprocess.Popen:
@@ -98,6 +102,7 @@ def newest_checkpoint(folder: Path) -> tuple[Path | None, int]:
         pytest.param("selective_backprop"),
         pytest.param("seta"),
         pytest.param("user_policy"),
+        pytest.param("user_selector"),
         pytest.param("infobatch_adam"),
     ],
 )
