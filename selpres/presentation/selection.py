@@ -4,8 +4,9 @@ One forward pass of all replicas over U (``errors_of``: every replica's per-patt
 (``one_thread``). A selector that scores candidates this way is charged ``schedule.selection_cost`` of a training
 presentation per candidate (a stage-wise order per enlargement, rounded up to whole presentations:
 ``orders.selection_charge``; Selective Backprop per candidate it scores), into the job's ledger
-(``selpres.presentation.selector.Ledger``). Why the default is 1/3, and what was measured: ``docs/architecture.md``
-("The cost of choosing"). Stratified draws (A_1, ``reselect``) need no network and are charged nothing.
+(``selpres.presentation.selector.Ledger``). Why the default is 1/3, and what was measured:
+``docs/studies/selection.md`` ("What choosing costs"). Stratified draws (A_1, ``reselect``) need no network and are
+charged nothing.
 """
 
 from __future__ import annotations
