@@ -43,6 +43,13 @@ class Presentation:
 
 
 _SPENT, _TRAINED, _CHARGED, _CONVENTIONAL, _EPOCHS = range(5)  # the ledger's rows
+_ROW = {
+    "spent": _SPENT,
+    "trained": _TRAINED,
+    "charged": _CHARGED,
+    "conventional": _CONVENTIONAL,
+    "epochs_done": _EPOCHS,
+}
 
 
 class Ledger:
@@ -81,7 +88,7 @@ class Ledger:
 
     def mean(self, row: str) -> float:
         """The mean over replicas of ``spent``, ``trained``, ``charged``, ``conventional`` or ``epochs_done``."""
-        i = ("spent", "trained", "charged", "conventional", "epochs_done").index(row)
+        i = _ROW[row]
         return self._even[i] if self._rows is None else float(self._rows[i].mean())
 
     @property
@@ -102,6 +109,8 @@ class Ledger:
 
     def affordable(self, r: int, k: int) -> int:
         """How many of ``k`` presentations replica r's remaining budget pays for (the epoch is cut there)."""
+        if self.budget is None:  # (asked once per replica and epoch: no tensor for an answer known already)
+            return k
         left = float(self.remaining[r])
         return k if math.isinf(left) else min(k, int(math.floor(left + 1e-9)))
 
@@ -121,9 +130,8 @@ class Ledger:
         conventional training would have presented in it."""
         share = self.n * ep.presentations / ep.size  # all of U an epoch; a compute-matched plan's cut epoch its part
         if shown.counts is None:
-            m = shown.order.shape[1]
-            if self._rows is None:
-                e = self._even
+            m, e = shown.order.shape[1], self._even
+            if e is not None:
                 e[_TRAINED] += m
                 e[_SPENT] += m
                 e[_EPOCHS] += 1
@@ -189,16 +197,14 @@ class Network:
     of choosing it times apart (``phase``: the epoch's shuffles are the clock's ``shuffle``)."""
 
     def __init__(self, engine, X: torch.Tensor, Y: torch.Tensor, phase=None):
-        self.engine, self.X, self.Y, self._phase = engine, X, Y, phase
+        self.engine, self.X, self.Y = engine, X, Y
+        self.phase = phase or (lambda name: nullcontext())  # phase(name): a context timing that part
 
     def errors(self) -> torch.Tensor:
         """Every replica's squared error on every pattern of U, summed over outputs [R, n] (scaled units), from
         one forward pass on one thread. Whoever asks charges it."""
         with one_thread():
             return errors_of(self.engine, self.X, self.Y)
-
-    def phase(self, name: str):
-        return nullcontext() if self._phase is None else self._phase(name)
 
 
 class Selector:
