@@ -14,7 +14,7 @@ import json
 import math
 from dataclasses import dataclass, field
 
-from selpres.report.jobs import Job, method_of
+from selpres.report.jobs import Job
 from selpres.storage import flatten
 
 SETS = (("test10", "test-10"), ("heldout", "held-out"))  # results.json key, name in the report
@@ -226,14 +226,14 @@ def arm_label(members: list[tuple[Job, dict[str, str]]], keys: list[str]) -> dic
 
 
 def method_labels(jobs: list[Job], within=None) -> dict[int, str]:
-    """id(job) -> its method's label, for every job with results: :func:`method_of`, and when jobs of that name
-    differ in other settings (a sweep over stage sizes, epochs, lr, ...), the settings that differ, so they are
-    not pooled (an arm by its name: :func:`arm_label`). ``within(job)`` -> a key: compare only jobs of one key
-    (a study whose rows are split by arm and regime already), by default the whole sweep."""
+    """id(job) -> its method's label, for every job with results: the method it ran (``Job.method``), and when jobs
+    of that name differ in other settings (a sweep over stage sizes, epochs, lr, ...), the settings that differ, so
+    they are not pooled (an arm by its name: :func:`arm_label`). ``within(job)`` -> a key: compare only jobs of one
+    key (a study whose rows are split by arm and regime already), by default the whole sweep."""
     by_name: dict[tuple, list[tuple[Job, dict]]] = {}
     for j in jobs:
         if j.results and "config" in j.results:
-            key = (within(j) if within else None, method_of(j.results))
+            key = (within(j) if within else None, j.method)
             by_name.setdefault(key, []).append((j, settings(j)))
     labels = {}
     for (_, name), members in by_name.items():

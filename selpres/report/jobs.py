@@ -21,11 +21,16 @@ class Job:
 
     path: Path  # the job folder
     status: str  # complete | diverged | failed | missing | unreadable
-    schedule: str | None  # its method: the schedule's name (method_of), labelled by selpres.report.groups
+    schedule: str | None  # its method's label: :attr:`method`, told apart by settings (selpres.report.groups)
     topology: str | None
     results: dict | None = None  # the full results.json of a complete/diverged job
     error: str | None = None
     notes: list[str] = field(default_factory=list)  # what was read as missing or not complete (selpres.report.validate)
+    method: str | None = None  # the method that ran (:func:`method_of`), before any label; None: ``schedule``
+
+    def __post_init__(self):
+        if self.method is None:
+            self.method = self.schedule
 
     @property
     def replicas(self) -> list[dict]:

@@ -231,7 +231,7 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
             prob.X, prob.Y, shown.order, weights=shown.weights, counts=shown.counts, spent=ledger.clock()
         )
     ledger.record(shown, ep)
-    prob.selector.observe(shown, job.engine.last_losses)
+    prob.selector.observe(shown, getattr(job.engine, "last_losses", None))  # (a batch engine keeps none)
     progress.epoch = ep.index + 1
     # whole presentations on the curve (each replica's exact cost: results.json's cost)
     progress.presentations = round(ledger.mean("spent"))
