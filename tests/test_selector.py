@@ -194,3 +194,19 @@ def test_a_job_of_every_kind_has_one_selector_and_one_ledger():
         assert isinstance(prob.selector, Selector) and isinstance(prob.ledger, Ledger)
         assert prob.selector.source.samplers is prob.samplers and len(prob.samplers) == 2
         assert not hasattr(prob, "pruning") and not hasattr(prob, "selection")
+
+
+def test_the_loop_asks_every_method_the_same_and_never_which_it_has():
+    """The loop, the engines and results.json name no kind of method: every job goes through one selector and one
+    ledger (a branch such as ``if prob.pruning`` would come back here)."""
+    import inspect
+    import re
+
+    from selpres.engines import batch, minibatch, native_minibatch, online
+    from selpres.run import results, train
+
+    kinds = re.compile(r"\.(pruning|selection)\b|stagewise|Policy|StageSelection|isinstance\([^)]*(Staged|Policy)")
+    for module in (train, results, online, batch, minibatch, native_minibatch):
+        code = "\n".join(line.split("#")[0] for line in inspect.getsource(module).splitlines())
+        code = re.sub(r'"""(.|\n)*?"""', "", code)  # docstrings may name the methods they serve
+        assert not kinds.search(code.replace("cfg.schedule.pruning", "")), (module.__name__, kinds.search(code))

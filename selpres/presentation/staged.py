@@ -79,8 +79,8 @@ class Staged(Selector):
             return Presentation(epoch_orders(self.samplers, self._orders_buffer()))
 
     def _orders_buffer(self) -> torch.Tensor:
-        """Where every epoch's presentation orders are written ([R * the largest epoch], reused: fresh memory is
-        mapped in page by page, which cost more than the shuffle itself at R = 1000)."""
+        """Where every epoch's presentation orders are written ([R * the largest epoch], reused every epoch:
+        ``epoch_orders`` says why)."""
         if self._buffer is None:
             largest = max(st.size if st.epochs else st.extra for st in self.schedule.stages)
             self._buffer = torch.empty(len(self.seeds) * largest, dtype=torch.int64)

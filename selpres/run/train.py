@@ -42,7 +42,7 @@ WORK = frozenset(("select", "shuffle", "train"))  # a method's own phases (Clock
 
 
 class _Phase:
-    """One timed phase (a plain context manager: an epoch opens five, at R = 1 in a fraction of a millisecond)."""
+    """One timed phase: a plain context manager, since the loop opens several every epoch."""
 
     __slots__ = ("clock", "name", "t0", "inner0")
 
