@@ -34,7 +34,7 @@ _EXPORTS = {
     "load_task": "selpres.data.task",
     "load_exported": "selpres.data.export",
     "load_csv": "selpres.data.export",
-    "Scaler": "selpres.data.paper",
+    "Scaler": "selpres.patterns",
     # the network, to use what a job trained (weights.pt)
     "BPN": "selpres.engines.model",
     "load_into": "selpres.engines.model",

@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from selpres.data import paper as D
+from selpres.patterns import ExemplarSet, Patterns, TestSets
 from selpres.data.routes import DataRoute
 from selpres.data.task import Shape, Task, check_test_split
 from selpres.errors import ConfigError
@@ -50,12 +50,12 @@ class Line(DataRoute):
 
     def build(self, robot, data):
         x = torch.linspace(0.0, 1.0, data.n, dtype=torch.float64)[:, None]
-        exemplar = D.ExemplarSet(x, data.slope * x, n_candidates=data.n)
+        exemplar = ExemplarSet(x, data.slope * x, n_candidates=data.n)
         n_test, n_ex = check_test_split(data, data.n)
         held = torch.linspace(0.005, 0.995, 99, dtype=torch.float64)[:, None]
         t10 = torch.cat((x[:n_ex], held[: n_test - n_ex]))
-        tests = D.TestSets(D.Patterns(t10, data.slope * t10), torch.arange(n_test) < n_ex,
-                           D.Patterns(held, data.slope * held))
+        tests = TestSets(Patterns(t10, data.slope * t10), torch.arange(n_test) < n_ex,
+                         Patterns(held, data.slope * held))
         task = Task(exemplar, tests, None, ("x",), ("y",), {"kind": "line", "source": "data=line", "n": data.n})
         return replace(task, scaler=task.fit_scaler(data))
 

@@ -19,8 +19,9 @@ import torch
 from selpres.arms.sources import as_choice, make_arm
 from selpres.arms.two_link import cfg_get
 from selpres.data.file import file_digest
-from selpres.data.paper import INPUT_NAMES, TARGET_NAMES, ExemplarSet, Patterns, TestSets
+from selpres.data.paper import INPUT_NAMES, TARGET_NAMES
 from selpres.data.spec import DataSpec
+from selpres.patterns import ExemplarSet, Patterns, TestSets
 from selpres.registry import Choice
 from selpres.storage import atomic_write, stable_hash
 

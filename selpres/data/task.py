@@ -38,6 +38,7 @@ from selpres.data.cache import cached
 from selpres.data.routes import ROUTES, keys_of
 from selpres.data.spec import DataSpec
 from selpres.errors import ConfigError
+from selpres.patterns import ExemplarSet, Scaler, TestSets
 from selpres.registry import Choice
 
 log = logging.getLogger("selpres")
@@ -73,9 +74,9 @@ class Task:
     """Exemplar inputs/targets (raw units), the 10 test patterns and the held-out set, the scaler, the
     names of the columns, and ``info``: what was made and how (for the log and results.json)."""
 
-    exemplar: D.ExemplarSet
-    tests: D.TestSets
-    scaler: D.Scaler
+    exemplar: ExemplarSet
+    tests: TestSets
+    scaler: Scaler
     input_names: tuple[str, ...] = D.INPUT_NAMES
     output_names: tuple[str, ...] = D.TARGET_NAMES
     info: dict = field(default_factory=dict)
@@ -87,7 +88,7 @@ class Task:
     def n(self) -> int:
         return len(self.exemplar)
 
-    def fit_scaler(self, data_cfg) -> D.Scaler:
+    def fit_scaler(self, data_cfg) -> Scaler:
         """The scaler ``data_cfg.scaling`` asks for on this exemplar set; ConfigError if it asks for the
         commanded boxes and the task has none (a data file, a sampled set without a torque box)."""
         mode = str(cfg_get(cfg_get(data_cfg, "scaling"), "mode"))
@@ -98,7 +99,7 @@ class Task:
                 else "with data.tau=null there is no commanded torque box to scale the targets by"
             )
             raise ConfigError("data.scaling.mode", "commanded", f"exemplar: {why}")
-        return D.Scaler.fit(self.exemplar, data_cfg, self.commanded)
+        return Scaler.fit(self.exemplar, cfg_get(data_cfg, "scaling"), self.commanded)
 
     def scaled_tests(self) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
         """name -> (inputs scaled, targets in Nm): what the network is scored on."""
