@@ -13,7 +13,7 @@ import torch
 from omegaconf import OmegaConf
 
 REPO = Path(__file__).resolve().parents[1]
-CONFIGS = REPO / "selpres" / "configs"
+CONFIGS = REPO / "configs"
 
 # One torch thread in the test processes and the jobs they start (OMP_NUM_THREADS set beforehand wins): the suite's
 # tensors are tiny, and a second intra-op thread only waits for a core: a 6-5-2 backward took 58 ms with 2 threads

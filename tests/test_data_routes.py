@@ -82,8 +82,9 @@ def test_a_new_route_is_one_module_and_one_yaml(tmp_path):
     registry lists it, ``data=line`` composes, validates and builds, its keys' types are checked as the schema
     checked the built-ins' (``data.slope=abc`` refused naming the key), its own check runs."""
     shutil.copytree(REPO / "selpres", tmp_path / "selpres", ignore=shutil.ignore_patterns("__pycache__", "*.so"))
+    shutil.copytree(REPO / "configs", tmp_path / "configs")
     (tmp_path / "selpres" / "data" / "routes" / "line.py").write_text(LINE)
-    (tmp_path / "selpres" / "configs" / "data" / "line.yaml").write_text(LINE_YAML)
+    (tmp_path / "configs" / "data" / "line.yaml").write_text(LINE_YAML)
     code = f"""
 import sys; sys.path.insert(0, sys.argv[1])
 import selpres
