@@ -201,3 +201,17 @@ def test_recorded_configs_keep_the_keys_and_hash_of_the_typed_schema():
     # the hashes main gave these configs before the data node was opened (a0ffa29)
     assert job_hash(compose()) == "d8fadaa1d4080fe3"
     assert job_hash(compose("data=sampled")) == "a18ed62083ecded8"
+
+
+def test_a_spec_reads_by_name_as_a_dict_and_a_config_node_do():
+    """The data room's functions read their node by name (``data["theta"]``): a spec, a plain dict and a config node
+    alike, so no room below ``run`` needs a config reader; a key the route does not have is a KeyError naming it."""
+    from selpres.run.specs import data_spec, plain
+
+    node = compose("data=sampled").data
+    spec = data_spec(node)
+    for key in ("kind", "heldout", "scaling", "q", "accel_limit"):  # common keys and the route's own
+        assert spec[key] == plain(node)[key] == plain(node[key]), key
+    assert spec["accel_limit"] == spec.accel_limit
+    with pytest.raises(KeyError, match="theta"):
+        spec["theta"]  # the grid route's key: not one of data.kind=sampled

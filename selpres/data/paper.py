@@ -14,7 +14,7 @@ from typing import Any
 
 import torch
 
-from selpres.arms.two_link import TwoLinkArm, cfg_get
+from selpres.arms.two_link import TwoLinkArm
 from selpres.errors import ConfigError
 from selpres.patterns import DTYPE, ExemplarSet, Patterns, TestSets
 
@@ -24,8 +24,8 @@ COLUMN_NAMES = INPUT_NAMES + TARGET_NAMES
 
 
 def _range(data_cfg: Any, key: str) -> tuple[float, float]:
-    node = cfg_get(data_cfg, key)
-    return float(cfg_get(node, "lo")), float(cfg_get(node, "hi"))
+    node = data_cfg[key]
+    return float(node["lo"]), float(node["hi"])
 
 
 def heldout_count(value: Any, total: int, what: str) -> int:
@@ -70,8 +70,8 @@ def grid_axis(lo: float, hi: float, step: float, name: str = "grid") -> torch.Te
 
 
 def _axis(data_cfg: Any, key: str) -> torch.Tensor:
-    node = cfg_get(data_cfg, key)
-    return grid_axis(cfg_get(node, "lo"), cfg_get(node, "hi"), cfg_get(node, "step"), name=key)
+    node = data_cfg[key]
+    return grid_axis(node["lo"], node["hi"], node["step"], name=key)
 
 
 def accel_filter(qdd: torch.Tensor, limit: float) -> torch.Tensor:
@@ -99,7 +99,7 @@ def build_exemplar_set(arm: TwoLinkArm, data_cfg: Any) -> ExemplarSet:
     Rows come out in lexicographic order (θ1, θ̇1, θ2, θ̇2, τ1, τ2), θ1 slowest, so the set is deterministic.
     """
     states, t1, t2, qdd = grid_accelerations(arm, data_cfg)
-    s, i, j = accel_filter(qdd, cfg_get(data_cfg, "accel_limit")).nonzero(as_tuple=True)
+    s, i, j = accel_filter(qdd, data_cfg["accel_limit"]).nonzero(as_tuple=True)
     tau_kept = torch.stack((t1[i], t2[j]), -1)
     p = _rows(states[s][:, [0, 2]], states[s][:, [1, 3]], qdd[s, i, j], tau_kept)
     return ExemplarSet(p.X, p.Y, n_candidates=int(qdd.shape[:-1].numel()))
@@ -142,7 +142,7 @@ def sample_outside(
     w_lo, w_hi = _range(data_cfg, "dtheta")
     t1_lo, t1_hi = _range(data_cfg, "tau1")
     t2_lo, t2_hi = _range(data_cfg, "tau2")
-    a = float(cfg_get(data_cfg, "accel_limit"))
+    a = float(data_cfg["accel_limit"])
     det_max = _max_det_mass_matrix(arm, th_lo, th_hi)
     tau_lo = torch.tensor([t1_lo, t2_lo], dtype=DTYPE)
     tau_hi = torch.tensor([t1_hi, t2_hi], dtype=DTYPE)
@@ -178,14 +178,14 @@ def sample_outside(
 def make_test_sets(arm: TwoLinkArm, data_cfg: Any, exemplar: ExemplarSet, seed: int) -> TestSets:
     """The paper's 10 random test patterns ("some from the exemplar set and some outside") + a held-out set."""
     gen = torch.Generator().manual_seed(int(seed))
-    n_test, n_ex = int(cfg_get(data_cfg, "test_patterns")), int(cfg_get(data_cfg, "test_from_exemplar"))
+    n_test, n_ex = int(data_cfg["test_patterns"]), int(data_cfg["test_from_exemplar"])
     if not 0 <= n_ex <= min(n_test, len(exemplar)):
         raise ValueError(f"test_from_exemplar: {n_ex} not in [0, min(test_patterns={n_test}, {len(exemplar)})]")
     idx = torch.randperm(len(exemplar), generator=gen)[:n_ex]
     out = sample_outside(arm, data_cfg, n_test - n_ex, gen)
     test10 = Patterns(torch.cat((exemplar.X[idx], out.X)), torch.cat((exemplar.Y[idx], out.Y)))
     from_ex = torch.arange(n_test) < n_ex
-    heldout = sample_outside(arm, data_cfg, int(cfg_get(data_cfg, "heldout")), gen)
+    heldout = sample_outside(arm, data_cfg, int(data_cfg["heldout"]), gen)
     return TestSets(test10, from_ex, heldout)
 
 
@@ -195,7 +195,7 @@ def make_test_sets(arm: TwoLinkArm, data_cfg: Any, exemplar: ExemplarSet, seed: 
 def grid_bounds(data_cfg: Any) -> tuple[torch.Tensor, ...]:
     """(x lo, x hi, τ lo, τ hi) the grid route commands: its θ, θ̇ ranges, ±accel_limit and τ boxes."""
     th, w = _range(data_cfg, "theta"), _range(data_cfg, "dtheta")
-    a = float(cfg_get(data_cfg, "accel_limit"))
+    a = float(data_cfg["accel_limit"])
     x0 = torch.tensor([th[0], w[0], -a, th[0], w[0], -a], dtype=DTYPE)
     x1 = torch.tensor([th[1], w[1], a, th[1], w[1], a], dtype=DTYPE)
     t1, t2 = _range(data_cfg, "tau1"), _range(data_cfg, "tau2")

@@ -31,7 +31,6 @@ from pathlib import Path
 import torch
 
 from selpres.arms.sources import files_read, source_of
-from selpres.arms.two_link import cfg_get
 from selpres.data import export as E
 from selpres.data import paper as D
 from selpres.data.cache import cached
@@ -91,7 +90,7 @@ class Task:
     def fit_scaler(self, data_cfg) -> Scaler:
         """The scaler ``data_cfg.scaling`` asks for on this exemplar set; ConfigError if it asks for the
         commanded boxes and the task has none (a data file, a sampled set without a torque box)."""
-        mode = str(cfg_get(cfg_get(data_cfg, "scaling"), "mode"))
+        mode = str(data_cfg["scaling"]["mode"])
         if mode == "commanded" and self.commanded is None:
             why = (
                 "a file has no commanded ranges"
@@ -99,7 +98,7 @@ class Task:
                 else "with data.tau=null there is no commanded torque box to scale the targets by"
             )
             raise ConfigError("data.scaling.mode", "commanded", f"exemplar: {why}")
-        return Scaler.fit(self.exemplar, cfg_get(data_cfg, "scaling"), self.commanded)
+        return Scaler.fit(self.exemplar, data_cfg["scaling"], self.commanded)
 
     def scaled_tests(self) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
         """name -> (inputs scaled, targets in Nm): what the network is scored on."""
