@@ -25,12 +25,14 @@ import hashlib
 import inspect
 import json
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
 
-from selpres.arms.sources import files_read, source_of
+from selpres.arms.sources import as_choice, files_read, source_of
 from selpres.data import export as E
 from selpres.data import paper as D
 from selpres.data.cache import cached
@@ -133,8 +135,12 @@ def _own_code(cls: type | None) -> str:
         return ""
 
 
-def load_task(robot: Choice, data: DataSpec) -> Task:
-    """The task of a robot/data spec (cached); raises ConfigError, writes nothing."""
+def load_task(robot: Choice | Mapping[str, Any], data: DataSpec | Mapping[str, Any]) -> Task:
+    """The task of a robot and a data spec (what ``selpres.run`` hands this room), or of a job's recorded robot and
+    data nodes (results.json's ``config["robot"]``, ``config["data"]``: plain mappings); cached; raises ConfigError,
+    writes nothing."""
+    robot = robot if isinstance(robot, Choice) else as_choice(robot)
+    data = data if isinstance(data, DataSpec) else DataSpec.of(data)
     stamp = [(str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in task_files(robot, data) if p.is_file()]
     robot_json = json.dumps({"_target_": robot.target, **robot.params}, sort_keys=True)
     route = ROUTES.get(data.kind)

@@ -34,6 +34,15 @@ def main(argv: list[str] | None = None) -> int:
         "writes (Table 1's: its numbers and verdicts; nothing is written if the markers are missing)",
     )
     ap.add_argument(
+        "--sections",
+        action="append",
+        default=None,
+        metavar="MODULE",
+        help="a study plug-in whose sections the report shows, by import path: a module exporting SECTION(ctx) or "
+        "a package of such modules (repeatable; default: the ones the sweep names, recorded in its multirun.yaml, "
+        "else the ones installed: the repository's studies, with make setup)",
+    )
+    ap.add_argument(
         "--margin",
         default="5%",
         help="equivalence margin m of the verdicts: a percentage of the mean final RMS, over the paired "
@@ -61,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
         except ReadmeError as e:
             return _error(str(e))
     out = a.out if a.out is not None else a.dir / "report"
-    report = Report.build(a.dir, options)
+    report = Report.build(a.dir, options, a.sections)
     if a.readme is not None and not report.has_readme:
         return _error(
             f"--readme {a.readme}: no study of the report of {a.dir} writes a README block (Table 1's does, "
@@ -75,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.readme is not None:
         flags = [f"--margin {shlex.quote(a.margin)}"] if a.margin != "5%" else []
         flags += ["--holm"] if a.holm else []
+        flags += [f"--sections {shlex.quote(m)}" for m in a.sections or []]
         command = " ".join(
             ["python -m selpres.report", shlex.quote(str(a.dir)), *flags, "--readme", shlex.quote(str(a.readme))]
         )

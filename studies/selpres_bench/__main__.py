@@ -1,3 +1,3 @@
-from selpres.bench.main import main
+from selpres_bench.main import main
 
 raise SystemExit(main())

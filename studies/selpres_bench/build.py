@@ -10,7 +10,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from selpres.bench.common import PACKAGE_PARENT, median_seconds
+from selpres_bench.common import CHILD_PATH, median_seconds
 
 
 def bench_compile() -> None:
@@ -19,7 +19,7 @@ def bench_compile() -> None:
         "import time,torch;from selpres.native import load;t=time.perf_counter();"
         "load((6,13,2));print(time.perf_counter()-t)"
     )
-    env = dict(os.environ, PYTHONPATH=str(PACKAGE_PARENT))
+    env = dict(os.environ, PYTHONPATH=CHILD_PATH)
     with tempfile.TemporaryDirectory() as tmp:
         env["SELPRES_CACHE_DIR"] = tmp
         out = []

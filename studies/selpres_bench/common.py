@@ -2,15 +2,23 @@
 
 from __future__ import annotations
 
+import os
 import statistics
 import time
 from pathlib import Path
 
 import torch
 
+import selpres
+import selpres_bench
+
 SIZES = (6, 13, 2)
 N, EPOCHS, LR, MOM = 1002, 150, 0.15, 0.9
-PACKAGE_PARENT = Path(__file__).resolve().parents[2]  # on PYTHONPATH of the child processes
+# on PYTHONPATH of the child processes: the folders selpres and this package are imported from (a checkout's root and
+# its studies/)
+CHILD_PATH = os.pathsep.join(
+    dict.fromkeys(str(Path(m.__file__).resolve().parents[1]) for m in (selpres, selpres_bench))
+)
 JOB_PARTS = ("train", "eval", "shuffle", "log", "checkpoint", "prepare", "loop")  # results.json wall_seconds
 
 

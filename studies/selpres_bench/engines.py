@@ -9,8 +9,8 @@ from types import SimpleNamespace
 
 import torch
 
-from selpres.bench.common import LR, MOM, SIZES, EngineTable, N, data
 from selpres.run.config import compose_train
+from selpres_bench.common import LR, MOM, SIZES, EngineTable, N, data
 
 
 def bench_idiomatic(table: EngineTable, epochs: int, repeats: int) -> None:

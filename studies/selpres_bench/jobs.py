@@ -11,9 +11,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from selpres.bench.common import EPOCHS, JOB_PARTS, PACKAGE_PARENT, EngineTable
-from selpres.bench.engines import bench_engine
 from selpres.run.config import compose_train
+from selpres_bench.common import CHILD_PATH, EPOCHS, JOB_PARTS, EngineTable
+from selpres_bench.engines import bench_engine
 
 
 def train_job(configs: str, overrides: list[str], out_dir: str) -> dict:
@@ -35,7 +35,7 @@ def train_job(configs: str, overrides: list[str], out_dir: str) -> dict:
 
 
 _CHILD = (
-    "import json, sys; from selpres.bench.jobs import train_job; "
+    "import json, sys; from selpres_bench.jobs import train_job; "
     "r = train_job(sys.argv[1], json.loads(sys.argv[2]), sys.argv[3]); "
     "print(json.dumps({k: r[k] for k in ('wall_seconds', 'train_call_seconds', 'engine', 'status')}))"
 )
@@ -43,7 +43,7 @@ _CHILD = (
 
 def run_job_process(configs: Path, overrides: list[str], out_dir: Path) -> dict:
     """One job in a fresh Python process, as ``python train.py`` runs it (cold caches, its own threads)."""
-    path = os.pathsep.join(p for p in (str(PACKAGE_PARENT), os.environ.get("PYTHONPATH")) if p)
+    path = os.pathsep.join(p for p in (CHILD_PATH, os.environ.get("PYTHONPATH")) if p)
     env = dict(os.environ, PYTHONPATH=path)
     t = time.perf_counter()
     p = subprocess.run(

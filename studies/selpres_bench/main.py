@@ -2,18 +2,18 @@
 
     selpres-bench               # full (several minutes)
     selpres-bench --quick       # short version (about a minute: fewer epochs and repeats)
-    python -m selpres.bench     # the same, without the console entry point
+    python -m selpres_bench     # the same, without the console entry point
 
-Sections: the training engines alone; mini-batch training of the modern Adam designs (``selpres.bench.minibatch``:
+Sections: the training engines alone; mini-batch training of the modern Adam designs (``selpres_bench.minibatch``:
 the native kernel against the torch mini-batch engine and torch.func's stacked models, eager and compiled); the
 whole job (``selpres.run.train.train`` end to end at R = 1, 30, 1000
 beside the engine alone at the same R); the per-epoch shuffles (the native bucket sort against numpy's argsort
 of the same hashes); the priority orders' selection cost; the stage-wise orders' cost of choosing
 (``selpres.presentation.selection``: one enlargement batched against a per-replica loop, and whole jobs' "select"
-phase against "train"); SeTa's selection (``selpres.bench.pruning``: its exact k-means in C against numpy, one call
+phase against "train"); SeTa's selection (``selpres_bench.pruning``: its exact k-means in C against numpy, one call
 and whole jobs); the native kernel's build; exemplar-set
-generation; the command line's start-up (``selpres.bench.startup``); TensorBoard written by selpres against
-torch's SummaryWriter (``selpres.bench.tracking``, full run only). A "replica-run" is one conventional run
+generation; the command line's start-up (``selpres_bench.startup``); TensorBoard written by selpres against
+torch's SummaryWriter (``selpres_bench.tracking``, full run only). A "replica-run" is one conventional run
 of the paper: 150 epochs x 1002 single-pattern
 updates of a 6-13-2 sigmoid net (SGD lr 0.15, momentum 0.9). Slow configurations are timed over a few
 epochs and extrapolated to 150 (the ``ep`` column says how many were timed); times are medians. Engine
@@ -33,17 +33,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from selpres.bench.build import bench_compile, bench_exemplar_generation
-from selpres.bench.common import EPOCHS, SIZES, EngineTable, N
-from selpres.bench.engines import bench_batch_engines, bench_engines
-from selpres.bench.jobs import bench_jobs
-from selpres.bench.minibatch import rows as minibatch_rows
-from selpres.bench.presentation import bench_orders, bench_selection, bench_shuffles
-from selpres.bench.pruning import rows as pruning_rows
-from selpres.bench.sampler import bench_sampler
-from selpres.bench.startup import rows as startup_rows
-from selpres.bench.tracking import rows as tracking_rows
 from selpres.run.config import CONFIG_DIR
+from selpres_bench.build import bench_compile, bench_exemplar_generation
+from selpres_bench.common import EPOCHS, SIZES, EngineTable, N
+from selpres_bench.engines import bench_batch_engines, bench_engines
+from selpres_bench.jobs import bench_jobs
+from selpres_bench.minibatch import rows as minibatch_rows
+from selpres_bench.presentation import bench_orders, bench_selection, bench_shuffles
+from selpres_bench.pruning import rows as pruning_rows
+from selpres_bench.sampler import bench_sampler
+from selpres_bench.startup import rows as startup_rows
+from selpres_bench.tracking import rows as tracking_rows
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -13,7 +13,7 @@ sum of the replicas' mse backpropagated, ``torch.optim.Adam`` on the stacked wei
 AOTAutograd); the step stays eager (a compiled step recompiles as the rate changes). Its first call, which
 compiles, is timed apart and not counted. Every variant runs at one thread, so that they compare like with like
 on this shared 2-core machine (the kernel also at torch's thread count). Target (issue 28): native >= 10x the
-torch engine and ahead of both vmap variants. ``python -m selpres.bench.minibatch [--quick]``.
+torch engine and ahead of both vmap variants. ``python -m selpres_bench.minibatch [--quick]``.
 """
 
 from __future__ import annotations

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import torch
 
-from selpres.bench.common import EPOCHS, SIZES, N, data, median_seconds
-from selpres.bench.jobs import run_job_process
+from selpres_bench.common import EPOCHS, SIZES, N, data, median_seconds
+from selpres_bench.jobs import run_job_process
 
 
 def bench_shuffles(quick: bool) -> None:

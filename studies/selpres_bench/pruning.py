@@ -1,7 +1,7 @@
 """selpres-bench: SeTa's selection, its exact 1-D k-means in C against the numpy programme, side by side.
 
-    python -m selpres.bench.pruning            # k-means calls, then the two-link and PUMA SeTa jobs (~2 minutes)
-    python -m selpres.bench.pruning --quick    # k-means calls and the two-link job only
+    python -m selpres_bench.pruning            # k-means calls, then the two-link and PUMA SeTa jobs (~2 minutes)
+    python -m selpres_bench.pruning --quick    # k-means calls and the two-link job only
 
 Rows: one k-means call (``selpres.presentation.kmeans.kmeans_edges``, 5 groups) on SeTa-like scores (squared
 exponential losses, a tenth never presented at 3.0) at the draw sizes of the two study arms, 9,000 and 90,000, C and
@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from selpres.bench.common import median_seconds
+from selpres_bench.common import median_seconds
 
 JOBS = {  # name: the overrides of ``python train.py``
     "two-link n=1e4": [

@@ -1,6 +1,6 @@
 """The sampler's overhead in a DataLoader loop: SelectivePresentation against torch's RandomSampler, side by side.
 
-    python -m selpres.bench.sampler [--quick] [--n 100000] [--batch 256]
+    python -m selpres_bench.sampler [--quick] [--n 100000] [--batch 256]
 
 Both samplers present all n patterns every epoch (a one-stage schedule, so the work is the same); an epoch is
 ``set_epoch`` plus a full pass of ``DataLoader(dataset, batch_size, sampler=...)`` with the batches touched, timed
@@ -98,7 +98,7 @@ def bench_sampler(quick: bool = False, n: int = 100_000, batch: int = 256) -> bo
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m selpres.bench.sampler", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m selpres_bench.sampler", description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer repeats")
     ap.add_argument("--n", type=int, default=100_000)
     ap.add_argument("--batch", type=int, default=256)

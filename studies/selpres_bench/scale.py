@@ -1,7 +1,7 @@
 """Speed at scale (issue 11, item 9), every row measured side by side in one run.
 
-    python -m selpres.bench.scale            # about a minute on an idle 2-core machine
-    python -m selpres.bench.scale --quick    # fewer repeats and presentations
+    python -m selpres_bench.scale            # about a minute on an idle 2-core machine
+    python -m selpres_bench.scale --quick    # fewer repeats and presentations
 
 Rows:
 
@@ -215,7 +215,7 @@ def padding_rows(repeats: int, presentations: int) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m selpres.bench.scale",
+        prog="python -m selpres_bench.scale",
         description=__doc__.split("\n\n")[0],
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=__doc__.split("\n\n", 2)[2],

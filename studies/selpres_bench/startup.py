@@ -6,7 +6,7 @@ busy machine slows all three alike; the ratios are taken per round and their med
 both commands ≤ 1.5× the bare torch import. ``train.py`` freezes the garbage collector before the interpreter
 exits (see its ``__main__``), which saves torch's objects a final walk too; so each round also times the torch
 import given the same freeze, and the job's ratio to that stricter floor is printed beside the target's.
-``python -m selpres.bench.startup [--rounds N]``.
+``python -m selpres_bench.startup [--rounds N]``.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 Each round runs the same conventional 6-13-2 job twice, once as selpres writes TensorBoard and once with the
 tracker swapped for :class:`SummaryWriterTracker` (the same scalars and hparams through
 ``torch.utils.tensorboard``), and reports the process's wall time (imports included, what ``python train.py``
-costs) and the ``train()`` call's. ``python -m selpres.bench.tracking [--rounds N] [--replicas 1 1000]``.
+costs) and the ``train()`` call's. ``python -m selpres_bench.tracking [--rounds N] [--replicas 1 1000]``.
 """
 
 from __future__ import annotations
@@ -19,12 +19,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from selpres.bench.common import PACKAGE_PARENT
 from selpres.run.config import CONFIG_DIR
 from selpres.run.tracking import Tracker, hparams_and_metrics
+from selpres_bench.common import CHILD_PATH
 
 _CHILD = (
-    "import json, sys, time; t0 = time.perf_counter(); from selpres.bench import tracking as T; "
+    "import json, sys, time; t0 = time.perf_counter(); from selpres_bench import tracking as T; "
     "r = T.child(sys.argv[1], json.loads(sys.argv[2]), sys.argv[3], sys.argv[4]); "
     "print(json.dumps({'call': r['train_call_seconds'], 'after_start': time.perf_counter() - t0}))"
 )
@@ -56,7 +56,7 @@ class SummaryWriterTracker(Tracker):
 
 def child(configs: str, overrides: list[str], out_dir: str, variant: str) -> dict:
     """One job in this (fresh) process, with selpres's tracker or the SummaryWriter one."""
-    from selpres.bench.jobs import train_job
+    from selpres_bench.jobs import train_job
 
     if variant == "summarywriter":
         import selpres.run.train as loop
@@ -66,7 +66,7 @@ def child(configs: str, overrides: list[str], out_dir: str, variant: str) -> dic
 
 
 def _run(overrides: list[str], out: Path, variant: str) -> dict:
-    path = os.pathsep.join(p for p in (str(PACKAGE_PARENT), os.environ.get("PYTHONPATH")) if p)
+    path = os.pathsep.join(p for p in (CHILD_PATH, os.environ.get("PYTHONPATH")) if p)
     t = time.perf_counter()
     p = subprocess.run(
         [sys.executable, "-c", _CHILD, str(CONFIG_DIR), json.dumps(overrides), str(out), variant],

@@ -1,12 +1,14 @@
-"""The studies: one module per study, that study's report sections, composed of the report's shared blocks.
+"""The studies of selpres: one module per study, its report sections composed of the report's blocks.
 
-A study is one experiment config (``selpres/configs/experiment/<name>.yaml``) plus one module here of the same
-name exporting ``SECTION(ctx) -> Section | list[Section] | None`` (None: the sweep is not this study's) and,
-optionally, ``ORDER`` (the order of its methods' rows, which the report's runs table follows too when the sweep is
-this study's). The report finds the modules through :data:`selpres.report.build.STUDIES` (a registry: a new study is
-a new module, no list edited) and leads with the sections of the study the sweep ran. Modules starting with ``_``
-are the studies' helpers: ``_paper`` (the paper's Table 1, its roles and numbers, from ``table1.yaml``),
-``_families`` (families of settings in the paper's words), ``_error_cost``, ``_sensitivity``, ``_table1_plots``.
+A study is one experiment config (``configs/experiment/<name>.yaml``) plus one module here of the same name
+exporting ``SECTION(ctx) -> Section | list[Section] | None`` (None: the sweep is not this study's) and, optionally,
+``ORDER`` (the order of its methods' rows, which the report's runs table follows too when the sweep is this
+study's). This package is a report plug-in (:mod:`selpres.report.plugins`): every experiment config names it for its
+sweep's report (``hydra.callbacks.report``), and its distribution registers it for sweeps that name none; the report
+lists its public modules without importing them and leads with the study the sweep ran. So a new study is a new
+module here, no list edited. Modules starting with ``_`` are the studies' helpers: ``_paper`` (the paper's Table 1,
+its roles and numbers, from ``table1.yaml``), ``_families`` (families of settings in the paper's words),
+``_error_cost``, ``_sensitivity``, ``_table1_plots``, ``_modern_cells``, ``_modern_claims``.
 
 A study names no method or arm in code: what it compares comes from the jobs' results.json, its roles (which method
 is the reference, which the baseline or partner), the rows' order, display names and a paper's numbers from its
@@ -15,7 +17,7 @@ the others: its grid against the paper, verdicts, time to target and figures; it
 a study of parameters (sensitivity, selection), compactly. ``experiment=large`` needs no module: one n's folder is
 Table 1's grid on its arms, the whole sweep the selection study's.
 
-The last room of the report's side: it may import ``selpres.report`` (the building blocks), ``selpres.run``
-(stats), ``selpres.data`` (a task's held-out targets) and the foundation. Nothing in the library imports it:
-``import selpres`` and the core (arms -> engines, the Sampler, run, report's blocks) work without it.
+Apart from the library (the repository's ``studies/`` distribution, not in selpres's wheel), it uses selpres's public
+API only, as a user's own study would: :mod:`selpres` (``load_task``) and the report's blocks, :mod:`selpres.report`
+(``tests/test_layout.py`` checks it). Nothing in selpres imports it.
 """

@@ -5,7 +5,7 @@ coloured by family, over conventional training's mean learning curve: the fronti
 training reaches at each cost. A point above the frontier is beaten by conventional training stopped at
 the same cost. Heat maps show a family's two-parameter grids (lr × momentum, ε × μ, κ × φ, ...).
 
-Shown with the sensitivity section (:mod:`selpres.studies.sensitivity`): when some family has more than one
+Shown with the sensitivity section (:mod:`selpres_studies.sensitivity`): when some family has more than one
 setting.
 """
 
@@ -16,12 +16,19 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from selpres.report.compare import mean_curve
-from selpres.report.context import Context, Section
-from selpres.report.groups import Group
-from selpres.report.sections.plots import family_styles, nm_log_axis, pyplot, save_png, thousands
-from selpres.run.stats import summarize
-from selpres.studies._families import Family, families, paper_conventional
+from selpres.report import (
+    Context,
+    Group,
+    Section,
+    family_styles,
+    mean_curve,
+    nm_log_axis,
+    pyplot,
+    save_png,
+    summarize,
+    thousands,
+)
+from selpres_studies._families import Family, families, paper_conventional
 
 NOTE = (
     "Points: mean final held-out RMS over complete seeds (all held-out patterns), bars: its 95 % t-interval; "

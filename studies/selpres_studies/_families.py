@@ -22,8 +22,8 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
-from selpres.report.groups import Group, optim_target, setting_text, settings, varying
-from selpres.studies._paper import DESIGN
+from selpres.report import Group, optim_target, setting_text, settings, varying
+from selpres_studies._paper import DESIGN
 
 PAPER, PAPER_OPTIM = DESIGN.published, DESIGN.paper["optim"]
 SELECTIVE = DESIGN.families["staged"]  # "selective presentation"

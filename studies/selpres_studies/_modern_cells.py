@@ -1,4 +1,4 @@
-"""The modern study's cells (:mod:`selpres.studies.modern`): its design file (roles, claims, display names), how a
+"""The modern study's cells (:mod:`selpres_studies.modern`): its design file (roles, claims, display names), how a
 job's arm, regime and method are read from its results.json, and each (arm, regime, method) cell's seeds, costs,
 wall seconds and held-out curves."""
 
@@ -11,8 +11,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from selpres.report.context import Context
-from selpres.report.groups import optim_target
+from selpres.report import Context, optim_target
 
 METRICS = (("rms", "held-out RMS", "Nm"), ("nmse", "held-out nMSE", ""))
 DESIGN_FILE = Path(__file__).with_name("modern.yaml")  # modern.yaml: the study's roles and display names
@@ -72,10 +71,9 @@ def regime_of(cfg: dict, design: Design = DESIGN) -> str:
 def _heldout_variance(robot_json: str, data_json: str) -> tuple[float, ...]:
     import json
 
-    from selpres.data.task import load_task
-    from selpres.run.specs import data_spec, robot_spec
+    from selpres import load_task
 
-    task = load_task(robot_spec(json.loads(robot_json)), data_spec(json.loads(data_json)))
+    task = load_task(json.loads(robot_json), json.loads(data_json))
     return tuple(task.tests.heldout.Y.var(0, unbiased=False).tolist())
 
 

@@ -1,14 +1,25 @@
-"""The modern study's judgements (:mod:`selpres.studies.modern`): each method on its own published claim against
+"""The modern study's judgements (:mod:`selpres_studies.modern`): each method on its own published claim against
 the reference at full cost, and Holm's correction over the whole family (the compute-matched comparisons too)."""
 
 from __future__ import annotations
 
 import math
 
-from selpres.report.compare import ALPHA, Margin, Options, adjust_family, outcome, paired, paired_columns, reading
-from selpres.report.markdown import signed_interval, table
-from selpres.run.stats import median, tost
-from selpres.studies._modern_cells import DESIGN, METRICS, Cell, Design, _arm_regimes
+from selpres.report import (
+    ALPHA,
+    Margin,
+    Options,
+    adjust_family,
+    median,
+    outcome,
+    paired,
+    paired_columns,
+    reading,
+    signed_interval,
+    table,
+    tost,
+)
+from selpres_studies._modern_cells import DESIGN, METRICS, Cell, Design, _arm_regimes
 
 
 def _against_reference(c: Cell, ref: Cell, metric: str, options: Options, one_sided: bool) -> dict:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from selpres.report.groups import base
+from selpres.report import base
 
 DESIGN_FILE = Path(__file__).with_name("table1.yaml")
 

@@ -1,15 +1,13 @@
 """The sensitivity study's numbers: per family, its spread over its settings and its level against the best
 method at the same cost; per selective setting, its budget-matched partner. The words around them are
-``selpres.studies.sensitivity``."""
+``selpres_studies.sensitivity``."""
 
 from __future__ import annotations
 
 import math
 
-from selpres.report.compare import mean_curve, paired, reach
-from selpres.report.groups import Group
-from selpres.run.stats import median, summarize
-from selpres.studies._families import (
+from selpres.report import Group, mean_curve, median, paired, reach, summarize
+from selpres_studies._families import (
     Family,
     at_fixed_other_parameters,
     at_paper_total_epochs,

@@ -7,11 +7,9 @@ from __future__ import annotations
 
 import math
 
-from selpres.report.context import Context, Section
-from selpres.report.sections.plots import Side, draw_cost, draw_curves, save_png
-from selpres.run.stats import summarize
-from selpres.studies._families import families, paper_run
-from selpres.studies._paper import DESIGN, paper_setting
+from selpres.report import Context, Section, Side, draw_cost, draw_curves, save_png, summarize
+from selpres_studies._families import families, paper_run
+from selpres_studies._paper import DESIGN, paper_setting
 
 RATIO_SET = "test10"  # the paper's RMS is over its 10 test patterns
 PAPER = DESIGN.published

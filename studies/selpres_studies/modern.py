@@ -18,11 +18,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from selpres.report.compare import Options, outcome, paired, paired_columns
-from selpres.report.context import Context, Section
-from selpres.report.markdown import table
-from selpres.run.stats import summarize
-from selpres.studies._modern_cells import (  # noqa: F401  (the study's API, read here by the tests)
+from selpres.report import Context, Options, Section, outcome, paired, paired_columns, summarize, table
+from selpres_studies._modern_cells import (  # noqa: F401  (the study's API, read here by the tests)
     DESIGN,
     METRICS,
     Cell,
@@ -37,7 +34,7 @@ from selpres.studies._modern_cells import (  # noqa: F401  (the study's API, rea
     job_work,
     regime_of,
 )
-from selpres.studies._modern_claims import claim_rows, claims_markdown, judge, speedup  # noqa: F401
+from selpres_studies._modern_claims import claim_rows, claims_markdown, judge, speedup  # noqa: F401
 
 DODGE = 0.07  # methods of one cost are drawn side by side within ±7 % of their cost
 
@@ -206,7 +203,7 @@ def plot_error_cost(rows: list[dict], path: Path, design: Design = DESIGN, axis:
     the methods other than the reference are drawn side by side within ±DODGE of their cost."""
     from matplotlib.ticker import FuncFormatter
 
-    from selpres.report.sections.plots import family_styles, pyplot, save_png
+    from selpres.report import family_styles, pyplot, save_png
 
     plt = pyplot()
     panels = sorted({(r["regime"], r["arm"]) for r in rows}, key=lambda k: (not k[0].startswith("paper"), k))

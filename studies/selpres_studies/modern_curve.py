@@ -7,17 +7,15 @@ the error of predicting the mean at every budget (more budget does not cure it),
 moves with how many stalled rather than with the budget. The table shows both.
 
 A job is one budget (its epochs N); the arm and regime are read as the modern study reads them
-(:func:`selpres.studies.modern.arm_of`, :func:`~selpres.studies.modern.regime_of`).
+(:func:`selpres_studies.modern.arm_of`, :func:`~selpres_studies.modern.regime_of`).
 """
 
 from __future__ import annotations
 
 import math
 
-from selpres.report.context import Context, Section
-from selpres.report.markdown import table
-from selpres.run.stats import median, summarize
-from selpres.studies._modern_cells import DESIGN, arm_of, job_work, regime_of
+from selpres.report import Context, Section, median, summarize, table
+from selpres_studies._modern_cells import DESIGN, arm_of, job_work, regime_of
 
 TOLERANCE = 0.10  # "converged": doubling the budget changes the mean final held-out RMS by less than this share
 

@@ -13,11 +13,25 @@ than one budget, or an order other than the stratified and random ones.
 
 from __future__ import annotations
 
-from selpres.report.compare import Options, adjust_family, mean_curve, outcome, paired, paired_columns, reach, reading
-from selpres.report.context import Context, Section
-from selpres.report.groups import Group
-from selpres.report.markdown import diff_text, fmt, pvalues_text, signed_interval, table
-from selpres.studies._families import PAPER_ORDER, matched_partner, paper_conventional, stages
+from selpres.report import (
+    Context,
+    Group,
+    Options,
+    Section,
+    adjust_family,
+    diff_text,
+    fmt,
+    mean_curve,
+    outcome,
+    paired,
+    paired_columns,
+    pvalues_text,
+    reach,
+    reading,
+    signed_interval,
+    table,
+)
+from selpres_studies._families import PAPER_ORDER, matched_partner, paper_conventional, stages
 
 TABLE1_ORDERS = (PAPER_ORDER, "random")  # what Table 1's verdicts already compare at one budget
 

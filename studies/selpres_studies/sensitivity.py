@@ -9,25 +9,24 @@ selective presentation's spread with that of the rivals that reach the best leve
 changes the cost, selective presentation is also read at the paper's N = 150, and each of its settings is
 set against conventional training stopped at the same cost (its budget-matched partner).
 
-Shown when some family has more than one setting (:mod:`selpres.studies._families`).
+Shown when some family has more than one setting (:mod:`selpres_studies._families`).
 """
 
 from __future__ import annotations
 
 import math
 
-from selpres.report.context import Context, Section
-from selpres.report.markdown import fmt, signed_interval, table
-from selpres.studies import _error_cost as error_cost
-from selpres.studies._families import (
+from selpres.report import Context, Section, fmt, signed_interval, table
+from selpres_studies import _error_cost as error_cost
+from selpres_studies._families import (
     BUDGET_MATCHED,
     SCHEDULE,
     SELECTIVE,
 )
-from selpres.studies._sensitivity import FAMILY, FIXED, PAPER_TOTAL, TOLERANCE, sensitivity_rows, versus_matched_rows
+from selpres_studies._sensitivity import FAMILY, FIXED, PAPER_TOTAL, TOLERANCE, sensitivity_rows, versus_matched_rows
 
 NOTE = (
-    "A *family* is one method with its parameters swept (see `selpres/studies/_families.py`): the schedule's "
+    "A *family* is one method with its parameters swept (see `studies/selpres_studies/_families.py`): the schedule's "
     "kind (one stage = conventional; several stages in the stratified order = selective presentation) and "
     "the optimizer (`optim._target_`); one-stage families are split by their cost, except conventional training "
     "stopped at each staged run's cost, which is one family (*budget-matched*). A *setting* is one swept "
