@@ -9,11 +9,15 @@ import sys
 from pathlib import Path
 
 from selpres.errors import ConfigError
-from selpres.report import __doc__ as package_doc
 from selpres.report.build import Report
 from selpres.report.compare import Margin, Options
 from selpres.report.jobs import job_folders
 from selpres.report.readme import BEGIN, END, ReadmeError, read_readme, update_readme
+
+DESCRIPTION = (
+    "The report of a sweep from its job folders' results.json: report.md, its CSV files and figures. The studies' "
+    "sections come from the plug-ins the sweep names (its multirun.yaml) or that are installed; --sections chooses."
+)
 
 
 def _error(msg: str) -> int:
@@ -22,7 +26,7 @@ def _error(msg: str) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m selpres.report", description=package_doc.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m selpres.report", description=DESCRIPTION)
     ap.add_argument("dir", type=Path, help="sweep directory, e.g. outputs/sweeps/table1")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: DIR/report)")
     ap.add_argument(
