@@ -113,7 +113,7 @@ class Disk:
         """Whether this open for writing of ``path`` meets the fault (counting the opens it lets pass)."""
         if self.dead is not None and Path(path).parent == self.dead:
             return True
-        if self.fired and self.fault not in STICKY or not self.wants(final_name(path)):
+        if self.fired or not self.wants(final_name(path)):  # one disk fails, once (and stays failed if STICKY)
             return False
         if self.skip > 0:
             self.skip -= 1
@@ -164,22 +164,27 @@ class Disk:
         assert signal.getsignal(signal.SIGXFSZ) == signal.SIG_IGN  # as Python sets it: EFBIG, not a signal
 
         def writer(raw: io.FileIO, path: str, buffering: int):
-            return io.BufferedWriter(_FailingRaw(raw, self, path), buffering if buffering > 1 else io.DEFAULT_BUFFER_SIZE)
+            return io.BufferedWriter(
+                _FailingRaw(raw, self, path), buffering if buffering > 1 else io.DEFAULT_BUFFER_SIZE
+            )
 
         def writing(mode: str) -> bool:
-            return "b" in mode and any(c in mode for c in "wax+")
+            return any(c in mode for c in "wax+")
 
-        def fake_open(file, mode="r", buffering=-1, *args, **kwargs):
+        def fake_open(
+            file, mode="r", buffering=-1, encoding=None, errors=None, newline=None, closefd=True, opener=None
+        ):
             if isinstance(file, (str, os.PathLike)) and writing(mode) and self.meets(os.fspath(file)):
                 path = os.path.abspath(os.fspath(file))
                 if self.fault in AT_OPEN:
                     self.opening(path)
                 else:
-                    return writer(io.FileIO(path, mode.replace("b", "")), path, buffering)
-            return real_open(file, mode, buffering, *args, **kwargs)
+                    raw = writer(io.FileIO(path, mode.replace("b", "").replace("t", "")), path, buffering)
+                    return raw if "b" in mode else io.TextIOWrapper(raw, encoding or "utf-8", errors, newline)
+            return real_open(file, mode, buffering, encoding, errors, newline, closefd, opener)
 
         def fake_fdopen(fd, mode="r", buffering=-1, *args, **kwargs):
-            if isinstance(fd, int) and writing(mode) and self.fault not in AT_OPEN:
+            if isinstance(fd, int) and "b" in mode and writing(mode) and self.fault not in AT_OPEN:
                 path = os.readlink(f"/proc/self/fd/{fd}")
                 if self.meets(path):
                     return writer(io.FileIO(fd, mode.replace("b", "")), path, buffering)
@@ -214,8 +219,14 @@ def newest_epoch(folder: Path) -> int | None:
 
 
 # ------------------------------------------------------------------------------------- a job, as a user runs it
-JOB = ["data.heldout=300", "eval.heldout_curve=300", "logging.progress=false", "checkpoint.every=1",
-       "schedule.epochs=[1,1,1,1,1]", "replicas=16"]  # fmt: skip  (16 replicas: weights.pt 18 KB, past the buffer)
+JOB = [
+    "data.heldout=300",
+    "eval.heldout_curve=300",
+    "logging.progress=false",
+    "checkpoint.every=1",
+    "schedule.epochs=[1,1,1,1,1]",
+    "replicas=16",
+]  # fmt: skip  (16 replicas: weights.pt 18 KB, past the buffer)
 
 
 @dataclass
@@ -226,13 +237,17 @@ class Ran:
 
 
 def train(folder: Path, *extra: str) -> Ran:
-    """``python train.py JOB... hydra.run.dir=folder`` in this process; what it printed and its exit status. What
-    the entry changes for the process (signal handlers, the frozen garbage generation) is put back."""
+    """``python train.py JOB... hydra.run.dir=folder`` in this process (``extra`` starting with ``-m``: a sweep,
+    whose overrides name its folder); what it printed and its exit status. What the entry changes for the process
+    (signal handlers, the frozen garbage generation) is put back."""
     from selpres.run import main
 
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)}
     argv, out, err = sys.argv, io.StringIO(), io.StringIO()
-    sys.argv = ["train.py", *JOB, *extra, f"hydra.run.dir={folder}"]
+    sweep = extra[:1] == ("-m",)
+    sys.argv = (
+        ["train.py", *extra[:1], *JOB, *extra[1:]] if sweep else ["train.py", *JOB, *extra, f"hydra.run.dir={folder}"]
+    )
     code = 0
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -276,13 +291,18 @@ def _is(*names: str) -> Callable[[str], bool]:
     return lambda n: n in names
 
 
-SITES: dict[str, tuple[Callable[[str], bool], int, int]] = {  # site -> (its files, opens let pass, bytes let pass)
-    "weights.pt": (_is("weights.pt"), 0, 0),
-    "checkpoint pair": (_is("checkpoint.pt", "checkpoint.alt.pt"), 2, 0),  # the third save
+# site -> (its files, opens let pass, bytes of the file written before the disk fails). A few KB into a file larger than
+# the 8 KB buffer the disk fills inside a large write, as on a real disk: the kernel writes what fits, the next write
+# fails and the buffer is left empty, so torch's RuntimeError is what leaves torch.save (weights.pt at 2 KB, a cache
+# entry at 4 KB: test_wherever_the_disk_fills_... tries every point); history.jsonl's appends are smaller than the
+# buffer and fail when it is flushed.
+SITES: dict[str, tuple[Callable[[str], bool], int, int]] = {
+    "weights.pt": (_is("weights.pt"), 0, 2048),
+    "checkpoint pair": (_is("checkpoint.pt", "checkpoint.alt.pt"), 2, 4096),  # the third save
     "history.jsonl": (_is("history.jsonl"), 2, 0),  # the third append
-    "results.json": (_is("results.json"), 0, 0),
+    "results.json": (_is("results.json"), 0, 4096),
     "TensorBoard events": (lambda n: n.startswith("events.out.tfevents."), 0, 4096),  # a flush at a checkpoint
-    "data cache": (lambda n: n.endswith(".task.pt"), 0, 0),
+    "data cache": (lambda n: n.endswith(".task.pt"), 0, 4096),
 }
 FAULTS = ("ENOSPC", "EDQUOT", "EFBIG", "EROFS", "vanished")
 CAUSES = {"ENOSPC": "disk full (ENOSPC)", "EDQUOT": "over quota (EDQUOT)", "EFBIG": "file-size limit (EFBIG)",
@@ -301,9 +321,16 @@ def outcome(site: str, fault: str) -> str:
 
 
 CASES = [(site, fault) for site in SITES for fault in FAULTS]
+FAST = {"ENOSPC", "EROFS", "vanished"}  # the fast tier: the faults whose aftermath differs (full, read-only, gone)
 
 
-@pytest.mark.parametrize(("site", "fault"), CASES, ids=[f"{s}-{f}".replace(" ", "_") for s, f in CASES])
+@pytest.mark.parametrize(
+    ("site", "fault"),
+    [
+        pytest.param(s, f, id=f"{s}-{f}".replace(" ", "_"), marks=() if f in FAST else pytest.mark.slow)
+        for s, f in CASES
+    ],
+)
 def test_a_fault_where_a_job_writes_gets_its_outcome(site, fault, clean, tmp_path, monkeypatch, request):
     wants, skip, budget = SITES[site]
     folder = tmp_path / "job"
@@ -373,6 +400,31 @@ def test_torch_reports_a_full_disk_as_a_runtime_error_and_atomic_write_names_the
     assert sorted(p.name for p in tmp_path.iterdir()) == ["direct.pt"]  # torch's own, cut; none of atomic_write's
 
 
+@pytest.mark.parametrize("fault", ["ENOSPC", "EDQUOT", "EFBIG"])
+def test_wherever_the_disk_fills_during_torch_save_the_write_fails_as_an_oserror_naming_the_file(tmp_path, fault):
+    """A 20 KB weights file (16 replicas of 6-13-2) cut at every 256th byte: each time an OSError naming the file with
+    the fault's errno, nothing under the file's name and no temp file; where the cut falls decides whether torch
+    reports it as its RuntimeError or the file's close as the OSError, and both must occur here."""
+    from selpres.run.checkpoint import dumps
+    from selpres.storage import atomic_write
+
+    g = torch.Generator().manual_seed(0)
+    obj = {"params": [torch.randn(16, *s, generator=g, dtype=torch.float64) for s in ((13, 6), (13,), (2, 13), (2,))]}
+    path, behind = tmp_path / "weights.pt", set()
+    size = len(dumps(obj))  # the bytes torch.save writes
+    for budget in range(0, size, 256):
+        with Disk(fault, _is("weights.pt"), 0, budget).mounted(), pytest.raises(OSError) as failed:
+            atomic_write(path, lambda f: torch.save(obj, f))
+        assert (failed.value.errno, failed.value.filename) == (CODES[fault], str(path)), budget
+        assert list(tmp_path.iterdir()) == [], budget
+        chain, e = [], failed.value.__cause__
+        while e is not None:
+            chain.append(e)
+            e = e.__context__
+        behind.add(type(chain[0]).__name__)
+    assert behind == {"RuntimeError", "OSError"}
+
+
 def test_torch_writing_by_path_under_a_file_size_limit_is_an_io_error_naming_the_file(tmp_path):
     """torch's C++ file stream (``torch.save(obj, "path")``) sets no errno: its RuntimeError ("PytorchStreamWriter
     failed writing file ... file write failed" or "unexpected pos") carries no OSError; selpres reads it as EIO
@@ -390,6 +442,65 @@ def test_torch_writing_by_path_under_a_file_size_limit_is_an_io_error_naming_the
     assert failure is not None and failure.errno == errno.EIO and "torch could not write it" in failure.strerror
     assert "\n" not in failure.strerror
     assert write_failure(RuntimeError("a bug, not a write")) is None and write_failure(ValueError("x")) is None
+
+
+# ------------------------------------------------------------------------------------------------ a sweep
+def sweep(folder: Path, *extra: str) -> Ran:
+    """``python train.py -m JOB... seed=0,1`` into ``folder`` (Hydra's basic launcher: its jobs in this process)."""
+    return train(folder, "-m", f"hydra.sweep.dir={folder}", "hydra.sweep.subdir=seed${seed}", "seed=0,1", *extra)
+
+
+def test_a_fault_in_a_sweeps_job_fails_that_job_in_one_line_and_the_same_sweep_resumes_it(clean, tmp_path):
+    """The disk fills while the first job writes its third checkpoint: that job fails in one line naming the file
+    (Hydra's compact error, exit 1), the other job runs to its end; the same sweep command resumes the failed job
+    from its last checkpoint to the numbers of a run that met no fault, and finds the other done."""
+    folder = tmp_path / "sweep"
+    disk = Disk("ENOSPC", lambda n: n.startswith("checkpoint"), skip=2, budget=4096)  # the first job's folder
+    with disk.mounted():
+        ran = sweep(folder)
+    assert ran.code == 1 and disk.fired
+    failed, other = folder / "seed0", folder / "seed1"
+    assert Path(disk.fired[0]).parent == failed
+    lines = [ln for ln in ran.err if str(failed / final_name(disk.fired[0])) in ln]
+    assert lines and all(os.strerror(errno.ENOSPC) in ln for ln in lines) and "Traceback" not in "\n".join(ran.err)
+    assert json.loads((other / "results.json").read_text())["status"] == "complete"
+    assert newest_epoch(failed) == disk.newest is not None
+    whole(failed)
+    again = sweep(folder)
+    assert again.code == 0, again.err
+    res = json.loads((failed / "results.json").read_text())
+    assert res["resumed_from_epoch"] == disk.newest and numbers(res) == clean
+
+
+_HYDRA_RECORD = """
+import json, sys
+from pathlib import Path
+sys.path.insert(0, sys.argv[2])
+import test_faults as T
+disk = T.Disk("ENOSPC", T._is("config.yaml"), skip=1)  # the second job's record
+with disk.mounted():
+    ran = T.sweep(Path(sys.argv[1]))
+print(json.dumps({"code": ran.code, "err": ran.err, "fired": disk.fired}))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="Hydra writes a sweep job's record (.hydra/config.yaml) before selpres's job code runs, and only a single "
+    "run's entry turns its failure into one line (selpres.run.guard._save_config_refusing): the sweep's entry must "
+    "too (the life helper's files, issue 39)",
+)
+def test_a_fault_while_hydra_writes_a_sweep_jobs_record_is_one_line(tmp_path):
+    """In a process of its own: a single run earlier in this one leaves the entry's hook on Hydra in place."""
+    from conftest import run_python
+
+    folder = tmp_path / "sweep"
+    done = run_python("-c", _HYDRA_RECORD, str(folder), str(Path(__file__).parent))
+    ran = json.loads(done.stdout.strip().splitlines()[-1])
+    assert ran["fired"] and "Traceback" not in "\n".join(ran["err"])
+    assert [ln for ln in ran["err"] if os.strerror(errno.ENOSPC) in ln and "config.yaml" in ln] == ran["err"][-1:]
+    assert json.loads((folder / "seed0" / "results.json").read_text())["status"] == "complete"
 
 
 # ------------------------------------------------------------------------------------- the report's files

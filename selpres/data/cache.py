@@ -12,11 +12,11 @@ Where: ``$SELPRES_DATA_CACHE`` if set (``off`` turns the cache off), else ``$XDG
 ``~/.cache/selpres/tasks``. What a job did is recorded in results.json ``data.cache`` (``hit``, ``stored``,
 ``off``, ``not stored (<why>)``, or ``not written: <file>: <cause> (errno N)`` when the disk refused the entry:
 full, over quota or a file-size limit, read-only, the folder gone; the job then runs on without the cache, with
-one warning in its log). An entry that cannot be read is built again with one warning saying why. Each entry also holds what its key was made of (the two configs and the
-source digest) and is checked against them on load: a copied, synced or colliding entry of other configs is a
-miss with one warning naming what differs, never another task's numbers. Entries are written atomically (a racing
-job writes the same bytes) and only entries of this cache are ever replaced or removed (the oldest beyond
-:data:`KEEP`).
+one warning in its log). An entry that cannot be read is built again with one warning saying why. Each entry
+also holds what its key was made of (the two configs and the source digest) and is checked against them on load:
+a copied, synced or colliding entry of other configs is a miss with one warning naming what differs, never another
+task's numbers. Entries are written atomically (a racing job writes the same bytes) and only entries of this cache
+are ever replaced or removed (the oldest beyond :data:`KEEP`).
 """
 
 from __future__ import annotations
