@@ -161,3 +161,27 @@ def test_a_data_file_that_cannot_be_read_is_a_data_file_error_not_a_failed_write
     monkeypatch.setattr(Path, "read_bytes", vanish)
     with pytest.raises(F.DataFileError, match=r"t.csv: file: cannot be read \(No such file or directory\)"):
         F.load_columns(path, ["a"])
+
+
+def test_a_checkpoint_that_vanishes_between_the_check_and_the_read_is_absent(tmp_path, monkeypatch):
+    """The newer of the pair removed after ``exists()`` said it was there: the other one is resumed, nothing is
+    said to be moved aside."""
+    from test_history import engine_of, record
+
+    from selpres.run import checkpoint as K
+
+    ckpts = K.Checkpoints(tmp_path, "h")
+    for epoch in (1, 2):
+        ckpts.save(engine_of(), K.Progress([record(e) for e in range(-1, epoch)], [None, None], epoch=epoch))
+    newer = max(ckpts.paths, key=lambda p: K.read(p)["epoch"])
+    real = K.read
+
+    def vanishing(path):
+        if path == newer and newer.exists():
+            newer.unlink()
+        return real(path)
+
+    monkeypatch.setattr(K, "read", vanishing)
+    progress = K.Checkpoints(tmp_path, "h").resume(engine_of(), 2)
+    assert progress.epoch == 1 and progress.stale_checkpoint is None
+    assert not list(tmp_path.glob("*stale*"))

@@ -225,6 +225,8 @@ class Checkpoints:
                 continue
             try:
                 ck = read(path)
+            except FileNotFoundError:  # gone since the check (a racing cleanup): not there, nothing to set aside
+                continue
             except Exception as exc:  # any unreadable file is set aside, never resumed (said in one line)
                 bad.append((path, why_unreadable(path, exc)))
                 continue
