@@ -305,6 +305,7 @@ SITES: dict[str, tuple[Callable[[str], bool], int, int]] = {
     "data cache": (lambda n: n.endswith(".task.pt"), 0, 4096),
 }
 FAULTS = ("ENOSPC", "EDQUOT", "EFBIG", "EROFS", "vanished")
+TORCH_WRITES = ("weights.pt", "data cache")  # written by torch.save: a failed write leaves torch as its RuntimeError
 CAUSES = {"ENOSPC": "disk full (ENOSPC)", "EDQUOT": "over quota (EDQUOT)", "EFBIG": "file-size limit (EFBIG)",
           "EROFS": "read-only folder (EROFS)", "vanished": "folder removed before the open (ENOENT)"}  # fmt: skip
 
@@ -314,10 +315,42 @@ def outcome(site: str, fault: str) -> str:
     if site == "data cache":
         return "runs on without the cache (exit 0); `data.cache: not written: …` and one warning in the log"
     if fault == "vanished":
-        return "exit 2, one line; the folder went with its checkpoint: the same command runs the job afresh"
+        return "exit 2, one line; the folder was removed, any checkpoint with it: the same command runs the job afresh"
     if site == "TensorBoard events" and fault in AT_OPEN:  # its only open is at set-up, before any checkpoint
         return "exit 2, one line; nothing to resume yet: the same command starts afresh"
     return "exit 2, one line; the last checkpoint intact: the same command resumes it"
+
+
+SHORT = {  # an outcome's name in the docs' table
+    "exit 2, one line; the last checkpoint intact: the same command resumes it": "resumes",
+    "exit 2, one line; nothing to resume yet: the same command starts afresh": "afresh",
+    "exit 2, one line; the folder was removed, any checkpoint with it: the same command runs the job afresh": "gone",
+    "runs on without the cache (exit 0); `data.cache: not written: …` and one warning in the log": "runs on",
+}
+
+
+def fault_table() -> str:
+    """The table docs/reproducibility.md shows (between its ``faults`` markers): what each fault at each write site
+    gets, from :func:`outcome`, whose every cell a case of this file checks."""
+    head = ["write site", *(CAUSES[f] for f in FAULTS), "torch's RuntimeError"]
+    rows = [
+        [f"`{site}`" if "." in site else site, *(SHORT[outcome(site, f)] for f in FAULTS),
+         SHORT[outcome(site, "ENOSPC")] if site in TORCH_WRITES else "(torch does not write it)"]
+        for site in SITES
+    ]  # fmt: skip
+    lines = [head, ["---"] * len(head), *rows]
+    legend = [f"- **{name}**: {text}" for text, name in SHORT.items()]
+    return "\n".join("| " + " | ".join(r) + " |" for r in lines) + "\n\n" + "\n".join(legend)
+
+
+def test_the_fault_table_in_the_docs_is_the_one_these_tests_check():
+    """docs/reproducibility.md's table is :func:`fault_table` (``python tests/test_faults.py`` prints it)."""
+    from conftest import REPO
+
+    text = (REPO / "docs" / "reproducibility.md").read_text()
+    begin, end = "<!-- faults:begin (python tests/test_faults.py) -->\n", "\n<!-- faults:end -->"
+    assert begin in text and end in text
+    assert text.split(begin, 1)[1].split(end, 1)[0] == fault_table()
 
 
 CASES = [(site, fault) for site in SITES for fault in FAULTS]
@@ -342,9 +375,15 @@ def test_a_fault_where_a_job_writes_gets_its_outcome(site, fault, clean, tmp_pat
         T._task.cache_clear()
         request.addfinalizer(T._task.cache_clear)  # later jobs in this process build their own
     disk = Disk(fault, wants, skip, budget)
+    from selpres import storage
+
+    seen, real = [], storage.write_failure
+    monkeypatch.setattr(storage, "write_failure", lambda e: seen.append(type(e).__name__) or real(e))
     with disk.mounted():
         ran = train(folder)
     assert disk.fired, f"the fault never met {site}"
+    if site in TORCH_WRITES and fault in ("ENOSPC", "EDQUOT", "EFBIG"):  # torch's own report of it, turned to OSError
+        assert "RuntimeError" in seen, seen
     target = Path(disk.fired[0])
     expected = outcome(site, fault)
     whole(folder)
@@ -532,3 +571,7 @@ def test_a_fault_while_the_report_is_written_is_one_line_and_the_results_stay(tm
             str(tmp_path / "good"), str(out)
         )
     assert {p: p.read_bytes() for p in sweep.rglob("*") if p.is_file()} == before
+
+
+if __name__ == "__main__":  # the docs' table
+    print(fault_table())
