@@ -14,7 +14,6 @@ falls back to pure torch. Only successes are remembered in the process: a later 
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import logging
 import os
@@ -56,10 +55,8 @@ def _compiler() -> list[str]:
     return shlex.split(cc)
 
 
-@functools.lru_cache(maxsize=4)
 def _compiler_version(cc: tuple[str, ...]) -> str:
-    """``cc --version``: part of the cache key, so a changed compiler never reuses an old library (asked once a
-    process: a failure is not remembered)."""
+    """``cc --version``: part of the cache key, so a changed compiler never reuses an old library."""
     try:
         proc = subprocess.run([*cc, "--version"], capture_output=True, text=True, timeout=30)
     except (OSError, subprocess.SubprocessError) as exc:
