@@ -2,9 +2,9 @@
 the layer that reaches every write site in-process).
 
 * A real full disk: the job folder on a small tmpfs that fills while ``weights.pt`` is written, the data cache on a
-  tmpfs too small for its entry (the issue's two reproductions), mounted in a mount namespace of the test's own
-  (``unshare -m``: nothing outside the test sees them, and they go when it ends). Skipped, with the reason, where
-  this machine allows no such mount (no ``unshare``, no CAP_SYS_ADMIN).
+  tmpfs too small for its entry (the issue's two reproductions), then remounted read-only; mounted in a mount
+  namespace of the test's own (``unshare -m``: nothing outside the test sees them, and they go when it ends).
+  Skipped, with the reason, where this machine allows no such mount (no ``unshare``, no CAP_SYS_ADMIN).
 * A real file-size limit (RLIMIT_FSIZE, which needs no privilege) that only the data cache's entry exceeds.
 """
 
@@ -62,7 +62,8 @@ run() {  # the same command each time
 RUN=first run "$@"
 cp -a "$M/disk/job" "$M/after"            # the folder as the full disk left it
 ls -A "$M/cache" >"$M/cache.ls"
-mount -o remount,size=65536k "$M/disk"    # room again (the cache stays too small)
+mount -o remount,size=65536k "$M/disk"    # room again
+mount -o remount,ro "$M/cache"             # and the cache's disk now read-only
 RUN=second run "$@"
 cp -a "$M/disk/job" "$M/final"
 """
@@ -72,8 +73,9 @@ def test_a_real_full_disk_while_weights_are_written_and_a_cache_too_small_for_it
     """The issue's reproductions, on real tmpfs mounts: the job folder's disk fills while ``weights.pt`` is written
     (torch's writer meets ENOSPC), the data cache's cannot hold its entry. The job ends in one line naming
     ``weights.pt`` and the cause, exit 2, its last checkpoint intact and no temp file; the cache's failure is one
-    warning and the job runs on without it. With room again, the same command resumes the last checkpoint and ends
-    with the numbers of a job that met no fault; results.json says the cache entry was not written."""
+    warning and the job runs on without it. With room again (and the cache's disk remounted read-only: EROFS), the
+    same command resumes the last checkpoint and ends with the numbers of a job that met no fault; results.json says
+    the cache entry was not written, and why."""
     why = _mount_refused(tmp_path)
     if why is not None:
         pytest.skip(why)
@@ -110,9 +112,8 @@ def test_a_real_full_disk_while_weights_are_written_and_a_cache_too_small_for_it
     assert read("second.rc").strip() == "0", read("second.err")
     res = json.loads((tmp_path / "final" / "results.json").read_text())
     assert res["resumed_from_epoch"] == kept and numbers(res) == clean
-    assert (
-        res["data"]["cache"].startswith(f"not written: {tmp_path}/cache/") and "No space left" in res["data"]["cache"]
-    )
+    cache = res["data"]["cache"]
+    assert cache.startswith(f"not written: {tmp_path}/cache/") and "Read-only file system (errno 30)" in cache, cache
     assert torch.load(tmp_path / "final" / "weights.pt", weights_only=True)["config_hash"] == res["config_hash"]
 
 
