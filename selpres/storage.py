@@ -65,12 +65,9 @@ def write_failure(e: BaseException) -> OSError | None:
         return e
     if not isinstance(e, RuntimeError):
         return None
-    seen, cause = {id(e)}, e.__context__ or e.__cause__
-    while cause is not None and id(cause) not in seen:
-        if isinstance(cause, OSError):
-            return cause
-        seen.add(id(cause))
-        cause = cause.__context__ or cause.__cause__
+    for behind in (e.__cause__, e.__context__):
+        if isinstance(behind, OSError):
+            return behind
     if _TORCH_WRITER.search(str(e)):
         return OSError(errno.EIO, f"torch could not write it ({one_line(str(e))})")
     return None

@@ -98,7 +98,7 @@ def _fields(p: dict) -> tuple[dict[str, str], dict[str, str]]:
     """(versions, machine) of a provenance record, each field as the report prints it."""
     src, native = p.get("selpres") or {}, p.get("native")
     commit = src.get("commit")
-    where = f"commit {commit[:12]}{', uncommitted changes' if src.get('dirty') else ''}" if commit else "no commit"
+    where = f"commit {str(commit)[:12]}{', uncommitted changes' if src.get('dirty') else ''}" if commit else "no commit"
     build = (
         f"{native.get('compiler')} {' | '.join(native.get('flags') or [])} ({native.get('instruction_set')})"
         if isinstance(native, dict)
