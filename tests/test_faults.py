@@ -262,13 +262,17 @@ def train(folder: Path, *extra: str) -> Ran:
     return Ran(code, [ln for ln in err.getvalue().splitlines() if ln.strip()], out.getvalue())
 
 
-@pytest.fixture(scope="module")
-def clean(tmp_path_factory):
+def clean_numbers(tmp_path_factory) -> dict:
     """The numbers of the job when nothing fails."""
     folder = tmp_path_factory.mktemp("clean") / "job"
     ran = train(folder)
     assert ran.code == 0, ran.err
     return numbers(json.loads((folder / "results.json").read_text()))
+
+
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory):
+    return clean_numbers(tmp_path_factory)
 
 
 def whole(folder: Path) -> None:
@@ -411,166 +415,6 @@ def test_a_fault_where_a_job_writes_gets_its_outcome(site, fault, clean, tmp_pat
     assert numbers(res) == clean  # resumed (or run afresh) to the numbers of a run that met no fault
     assert len(list(folder.glob("events.out.tfevents.*.selpres"))) == 1 and not list(folder.glob("checkpoint*.pt"))
     whole(folder)
-
-
-# ----------------------------------------------------------------- torch's own report of a failed write
-def test_torch_reports_a_full_disk_as_a_runtime_error_and_atomic_write_names_the_file_and_errno(tmp_path):
-    """What torch 2.13 does (checked here, not assumed): ``torch.save`` into a file whose write fails with ENOSPC
-    raises RuntimeError (``unexpected pos``), the OSError its ``__context__``; atomic_write raises an OSError naming
-    the file with ENOSPC, torch's error as its cause, and leaves no file under either name."""
-    from selpres.storage import atomic_write
-
-    big = {"w": torch.zeros(10_000, dtype=torch.float64)}  # 80 KB: written past the buffer, inside torch's writer
-    with Disk("ENOSPC", _is("direct.pt")).mounted():
-        f = open(tmp_path / "direct.pt", "wb")
-        with pytest.raises(RuntimeError, match=r"unexpected pos") as raw:
-            torch.save(big, f)
-        with contextlib.suppress(OSError):  # the buffer's rest cannot be written either
-            f.close()
-    assert isinstance(raw.value.__context__, OSError) and raw.value.__context__.errno == errno.ENOSPC
-    with Disk("ENOSPC", _is("w.pt")).mounted(), pytest.raises(OSError) as named:
-        atomic_write(tmp_path / "w.pt", lambda f: torch.save(big, f))
-    assert (named.value.errno, named.value.filename) == (errno.ENOSPC, str(tmp_path / "w.pt"))
-    chain, seen = [], named.value
-    while seen is not None:
-        chain.append(seen)
-        seen = seen.__cause__ or seen.__context__
-    assert any(isinstance(e, RuntimeError) and "unexpected pos" in str(e) for e in chain)  # torch's, behind it
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["direct.pt"]  # torch's own, cut; none of atomic_write's
-
-
-@pytest.mark.parametrize("fault", ["ENOSPC", "EDQUOT", "EFBIG"])
-def test_wherever_the_disk_fills_during_torch_save_the_write_fails_as_an_oserror_naming_the_file(tmp_path, fault):
-    """A 20 KB weights file (16 replicas of 6-13-2) cut at every 256th byte: each time an OSError naming the file with
-    the fault's errno, nothing under the file's name and no temp file; where the cut falls decides whether torch
-    reports it as its RuntimeError or the file's close as the OSError, and both must occur here."""
-    from selpres.run.checkpoint import dumps
-    from selpres.storage import atomic_write
-
-    g = torch.Generator().manual_seed(0)
-    obj = {"params": [torch.randn(16, *s, generator=g, dtype=torch.float64) for s in ((13, 6), (13,), (2, 13), (2,))]}
-    path, behind = tmp_path / "weights.pt", set()
-    size = len(dumps(obj))  # the bytes torch.save writes
-    for budget in range(0, size, 256):
-        with Disk(fault, _is("weights.pt"), 0, budget).mounted(), pytest.raises(OSError) as failed:
-            atomic_write(path, lambda f: torch.save(obj, f))
-        assert (failed.value.errno, failed.value.filename) == (CODES[fault], str(path)), budget
-        assert list(tmp_path.iterdir()) == [], budget
-        chain, e = [], failed.value.__cause__
-        while e is not None:
-            chain.append(e)
-            e = e.__context__
-        behind.add(type(chain[0]).__name__)
-    assert behind == {"RuntimeError", "OSError"}
-
-
-def test_torch_writing_by_path_under_a_file_size_limit_is_an_io_error_naming_the_file(tmp_path):
-    """torch's C++ file stream (``torch.save(obj, "path")``) sets no errno: its RuntimeError ("PytorchStreamWriter
-    failed writing file ... file write failed" or "unexpected pos") carries no OSError; selpres reads it as EIO
-    (here under a real RLIMIT_FSIZE)."""
-    from selpres.storage import write_failure
-
-    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
-    resource.setrlimit(resource.RLIMIT_FSIZE, (4096, hard))
-    try:
-        with pytest.raises(RuntimeError) as raw:
-            torch.save({"w": torch.zeros(10_000)}, str(tmp_path / "p.pt"))
-    finally:
-        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
-    failure = write_failure(raw.value)
-    assert failure is not None and failure.errno == errno.EIO and "torch could not write it" in failure.strerror
-    assert "\n" not in failure.strerror
-    assert write_failure(RuntimeError("a bug, not a write")) is None and write_failure(ValueError("x")) is None
-
-
-# ------------------------------------------------------------------------------------------------ a sweep
-def sweep(folder: Path, *extra: str) -> Ran:
-    """``python train.py -m JOB... seed=0,1`` into ``folder`` (Hydra's basic launcher: its jobs in this process)."""
-    return train(folder, "-m", f"hydra.sweep.dir={folder}", "hydra.sweep.subdir=seed${seed}", "seed=0,1", *extra)
-
-
-def test_a_fault_in_a_sweeps_job_fails_that_job_in_one_line_and_the_same_sweep_resumes_it(clean, tmp_path):
-    """The disk fills while the first job writes its third checkpoint: that job fails in one line naming the file
-    (Hydra's compact error, exit 1), the other job runs to its end; the same sweep command resumes the failed job
-    from its last checkpoint to the numbers of a run that met no fault, and finds the other done."""
-    folder = tmp_path / "sweep"
-    disk = Disk("ENOSPC", lambda n: n.startswith("checkpoint"), skip=2, budget=4096)  # the first job's folder
-    with disk.mounted():
-        ran = sweep(folder)
-    assert ran.code == 1 and disk.fired
-    failed, other = folder / "seed0", folder / "seed1"
-    assert Path(disk.fired[0]).parent == failed
-    lines = [ln for ln in ran.err if str(failed / final_name(disk.fired[0])) in ln]
-    assert lines and all(os.strerror(errno.ENOSPC) in ln for ln in lines) and "Traceback" not in "\n".join(ran.err)
-    assert json.loads((other / "results.json").read_text())["status"] == "complete"
-    assert newest_epoch(failed) == disk.newest is not None
-    whole(failed)
-    again = sweep(folder)
-    assert again.code == 0, again.err
-    res = json.loads((failed / "results.json").read_text())
-    assert res["resumed_from_epoch"] == disk.newest and numbers(res) == clean
-
-
-_HYDRA_RECORD = """
-import json, sys
-from pathlib import Path
-sys.path.insert(0, sys.argv[2])
-import test_faults as T
-disk = T.Disk("ENOSPC", T._is("config.yaml"), skip=1)  # the second job's record
-with disk.mounted():
-    ran = T.sweep(Path(sys.argv[1]))
-print(json.dumps({"code": ran.code, "err": ran.err, "fired": disk.fired}))
-"""
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="Hydra writes a sweep job's record (.hydra/config.yaml) before selpres's job code runs, and only a single "
-    "run's entry turns its failure into one line (selpres.run.guard._save_config_refusing): the sweep's entry must "
-    "too (the life helper's files, issue 39)",
-)
-def test_a_fault_while_hydra_writes_a_sweep_jobs_record_is_one_line(tmp_path):
-    """In a process of its own: a single run earlier in this one leaves the entry's hook on Hydra in place."""
-    from conftest import run_python
-
-    folder = tmp_path / "sweep"
-    done = run_python("-c", _HYDRA_RECORD, str(folder), str(Path(__file__).parent))
-    ran = json.loads(done.stdout.strip().splitlines()[-1])
-    assert ran["fired"] and "Traceback" not in "\n".join(ran["err"])
-    assert [ln for ln in ran["err"] if os.strerror(errno.ENOSPC) in ln and "config.yaml" in ln] == ran["err"][-1:]
-    assert json.loads((folder / "seed0" / "results.json").read_text())["status"] == "complete"
-
-
-# ------------------------------------------------------------------------------------- the report's files
-def test_a_fault_while_the_report_is_written_is_one_line_and_the_results_stay(tmp_path, capsys):
-    """selpres-report into a full disk: one line naming the file and the cause, exit 2; the sweep's folders are
-    as they were, and the report written again once there is room is the report of a disk that never failed."""
-    from selpres.report.__main__ import main as report
-
-    sweep = tmp_path / "sweep"
-    for seed in (0, 1):
-        assert train(sweep / f"seed{seed}", f"seed={seed}").code == 0
-    before = {p: p.read_bytes() for p in sweep.rglob("*") if p.is_file()}
-    assert report([str(sweep), "--out", str(tmp_path / "good")]) == 0
-    capsys.readouterr()
-    for name in ("report.md", "runs.csv"):
-        out = tmp_path / f"bad-{name}"
-        disk = Disk("ENOSPC", _is(name))
-        with disk.mounted():
-            code = report([str(sweep), "--out", str(out)])
-        err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
-        assert code == 2 and disk.fired, err
-        assert len(err) == 1, err
-        (line,) = err
-        assert str(out / name) in line and os.strerror(errno.ENOSPC) in line
-        assert not list(out.glob(".*.tmp")) and not (out / "report.md").exists()
-        assert report([str(sweep), "--out", str(out)]) == 0
-        capsys.readouterr()
-        assert (out / "report.md").read_text() == (tmp_path / "good" / "report.md").read_text().replace(
-            str(tmp_path / "good"), str(out)
-        )
-    assert {p: p.read_bytes() for p in sweep.rglob("*") if p.is_file()} == before
 
 
 if __name__ == "__main__":  # the docs' table
