@@ -426,8 +426,8 @@ def test_examples_run(tmp_path):
 
 
 def test_the_bench_row_runs(capsys):
-    """selpres/bench/sampler.py on a small set: one row per loop kind, both samplers present n every epoch."""
-    from selpres.bench.sampler import bench_sampler
+    """studies/selpres_bench/sampler.py on a small set: one row per loop kind, both samplers present n every epoch."""
+    from selpres_bench.sampler import bench_sampler
 
     bench_sampler(quick=True, n=3000, batch=64)
     rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("sampler  ")]

@@ -1,4 +1,4 @@
-"""Typed configuration schema (Hydra structured configs): types here, values in ``selpres/configs/``.
+"""Typed configuration schema (Hydra structured configs): types here, values in ``configs/`` (:data:`CONFIG_DIR`).
 
 The dataclasses are registered in Hydra's ConfigStore as ``selpres_schema`` and listed first in
 ``configs/train.yaml``'s defaults, so omegaconf itself rejects unknown keys and wrong types with a
@@ -19,7 +19,10 @@ from typing import Any, Dict, List, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, OmegaConf
 
-CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"  # shipped in the package (wheel and checkout alike)
+# The configs: a checkout's top-level configs/, which the wheel maps into the package (selpres/configs/), so a
+# checkout and an install compose the same files
+_PACKAGE = Path(__file__).resolve().parents[1]
+CONFIG_DIR = _PACKAGE / "configs" if (_PACKAGE / "configs").is_dir() else _PACKAGE.parent / "configs"
 
 
 class EngineName(Enum):

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 import torch
 from omegaconf import DictConfig
 
-from selpres.data import paper as D
 from selpres.data.file import DataFileError
 from selpres.data.task import Task, load_task
 from selpres.engines.batch import BatchEngine
@@ -22,6 +21,7 @@ from selpres.engines.native_minibatch import make_minibatch_engine
 from selpres.engines.online import make_engine
 from selpres.engines.optim import check_hparams, with_defaults
 from selpres.errors import ConfigError
+from selpres.patterns import Scaler
 from selpres.presentation.orders import make_order
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
 from selpres.presentation.pruning._job import Pruning, pruning_plan
@@ -44,7 +44,7 @@ class Problem:
     sizes: tuple[int, ...]
     schedule: Schedule
     seeds: list[int]
-    scaler: D.Scaler
+    scaler: Scaler
     X: torch.Tensor  # exemplar inputs, scaled
     Y: torch.Tensor  # exemplar targets, scaled
     tests: dict  # name -> (X scaled, Y in Nm)

@@ -194,7 +194,7 @@ class ScalarEvents:
 class Tracker:
     """TensorBoard event files written in the loop's own thread.
 
-    Kept by measurement (``python -m selpres.bench.tracking``, 2026-12-01, load 0.6, 3 rounds, conventional
+    Kept by measurement (``python -m selpres_bench.tracking``, 2026-12-01, load 0.6, 3 rounds, conventional
     6-13-2): against the same scalars and hparams through ``torch.utils.tensorboard.SummaryWriter``, the R = 1
     job's ``train()`` took 0.31 s instead of 0.60 s (x1.79-2.26) and its whole process 2.42 s instead of 2.85 s;
     the R = 1000 job's ``train()`` 9.9 s instead of 12.8 s (x1.29-1.38). The byte-for-byte tests against

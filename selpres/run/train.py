@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 from omegaconf import DictConfig
 
-from selpres.data import paper as D
+from selpres.patterns import metric_names
 from selpres.presentation.sampler import epoch_orders, shuffle_implementation
 from selpres.presentation.schedule import EpochPlan
 from selpres.run import floor, lock, orphan, stop
@@ -136,7 +136,7 @@ def final_scores(engine, prob: Problem) -> dict:
             per_joint = unit_sums.div(n).sqrt()
             scores[unit] = {
                 "overall": _rms(unit_sums, n),
-                **{joint: per_joint[:, k] for k, joint in enumerate(D.metric_names(sums.shape[1])[1:])},
+                **{joint: per_joint[:, k] for k, joint in enumerate(metric_names(sums.shape[1])[1:])},
             }
         scores["nmse"] = floor.nmse(sums * prob.nm2_per_scaled2, n, prob.tests[name][1])  # selpres.run.floor
         out[name] = scores
