@@ -42,12 +42,34 @@ def test_curves_by_epoch_and_by_presentations(tmp_path):
     assert start.hparams["topology"].string_value == "6-13-2"
     assert start.hparams["sizes"].string_value == "[50, 100, 400, 800, 1002]"  # lists flattened to strings
     experiment = plugin_data_pb2.HParamsPluginData.FromString(content["_hparams_/experiment"]).experiment
-    curves = [f"{m}/mean/by_epoch" for m in ("train_mse", "test10_rms_nm", "heldout_rms_nm")]
-    assert sorted(m.name.tag for m in experiment.metric_infos) == sorted(curves)  # HParams: each one's last value
+    finals = ["final/heldout_rms_nm", "final/heldout_nmse", "final/test10_rms_nm"]
+    assert sorted(m.name.tag for m in experiment.metric_infos) == sorted(finals)  # the final numbers, not a curve's
+    # the schedule in the parametric schedule's words, numbers as numbers (parallel coordinates place them)
+    assert start.hparams["p"].number_value == 4 and start.hparams["n1"].number_value == 50
+    assert start.hparams["sum N_i"].number_value == 6 and start.hparams["growth"].string_value == "paper"
+    cost = 50 + 100 + 400 + 800 + 2 * 1002  # by hand: one epoch of each set, two of the last
+    assert start.hparams["cost (presentations)"].number_value == res["presentations_done"] == cost
 
-    # final metrics are single values: a Markdown table in the Text tab, never a one-point scalar chart
-    assert not [t for t in tags if t.startswith("final")]
-    assert all(len(acc.Scalars(t)) > 1 for t in tags), [t for t in tags if len(acc.Scalars(t)) == 1]
+    # each final metric is one scalar at the job's cost: the mean over replicas of all held-out patterns, not the
+    # last point of the 300-pattern curve
+    for tag, key in (("final/heldout_rms_nm", "heldout_rms_nm_overall"), ("final/heldout_nmse", "heldout_rms_nmse_overall")):
+        (point,) = acc.Scalars(tag)
+        assert point.step == cost and math.isclose(point.value, res["summary"][key]["mean"], rel_tol=1e-6)
+    curves = [t for t in tags if not t.startswith("final/")]
+    assert all(len(acc.Scalars(t)) > 1 for t in curves), [t for t in curves if len(acc.Scalars(t)) == 1]
+
+    # Custom Scalars: one Margin chart per quantity (mean with its min-max band), against presentations and epochs
+    from tensorboard.plugins.custom_scalar import layout_pb2
+
+    (config,) = acc.Tensors("custom_scalars__config__")
+    layout = layout_pb2.Layout.FromString(config.tensor_proto.string_val[0])
+    margins = [c.margin.series[0] for cat in layout.category for c in cat.chart if c.HasField("margin")]
+    assert {(m.value, m.lower, m.upper) for m in margins} == {
+        (f"{q}/mean/by_{a}", f"{q}/min/by_{a}", f"{q}/max/by_{a}")
+        for q in ("heldout_rms_nm", "test10_rms_nm", "train_mse")
+        for a in ("presentations", "epoch")
+    }
+    assert all({m.value, m.lower, m.upper} <= tags for m in margins)  # every chart's tags are written
     assert acc.PluginTagToContent("text") == {"final": b""}
     (table,) = acc.Tensors("final")
     rows = dict(

@@ -2,9 +2,17 @@
 
 Curves against cumulative presentations are the fair axis: a selective and a conventional run are
 compared at equal cost there. The log is a pure function of the history records, so a resumed run
-rebuilds it from the checkpoint's history instead of appending duplicates. A job's final metrics are single
-values, so they go where single values belong, not into one-point charts: the HParams tab (each curve's last value)
-and a Markdown table in the Text tab; the Time Series tab holds only curves.
+rebuilds it from the checkpoint's history instead of appending duplicates.
+
+What a sweep is compared by (:func:`close_job`): the HParams tab holds each job's schedule in the parametric
+schedule's words as numbers where they are numbers (p, n_1, ΣN_i, the cost in presentations and its ratio to
+conventional training at equal epochs; the growth, the N_i rule and the order as text) beside the job's own
+overrides (``.hydra/overrides.yaml``: the sweep's keys), and declares the *final* held-out RMS and nMSE (all
+held-out patterns, mean over replicas) and test-10 RMS as its metrics, so its table, parallel coordinates and
+scatter plots show the sweep. Those three are scalars at one step, the job's cost, so the Time Series card
+``final`` is the sweep's error–cost scatter; every final metric is also in a Markdown table in the Text tab. The
+Custom Scalars tab (:func:`layout_summary`, once per file) has one chart per quantity against presentations and
+against epochs: the mean over replicas with its min–max band (a Margin chart), every run in one chart.
 """
 
 from __future__ import annotations
@@ -151,6 +159,119 @@ def metrics_table(metrics: dict) -> str:
     return "\n".join(["| final metric | value |", "|---|---|", *rows])
 
 
+FINAL = {  # the HParams metrics: a scalar each at the job's cost -> the results.json summary it is the mean of
+    "final/heldout_rms_nm": "heldout_rms_nm_overall",
+    "final/heldout_nmse": "heldout_rms_nmse_overall",
+    "final/test10_rms_nm": "test10_rms_nm_overall",
+}
+CHARTS = (  # (title, the curve's tag stem): one Margin chart each, against presentations and against epochs
+    ("held-out RMS (Nm), first eval.heldout_curve patterns", "heldout_rms_nm"),
+    ("test-10 RMS (Nm)", "test10_rms_nm"),
+    ("training MSE (scaled)", "train_mse"),
+)
+
+
+def layout_summary():
+    """TensorBoard's Custom Scalars layout (as ``torch.utils.tensorboard.summary.custom_scalars`` builds it): per
+    quantity one Margin chart, the mean over replicas with its min–max band, against presentations (the cost axis
+    on which runs of different cost line up) and against epochs; the stage and training-set size as lines."""
+    from tensorboard.compat.proto import tensor_pb2, tensor_shape_pb2, types_pb2
+    from tensorboard.compat.proto.summary_pb2 import Summary, SummaryMetadata
+    from tensorboard.plugins.custom_scalar import layout_pb2
+
+    def margin(title: str, stem: str, axis: str):
+        tags = [f"{stem}/{k}/by_{axis}" for k in ("mean", "min", "max")]
+        series = layout_pb2.MarginChartContent.Series(value=tags[0], lower=tags[1], upper=tags[2])
+        return layout_pb2.Chart(title=title, margin=layout_pb2.MarginChartContent(series=[series]))
+
+    def lines(title: str, pattern: str):
+        return layout_pb2.Chart(title=title, multiline=layout_pb2.MultilineChartContent(tag=[pattern]))
+
+    categories = [
+        layout_pb2.Category(
+            title=f"against {axis} (mean over replicas, band: min to max)",
+            chart=[margin(f"{title} by {axis}", stem, axis) for title, stem in CHARTS]
+            + [lines(f"stage by {axis}", f"^schedule/stage/by_{axis}$")],
+        )
+        for axis in ("presentations", "epoch")
+    ]
+    tensor = tensor_pb2.TensorProto(
+        dtype=types_pb2.DT_STRING,
+        string_val=[layout_pb2.Layout(category=categories).SerializeToString()],
+        tensor_shape=tensor_shape_pb2.TensorShapeProto(),
+    )
+    meta = SummaryMetadata(plugin_data=SummaryMetadata.PluginData(plugin_name="custom_scalars"))
+    return Summary(value=[Summary.Value(tag="custom_scalars__config__", tensor=tensor, metadata=meta)])
+
+
+def _number(text: str):
+    """An override's value as TensorBoard's HParams should hold it: a number where it is one, else its text."""
+    import yaml
+
+    try:
+        v = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+    return v if isinstance(v, (int, float, bool)) else text
+
+
+def overrides_of(folder: Path | None) -> dict:
+    """The job's own overrides (Hydra's ``.hydra/overrides.yaml``: what the sweep set) as {key: value}."""
+    path = None if folder is None else folder / ".hydra" / "overrides.yaml"
+    try:
+        import yaml
+
+        given = yaml.safe_load(path.read_text()) if path and path.is_file() else []
+    except (OSError, ValueError):
+        return {}
+    out = {}
+    for item in given if isinstance(given, list) else []:
+        key, eq, value = str(item).lstrip("+").partition("=")
+        if eq and not key.startswith("~"):
+            out[key] = _number(value)
+    return out
+
+
+def job_hparams(results: dict, folder: Path | None) -> dict:
+    """A finished job's hyperparameters for the HParams tab: its schedule in the parametric schedule's words, its
+    cost, the rest of what identifies it, then its own overrides (numbers as numbers)."""
+    cfg, sch = results.get("config") or {}, results["schedule"]
+    optim = cfg.get("optim") or {}
+    hp = {
+        "schedule": sch["name"],
+        "order": sch.get("order"),
+        "p": sch.get("p"),
+        "n1": sch.get("n1"),
+        "growth": sch.get("growth"),
+        "N_i rule": sch.get("profile"),
+        "sum N_i": sch.get("epochs_total"),
+        "budget": sch.get("budget"),
+        "cost (presentations)": results.get("presentations_done"),
+        "cost / conventional at equal epochs": sch.get("cost_ratio"),
+        "topology": results.get("topology"),
+        "seed": cfg.get("seed"),
+        "replicas": results.get("replicas"),
+        "optim": optim.get("_target_"),
+        "lr": optim.get("lr"),
+        "momentum": optim.get("momentum"),
+        "batch_size": optim.get("batch_size"),
+        "sizes": str(sch.get("sizes")),
+        "epochs": str(sch.get("epochs")),
+        "engine": results.get("engine"),
+        "engine_requested": results.get("engine_requested"),
+    }
+    return {**hp, **overrides_of(folder)}
+
+
+def close_job(tracker: Tracker, results: dict, folder: Path | None) -> None:
+    """The end of a job's log: the final metrics at its cost, its hyperparameters, every final metric as text."""
+    summary = results["summary"]
+    final = {tag: summary[k]["mean"] for tag, k in FINAL.items() if k in summary and summary[k]["mean"] is not None}
+    tracker.final(final, int(round(results.get("presentations_done") or 0)))
+    floor_nm = {f"final/floor_{k}_nm_overall": v["nm"]["overall"] for k, v in (results.get("floor") or {}).items()}
+    tracker.close(job_hparams(results, folder), {**{f"final/{k}": v["mean"] for k, v in summary.items()}, **floor_nm})
+
+
 def _varint(n: int) -> bytes:
     """A non-negative int in protobuf's base-128 varint encoding."""
     out = bytearray()
@@ -215,6 +336,7 @@ class Tracker:
         self.logdir = Path(logdir)
         self.writer = None  # the EventFile, while open
         self._curve_tags: list[str] = []  # the by-epoch curves written, whose last values HParams shows
+        self._final_tags: list[str] = []  # the final metrics written (:meth:`final`): HParams' metrics instead
         if enabled:
             from tensorboard.compat.proto import event_pb2
 
@@ -227,6 +349,7 @@ class Tracker:
             name = f"events.out.tfevents.{int(time.time()):010d}.{socket.gethostname()}.{os.getpid()}.selpres"
             self.writer = EventFile(self.logdir / name)  # closed in close()
             self._append(self._event(wall_time=time.time(), file_version="brain.Event:2"))
+            self._append(self._event(wall_time=time.time(), summary=layout_summary()))
 
     def _append(self, event) -> None:
         self.writer.write(event.SerializeToString())
@@ -274,15 +397,23 @@ class Tracker:
         for rec in history:
             self.log_epoch(rec)
 
+    def final(self, scalars: dict, step: int) -> None:
+        """The job's final metrics (:data:`FINAL`), one scalar each at ``step`` (the job's cost): the metrics the
+        HParams tab declares, and in the Time Series tab one point per run at its cost."""
+        finite = [(k, v) for k, v in scalars.items() if v is not None and math.isfinite(v)]
+        if self.writer is None or not finite:
+            return
+        self._write(finite, step)
+        self._final_tags += [k for k, _ in finite]
+
     def close(self, hparams: dict, metrics: dict) -> None:
         """The hyperparameters for TensorBoard's HParams plugin (torch's ``add_hparams`` summaries, into this same
-        file), its metrics the mean curves (it shows a curve's last value: the job's final one), and every final
-        metric in a Markdown table (Text tab, tag ``final``); then the file is closed. No final metric becomes a
-        scalar: a one-point chart at step 0 is an empty card at the top of the Time Series tab."""
+        file), its metrics the final ones written by :meth:`final` (else the mean curves, whose last value it
+        shows), and every final metric in a Markdown table (Text tab, tag ``final``); then the file is closed."""
         if self.writer is None:
             return
         hp, mt = hparams_and_metrics(hparams, metrics)
-        curves = {tag: None for tag in self._curve_tags}
+        curves = {tag: None for tag in self._final_tags or self._curve_tags}
         for summary in hparams_summaries(hp, curves):  # experiment, session start, session end
             self._append(self._event(wall_time=time.time(), summary=summary))
         if mt:
