@@ -146,10 +146,13 @@ def _lengths(sch: Mapping) -> str:
     given = [(k, sch.get(k)) for k in ("epochs", "total_epochs", "budget") if sch.get(k) is not None]
     if len(given) != 1:
         what = " and ".join(f"schedule.{k}={_shown(v)}" for k, v in given) or "none of them"
-        fix = f" (e.g. schedule.{given[0][0]}=null)" if given else ""
+        # the key named is the one given beside stages.yaml's total_epochs; the fix nulls that default
+        key, value = next(((k, v) for k, v in given if k != "total_epochs"), given[0] if given else ("total_epochs", None))
+        fix = " (e.g. schedule.total_epochs=null" if len(given) > 1 and "total_epochs" in dict(given) else ""
+        fix += ("; with epochs listed also schedule.profile=null)" if key == "epochs" else ")") if fix else ""
         raise ConfigError(
-            f"schedule.{given[-1][0] if given else 'total_epochs'}",
-            given[-1][1] if given else None,
+            f"schedule.{key}",
+            value,
             f"one of schedule.total_epochs (ΣN_i), schedule.budget (presentations) or schedule.epochs (one N_i per "
             f"stage) for {PARAMETRIC}, the others null{fix}; got {what}",
         )
