@@ -4,13 +4,14 @@ equal cost (``partners=on``, ``configs/partners/``).
 A staged setting's *compute-matched partner* is one-stage conventional training stopped at the same presentations
 (training plus the charge for choosing), with the same other settings; the *full conventional run* is the paper's
 conventional method (all n patterns, N = ΣN_i epochs: the sweep's own total where its settings share one, else
-the conventional preset's 150). After the sweep's own jobs (:class:`Partners`, a Hydra callback that does nothing
-unless ``partners=on``), the costs are read from the finished jobs' results.json and the partners run as one more
-sweep into ``<sweep>/partners/``, with the sweep's overrides outside the schedule (a swept topology or rate is
-swept there too) and its launcher: conventional training stopped at each budget, ``schedule=stages
-schedule.p=0 schedule.budget=...`` named ``conventional`` (a budget there is not rescaled to n, as the ``matched``
-preset's paper count is); the full run is the budget n·N, whole epochs: the same stages, the same numbers, as
-``schedule=conventional``. A partner that already ran is found done, as any job of a re-run sweep.
+the conventional preset's 150). ``partners=on`` makes the sweep's sweeper ``hydra_plugins.selpres_partners.PartnerSweeper``, Hydra's basic
+sweeper that, once the sweep's own jobs have run, reads their costs from results.json and launches the partners
+through the same launcher (``hydra/launcher=local2``'s workers are warm by then) into the same sweep folder: the
+sweep's overrides outside the schedule (a swept topology or rate is swept there too) with conventional training
+stopped at each budget, ``schedule=stages schedule.p=0 schedule.budget=...`` named ``conventional`` (a budget there
+is not rescaled to n, as the ``matched`` preset's paper count is); the full run is the budget n·N, whole epochs:
+the same stages, the same numbers, as ``schedule=conventional``. A partner that already ran is found done, as any
+job of a re-run sweep.
 
 The report names the partners a sweep lacks and prints :func:`rerun_command`: the sweep's own command with
 ``partners=on``, which finds the sweep's jobs done and adds only the partners.
@@ -20,18 +21,16 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import shlex
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
-from hydra.experimental.callback import Callback
-from omegaconf import DictConfig, OmegaConf
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from omegaconf import OmegaConf
 
 log = logging.getLogger("selpres")
 
-FOLDER = "partners"  # <sweep>/partners/: where the partners run
 FULL_EPOCHS = 150  # the conventional preset's N (configs/schedule/conventional.yaml)
 
 
@@ -42,11 +41,9 @@ def _schedule_override(item: str) -> bool:
 
 def costs(sweep: Path) -> list[int]:
     """The budgets of the sweep's partners, sorted: the cost of each of its staged settings, and n·N of its full
-    conventional run; read from its finished jobs (those under ``<sweep>/partners/`` left out)."""
+    conventional run; read from its finished jobs."""
     budgets, totals, n = set(), set(), None
     for path in sweep.rglob("results.json"):
-        if FOLDER in path.relative_to(sweep).parts[:-1]:
-            continue
         try:
             res = json.loads(path.read_bytes())
             sch = res["schedule"]
@@ -58,43 +55,48 @@ def costs(sweep: Path) -> list[int]:
         budgets.add(int(res["presentations_done"]))
         if not any(sch.get("extra_presentations") or []) and sch.get("budget") is None:
             totals.add(sum(sch["epochs"]))
-    if n is None:
+    if not budgets:
         return []
     return sorted(budgets | {n * (totals.pop() if len(totals) == 1 else FULL_EPOCHS)})
 
 
-def partner_sweep(task: list[str], launcher: str | None, budgets: list[int], sweep: Path) -> list[str]:
-    """The command line (an argument list) of the partners' sweep: conventional training stopped at each budget."""
-    base = [o for o in task if not _schedule_override(o)]
-    base += [f"hydra/launcher={launcher}"] if launcher and launcher != "basic" else []
-    base += [f"hydra.sweep.dir={sweep / FOLDER}", "hydra.sweeper.params={}"]
+def partner_overrides(given: list[str], budgets: list[int]) -> list[str]:
+    """The partners' sweep: ``given`` (the sweep's overrides and params) outside the schedule, and conventional
+    training stopped at each budget."""
     one_stage = ["schedule=stages", "schedule.name=conventional", "schedule.p=0", "schedule.first=null"]
     one_stage += ["schedule.growth=null", "schedule.total_epochs=null", f"schedule.budget={','.join(map(str, budgets))}"]
-    return [sys.executable, "-m", "selpres.run.main", "-m", *base, *one_stage]
+    return [o for o in given if not _schedule_override(o)] + one_stage
 
 
-class Partners(Callback):
-    """Hydra callback: with ``partners=on``, the sweep's partners after its own jobs (see the module's docstring)."""
+def add_partners(sweeper: Any, arguments: list[str], returns: list) -> list:
+    """After a basic sweeper's own jobs (``hydra_plugins.selpres_partners.PartnerSweeper``): the partners, through
+    its launcher; ``returns`` with their results appended."""
+    sweep = Path(str(OmegaConf.select(sweeper.config, "hydra.sweep.dir")))
+    budgets = costs(sweep)
+    if not budgets:
+        log.warning("partners: no staged job of %s finished, so no cost to match", sweep)
+        return returns
+    parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
+    given = parser.parse_overrides(partner_overrides(sweeper._parse_config() + list(arguments), budgets))
+    jobs = [job for batch in sweeper.split_arguments(given, None) for job in batch]
+    log.info("partners: conventional training stopped at %s presentations (%d jobs)",
+             ", ".join(f"{b:,}" for b in budgets), len(jobs))  # fmt: skip
+    _more_jobs(len(jobs))
+    returns.append(sweeper.launcher.launch(jobs, initial_job_idx=sum(len(r) for r in returns)))
+    return returns
 
-    def __init__(self, enabled: bool = False):
-        self.enabled = bool(enabled)
 
-    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
-        if not self.enabled:
-            return
-        sweep = Path(str(OmegaConf.select(config, "hydra.sweep.dir")))
-        budgets = costs(sweep)
-        if not budgets:
-            log.warning("partners: no finished job in %s to take a cost from", sweep)
-            return
-        task = list(OmegaConf.select(config, "hydra.overrides.task") or [])
-        launcher = OmegaConf.select(config, "hydra.runtime.choices.hydra/launcher")
-        argv = partner_sweep(task, launcher, budgets, sweep)
-        log.info("partners: conventional training stopped at %s presentations, in %s",
-                 ", ".join(f"{b:,}" for b in budgets), sweep / FOLDER)  # fmt: skip
-        done = subprocess.run(argv, check=False)
-        if done.returncode != 0:
-            log.warning("partners: %s exited %d", shlex.join(argv[3:]), done.returncode)
+def _more_jobs(k: int) -> None:
+    """Tell the sweep's progress line (selpres.run.progress) that ``k`` more jobs follow."""
+    from selpres.run import progress
+
+    path = os.environ.get(progress.ENV)
+    if path:
+        try:
+            with open(path, "a") as f:
+                f.write(json.dumps({"more": k}) + "\n")
+        except OSError:
+            pass
 
 
 def rerun_command(sweep: Path) -> str | None:

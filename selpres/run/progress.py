@@ -44,10 +44,11 @@ def duration(seconds: float) -> str:
 
 
 def sweep_size(config: DictConfig) -> int | None:
-    """How many jobs the sweep of ``config`` launches: the basic sweeper's product of values (its ``params`` and the
-    command line's), an Optuna sweep's ``n_trials``; None where it cannot be told (another sweeper)."""
-    if "basic_sweeper" not in (OmegaConf.select(config, "hydra.sweeper._target_") or ""):
-        trials = OmegaConf.select(config, "hydra.sweeper.n_trials")
+    """How many jobs the sweep of ``config`` launches: an Optuna sweep's ``n_trials``, else the basic sweeper's product
+    of values (its ``params`` and the command line's; partners=on adds its own when it knows them); None where it
+    cannot be told."""
+    trials = OmegaConf.select(config, "hydra.sweeper.n_trials")  # an Optuna sweep (experiment=search)
+    if trials is not None:
         return int(trials) if isinstance(trials, int) else None
     try:
         from hydra._internal.config_loader_impl import ConfigLoaderImpl
@@ -102,9 +103,11 @@ class SweepProgress(Callback):
 
 def sweep_line(path: Path, now: float | None = None) -> str:
     """The progress line from a sweep's progress file."""
-    head, *ends = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    head, *lines = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    ends = [e for e in lines if "status" in e]
     done, failed = len(ends), sum(e["status"] == "FAILED" for e in ends)
     total = head.get("total")
+    total = total + sum(e.get("more", 0) for e in lines) if total else None  # jobs a sweeper adds (partners)
     elapsed = (now or time.time()) - head["start"]
     count = f"{done}/{total}" if total else f"{done}"
     text = f"sweep: {count} jobs done" + (f" ({failed} failed)" if failed else "") + f", {duration(elapsed)} elapsed"

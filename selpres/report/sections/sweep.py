@@ -150,8 +150,9 @@ def pareto(points: list[Point]) -> dict[int, str]:
 def sweep_rows(ctx: Context) -> tuple[list[dict], list[Point], list[Point], list[str]]:
     """(one row per setting, the settings' points, the conventional runs' points, the swept keys)."""
     members, conventional = roles(ctx.groups)
-    members.sort(key=lambda g: (ctx.topologies.index(g.topology), ctx.methods.index(g.schedule)))
     keys = swept_keys(members)
+    order = lambda g: [number(settings(g.used[0]).get(k, "null")) for k in keys]
+    members.sort(key=lambda g: (ctx.topologies.index(g.topology), [(isinstance(v, str), v) for v in order(g)]))
     options = Options(margin=ctx.options.margin, holm=True)  # always Holm over each family (the module's docstring)
     points = [Point(g, i + 1, _cost_ci(g)) for i, g in enumerate(members)]
     conv_points = [Point(h, 0, _cost_ci(h)) for h in conventional]
@@ -209,11 +210,12 @@ def _verdict(r: dict, role: str) -> str:
     said = r.get(f"{role}_verdict")
     if said is None:
         return r.get(f"{role}_reading", "")
-    d = r[f"{role}_diff_mean"]
-    iv = signed_interval(r[f"{role}_ci_lo"], r[f"{role}_ci_hi"])
+    d, lo, hi = r[f"{role}_diff_mean"], r[f"{role}_ci_lo"], r[f"{role}_ci_hi"]
     if said == "equivalent":
         said = f"equivalent within ±{r[f'{role}_margin']:.4f}"
-    return f"{d:+.4f} {iv}: {said}"
+    elif said == "no detectable difference" and lo is not None and not lo <= 0 <= hi:
+        said += f" after Holm (p = {r[f'{role}_p_holm']:.2g})"
+    return f"{d:+.4f} {signed_interval(lo, hi)}: {said}"
 
 
 def sweep_markdown(rows: list[dict], keys: list[str]) -> str:

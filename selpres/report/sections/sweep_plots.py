@@ -24,6 +24,32 @@ def _bars(mean, lo, hi):
     return [[mean - lo if lo is not None else 0.0], [hi - mean if hi is not None else 0.0]]
 
 
+LABEL_OFFSETS = [(7, 6), (7, -13), (-16, 6), (-16, -13), (9, 16), (-18, 16), (9, -24), (-18, -24), (0, 26)]
+
+
+def _label(ax, taken: list, x: float, y: float, text: str) -> None:
+    """The point's number where it overlaps no label placed before and no marker (points in display units)."""
+    px, py = ax.transData.transform((x, y))
+    w, h = 6.5 * len(text) + 2, 11
+    for dx, dy in LABEL_OFFSETS:
+        box = (px + dx * 1.4, py + dy * 1.4, w, h)  # offsets are in points, the display in pixels at dpi 110
+        if not any(abs(box[0] - b[0]) < max(w, b[2]) and abs(box[1] - b[1]) < h for b in taken):
+            break
+    taken.append(box)
+    ax.annotate(text, (x, y), xytext=(dx, dy), textcoords="offset points", fontsize=8)
+
+
+def _front(points: list[Point]) -> list[tuple[float, float]]:
+    """The Pareto front over every point (settings and conventional runs) as a step line, by cost."""
+    pts = sorted((p.cost, p.stats["mean"]) for p in points if p.stats["mean"] is not None)
+    out, best = [], math.inf
+    for c, e in pts:
+        if e < best:
+            out.append((c, e))
+            best = e
+    return out
+
+
 def draw_plane(rows: list[dict], points: list[Point], conv: list[Point], topologies: list[str]):
     plt = pyplot()
     fig, axes = plt.subplots(
@@ -31,7 +57,7 @@ def draw_plane(rows: list[dict], points: list[Point], conv: list[Point], topolog
     )
     names = list(dict.fromkeys(base(p.group.schedule) for p in points))
     styles = family_styles(names)
-    front = {r["number"]: r["pareto"] for r in rows}
+    pareto_of = {r["number"]: r["pareto"] for r in rows}
     legend: dict[str, object] = {}
     for ax, t in zip(axes[0], topologies):
         mine = [p for p in points if p.group.topology == t and p.stats["mean"] is not None]
@@ -44,11 +70,25 @@ def draw_plane(rows: list[dict], points: list[Point], conv: list[Point], topolog
             lo = [s["ci95"][0] if s["ci95"][0] is not None else s["mean"] for s in st]
             hi = [s["ci95"][1] if s["ci95"][1] is not None else s["mean"] for s in st]
             ax.fill_between(x, lo, hi, color="0.35", alpha=0.15, lw=0)
+        shown = mine + line
+        lo_x = min(p.cost for p in shown) * 0.9 if shown else 0
+        hi_x = max(p.cost for p in shown) * 1.04 if shown else 1
         full = full_run(mine[0].group, [p.group for p in conv]) if mine else None
-        curve = mean_curve(full) if full is not None else []
+        curve = [(c, v) for c, v, _ in (mean_curve(full) if full is not None else []) if lo_x <= c <= hi_x]
         if curve:
-            (h,) = ax.plot([c for c, _, _ in curve[1:]], [v for _, v, _ in curve[1:]], "--", color="0.6", lw=0.9)
-            legend["its learning curve (held-out curve patterns)"] = h
+            (h,) = ax.plot([c for c, _ in curve], [v for _, v in curve], "--", color="0.6", lw=0.9)
+            legend["the full conventional run's learning curve (held-out curve patterns)"] = h
+        front = _front(shown)
+        if len(front) > 1:
+            (h,) = ax.step([c for c, _ in front], [e for _, e in front], where="post", color="k", lw=0.8, ls=":")
+            legend["Pareto front (every run)"] = h
+        partners = {r["number"]: r.get("partner_cost") for r in rows}
+        for p in mine:
+            match = next((q for q in line if q.cost == partners.get(p.number)), None)
+            if match is not None:
+                ax.plot([p.cost, match.cost], [p.stats["mean"], match.stats["mean"]], color="0.5", lw=0.6)
+        ax.set_xlim(lo_x, hi_x)
+        taken: list = []
         for p in mine:
             st, name = p.stats, base(p.group.schedule)
             color, marker = styles[name]
@@ -58,11 +98,16 @@ def draw_plane(rows: list[dict], points: list[Point], conv: list[Point], topolog
                 mec="k", mew=0.5, capsize=2, elinewidth=0.9,
             )  # fmt: skip
             legend.setdefault(f"{name} (numbers: the table's rows)" if len(names) > 1 else "settings (numbered as in the table)", h)
-            if front.get(p.number) == "Pareto":
-                (ring,) = ax.plot(p.cost, st["mean"], "o", ms=15, mfc="none", mec="k", mew=1.2)
-                legend["Pareto set"] = ring
-            ax.annotate(f"{p.number}", (p.cost, st["mean"]), xytext=(6, 5), textcoords="offset points", fontsize=8)
+            if pareto_of.get(p.number) == "Pareto":
+                (ring,) = ax.plot(p.cost, st["mean"], "o", ms=14, mfc="none", mec="k", mew=1.1)
+                legend["Pareto set (settings)"] = ring
         nm_log_axis(ax)
+        fig.canvas.draw()  # the axes' final limits, so labels are placed where they will be drawn
+        for p in mine:  # the markers themselves are taken too
+            px, py = ax.transData.transform((p.cost, p.stats["mean"]))
+            taken.append((px - 5, py - 5, 10, 10))
+        for p in mine:
+            _label(ax, taken, p.cost, p.stats["mean"], str(p.number))
         thousands(ax)
         ax.set_xlabel("cost: presentations (units of t)")
         ax.set_ylabel("final held-out RMS (Nm), mean over seeds")
@@ -114,18 +159,23 @@ def draw_grids(found: list[tuple[str, str, str, dict]]):
             if d is None:
                 ax.text(j, i, "no partner", ha="center", va="center", fontsize=7, color="0.4")
                 continue
-            unresolved = r["partner_ci_lo"] <= 0 <= r["partner_ci_hi"]
+            said = r.get("partner_verdict")
+            unresolved = said not in ("better", "worse", "equivalent")
             if unresolved:
                 ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, hatch="///", ec="0.55", lw=0))
-            text = f"#{r['number']}\n{d:+.4f}" + ("\nn.r." if unresolved else "")
-            ax.text(j, i, text, ha="center", va="center", fontsize=7)
+            mark = {"equivalent": "\n≈ within ±m", "better": "\nbetter", "worse": "\nworse"}.get(said, "\nn.r.")
+            text = f"#{r['number']}\n{d:+.4f}" + mark
+            ax.text(j, i, text, ha="center", va="center", fontsize=7, color="w" if abs(d) > 0.6 * span else "k")
         ax.set_xticks(range(len(xs)), xs, fontsize=8)
         ax.set_yticks(range(len(ys)), ys, fontsize=8)
         ax.set_xlabel(x)
         ax.set_ylabel(y)
         ax.set_title(name, fontsize=9)
     fig.colorbar(im, ax=list(axes[0]), label="Δ held-out RMS vs partner (Nm)\n< 0 (blue): the setting errs less")
-    fig.suptitle("Δ against the compute-matched partner, paired by seed; hatched, n.r.: 95 % interval contains 0", fontsize=9)
+    fig.suptitle(
+        "Δ = setting − compute-matched partner, paired by seed\nhatched, n.r.: not resolved (no detectable difference, Holm)",
+        fontsize=9,
+    )
     return fig
 
 
