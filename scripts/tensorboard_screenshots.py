@@ -90,7 +90,13 @@ class DevTools:
         while True:
             b0, b1 = self._exact(2)
             n = b1 & 0x7F
-            n = struct.unpack(">H", self._exact(2))[0] if n == 126 else struct.unpack(">Q", self._exact(8))[0] if n == 127 else n
+            n = (
+                struct.unpack(">H", self._exact(2))[0]
+                if n == 126
+                else struct.unpack(">Q", self._exact(8))[0]
+                if n == 127
+                else n
+            )
             parts += self._exact(n)
             if b0 & 0x80:
                 return parts.decode()
@@ -117,7 +123,8 @@ function deep(pred) { const out = []; const walk = n => { if (!n) return; if (n.
   return out; }
 function clickText(text) { const hits = deep(n => (n.innerText || '').trim().toUpperCase() === text.toUpperCase());
   const el = hits[hits.length - 1]; if (el) { el.click(); return true; } return false; }
-function clickLabel(re) { const hits = deep(n => re.test(n.getAttribute('aria-label') || n.getAttribute('title') || ''));
+function clickLabel(re) {
+  const hits = deep(n => re.test(n.getAttribute('aria-label') || n.getAttribute('title') || ''));
   hits.forEach(h => h.click()); return hits.length; }
 """
 
@@ -147,16 +154,16 @@ VIEWS = [  # (file, TensorBoard URL fragment, clicks in the page after it loads)
 
 
 def check(dev: DevTools, runs: int) -> list[str]:
-    """What the HParams table must show: every run, the schedule's columns, the final RMS as a metric."""
+    """What the HParams table must show: a row for every run, the schedule's columns, the final RMS as a metric."""
     dev.call("Page.navigate", url=dev.base + "#hparams")
     time.sleep(dev.wait)
-    text = dev.js(DEEP + "deep(n => n.tagName === 'TF-HPARAMS-TABLE-VIEW').map(n => n.shadowRoot.innerText).join('\\n')")
-    text = text or dev.js(DEEP + "document.body.innerText + deep(n => !!n.shadowRoot).map(n => n.shadowRoot.textContent).join(' ')")
-    missing = [w for w in ("sum N_i", "growth", "N_i rule", "cost (presentations)", "final/heldout_rms_nm") if w not in text]
-    rows = dev.js(DEEP + "deep(n => n.tagName === 'VAADIN-GRID' || n.tagName === 'TF-HPARAMS-TABLE-VIEW').length")
-    if missing:
-        return [f"the HParams tab lacks {', '.join(missing)}"]
-    return [] if rows is not None else ["the HParams table was not drawn"]
+    text = dev.js(DEEP + "deep(n => !!n.shadowRoot).map(n => n.shadowRoot.textContent).join(' ')") or ""
+    wanted = ("p", "n1", "sum N_i", "growth", "N_i rule", "cost (presentations)", "final/heldout_rms_nm")
+    problems = [f"the HParams tab shows no column {w!r}" for w in wanted if w not in text]
+    rows = dev.js(DEEP + "Math.max(0, ...deep(n => n.tagName === 'VAADIN-GRID').map(g => (g.items || []).length))")
+    if rows != runs:
+        problems.append(f"the HParams table has {rows} rows for {runs} runs")
+    return problems
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -166,13 +173,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--chromium", default=shutil.which("chromium") or shutil.which("chromium-browser") or "chromium")
     ap.add_argument("--wait", type=float, default=8.0, help="seconds for TensorBoard to draw a view")
     a = ap.parse_args(argv)
-    runs = len({p.parent for p in a.logdir.rglob("events.out.tfevents.*")})
+    runs = len({p.parent for p in a.logdir.rglob("events.out.tfevents.*") if not p.name.endswith(".sweep.selpres")})
     if not runs:
         print(f"error: no TensorBoard event files under {a.logdir}", file=sys.stderr)
         return 2
     tb_port, cdp_port = free_port(), free_port()
     tb = subprocess.Popen(
-        [sys.executable, "-m", "tensorboard.main", "--logdir", str(a.logdir), "--host", "127.0.0.1", "--port", str(tb_port)],
+        [
+            sys.executable,
+            "-m",
+            "tensorboard.main",
+            "--logdir",
+            str(a.logdir),
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(tb_port),
+        ],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )

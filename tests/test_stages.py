@@ -103,7 +103,11 @@ def test_listed_schedules_are_described_in_the_rules_words():
     assert sel == {"form": "listed", "growth": "paper", "profile": "equal"}
     assert rule_of(build_schedule([0.0625, 0.125, 0.25, 0.5, 1.0], [30] * 5, N))["growth"] == "geometric"
     assert rule_of(build_schedule([50, 100, 400, 800, 1002], [10, 20, 30, 40, 50], N))["profile"] == "increasing"
-    assert rule_of(build_schedule([50, 60, 1002], [1, 5, 2], N)) == {"form": "listed", "growth": "listed", "profile": "listed"}
+    assert rule_of(build_schedule([50, 60, 1002], [1, 5, 2], N)) == {
+        "form": "listed",
+        "growth": "listed",
+        "profile": "listed",
+    }
 
 
 # ------------------------------------------------------------------------------------------------- refusals
@@ -120,7 +124,11 @@ REFUSED = [  # (overrides, the key named, words of what is allowed)
     (["schedule=stages", "schedule.profile=flat"], "schedule.profile", "equal, increasing, decreasing"),
     (["schedule=stages", "schedule.growth=paper", "schedule.p=2"], "schedule.p", "4 with schedule.growth=paper"),
     (["schedule=stages", "schedule.p=400", "schedule.first=1"], "schedule.p", "sizes that grow"),
-    (["schedule=stages", "schedule.epochs=[1,2,3,4,5]"], "schedule.epochs", "schedule.total_epochs=null; with epochs listed also schedule.profile=null"),
+    (
+        ["schedule=stages", "schedule.epochs=[1,2,3,4,5]"],
+        "schedule.epochs",
+        "schedule.total_epochs=null; with epochs listed also schedule.profile=null",
+    ),
     (["schedule=stages", "schedule.sizes=[0.5,1.0]"], "schedule.p", "null with listed sizes"),
     (["schedule=selective", "schedule.p=2"], "schedule.p", "schedule.sizes=[50,100,400,800,1002]"),
     (["schedule=selective", "schedule.growth=linear"], "schedule.growth", "read only with schedule.p set"),

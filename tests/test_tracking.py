@@ -52,7 +52,10 @@ def test_curves_by_epoch_and_by_presentations(tmp_path):
 
     # each final metric is one scalar at the job's cost: the mean over replicas of all held-out patterns, not the
     # last point of the 300-pattern curve
-    for tag, key in (("final/heldout_rms_nm", "heldout_rms_nm_overall"), ("final/heldout_nmse", "heldout_rms_nmse_overall")):
+    for tag, key in (
+        ("final/heldout_rms_nm", "heldout_rms_nm_overall"),
+        ("final/heldout_nmse", "heldout_rms_nmse_overall"),
+    ):
         (point,) = acc.Scalars(tag)
         assert point.step == cost and math.isclose(point.value, res["summary"][key]["mean"], rel_tol=1e-6)
     curves = [t for t in tags if not t.startswith("final/")]

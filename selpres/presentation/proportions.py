@@ -147,7 +147,9 @@ def _lengths(sch: Mapping) -> str:
     if len(given) != 1:
         what = " and ".join(f"schedule.{k}={_shown(v)}" for k, v in given) or "none of them"
         # the key named is the one given beside stages.yaml's total_epochs; the fix nulls that default
-        key, value = next(((k, v) for k, v in given if k != "total_epochs"), given[0] if given else ("total_epochs", None))
+        key, value = next(
+            ((k, v) for k, v in given if k != "total_epochs"), given[0] if given else ("total_epochs", None)
+        )
         fix = " (e.g. schedule.total_epochs=null" if len(given) > 1 and "total_epochs" in dict(given) else ""
         fix += ("; with epochs listed also schedule.profile=null)" if key == "epochs" else ")") if fix else ""
         raise ConfigError(
@@ -194,7 +196,9 @@ def stage_sizes(p: int, first, growth, n: int) -> list[int]:
     if growth == "paper":
         if p != len(_PAPER_SHARES) + 1:
             raise ConfigError(
-                "schedule.p", p, f"4 with schedule.growth=paper (Table 1's five sizes); any p: growth geometric or linear"
+                "schedule.p",
+                p,
+                "4 with schedule.growth=paper (Table 1's five sizes); any p: growth geometric or linear",
             )
         sizes = [half_up(f), *(half_up(s) for s in _PAPER_SHARES), n]
     elif growth == "geometric":
@@ -206,8 +210,8 @@ def stage_sizes(p: int, first, growth, n: int) -> list[int]:
         raise ConfigError(
             "schedule.p",
             p,
-            f"sizes that grow: p={p}, first={_shown(first)}, growth={growth} on n = {n:,} round to {sizes} (n_{bad + 1} "
-            f">= n_{bad + 2}); fewer enlargements, another first or another growth",
+            f"sizes that grow: p={p}, first={_shown(first)}, growth={growth} on n = {n:,} round to {sizes} "
+            f"(n_{bad + 1} >= n_{bad + 2}); fewer enlargements, another first or another growth",
         )
     return sizes
 
@@ -259,7 +263,8 @@ def split_budget(profile, budget, sizes: list[int]) -> tuple[Stage, ...]:
         raise ConfigError(
             "schedule.budget",
             budget,
-            f"at least {least:,} presentations: one epoch on each of the {len(sizes)} sets {sizes} with profile={profile}",
+            f"at least {least:,} presentations: one epoch on each of the {len(sizes)} sets {sizes} with "
+            f"profile={profile}",
         )
     left = budget - sum(e * s for e, s in zip(epochs, sizes))
     for i in sorted(range(len(sizes)), key=lambda i: (ideal[i] - epochs[i], i), reverse=True):
@@ -329,7 +334,9 @@ def _grows(growth: str, sizes: list[int], n: int) -> bool:
     """Whether some n_1 / n makes the rule ``growth`` give ``sizes`` (each size pins it to an interval)."""
     p, lo, hi = len(sizes) - 1, 0.0, 1.0
     if growth == "paper":
-        return p == 4 and sizes[1:-1] == [max(1, math.floor(x * n + 0.5)) for x in _PAPER_SHARES] and sizes[0] < sizes[1]
+        return (
+            p == 4 and sizes[1:-1] == [max(1, math.floor(x * n + 0.5)) for x in _PAPER_SHARES] and sizes[0] < sizes[1]
+        )
     for i, s in enumerate(sizes[:-1]):
         a, b = (s - 0.5) / n, (s + 0.5) / n  # the share the rule must give for stage i, to the rounding
         if growth == "geometric":  # f ** (1 - i/p) in [a, b)

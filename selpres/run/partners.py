@@ -4,14 +4,14 @@ equal cost (``partners=on``, ``configs/partners/``).
 A staged setting's *compute-matched partner* is one-stage conventional training stopped at the same presentations
 (training plus the charge for choosing), with the same other settings; the *full conventional run* is the paper's
 conventional method (all n patterns, N = ΣN_i epochs: the sweep's own total where its settings share one, else
-the conventional preset's 150). ``partners=on`` makes the sweep's sweeper ``hydra_plugins.selpres_partners.PartnerSweeper``, Hydra's basic
-sweeper that, once the sweep's own jobs have run, reads their costs from results.json and launches the partners
-through the same launcher (``hydra/launcher=local2``'s workers are warm by then) into the same sweep folder: the
-sweep's overrides outside the schedule (a swept topology or rate is swept there too) with conventional training
-stopped at each budget, ``schedule=stages schedule.p=0 schedule.budget=...`` named ``conventional`` (a budget there
-is not rescaled to n, as the ``matched`` preset's paper count is); the full run is the budget n·N, whole epochs:
-the same stages, the same numbers, as ``schedule=conventional``. A partner that already ran is found done, as any
-job of a re-run sweep.
+the conventional preset's 150). ``partners=on`` makes the sweep's sweeper
+``hydra_plugins.selpres_partners.PartnerSweeper``, Hydra's basic sweeper that, once the sweep's own jobs have run,
+reads their costs from results.json and launches the partners through the same launcher (``hydra/launcher=local2``'s
+workers are warm by then) into the same sweep folder: the sweep's overrides outside the schedule (a swept topology
+or rate is swept there too) with conventional training stopped at each budget, ``schedule=stages schedule.p=0
+schedule.budget=...`` named ``conventional`` (a budget there is not rescaled to n, as the ``matched`` preset's paper
+count is); the full run is the budget n·N, whole epochs: the same stages, the same numbers, as
+``schedule=conventional``. A partner that already ran is found done, as any job of a re-run sweep.
 
 The report names the partners a sweep lacks and prints :func:`rerun_command`: the sweep's own command with
 ``partners=on``, which finds the sweep's jobs done and adds only the partners.
@@ -64,7 +64,11 @@ def partner_overrides(given: list[str], budgets: list[int]) -> list[str]:
     """The partners' sweep: ``given`` (the sweep's overrides and params) outside the schedule, and conventional
     training stopped at each budget."""
     one_stage = ["schedule=stages", "schedule.name=conventional", "schedule.p=0", "schedule.first=null"]
-    one_stage += ["schedule.growth=null", "schedule.total_epochs=null", f"schedule.budget={','.join(map(str, budgets))}"]
+    one_stage += [
+        "schedule.growth=null",
+        "schedule.total_epochs=null",
+        f"schedule.budget={','.join(map(str, budgets))}",
+    ]
     return [o for o in given if not _schedule_override(o)] + one_stage
 
 

@@ -4,14 +4,8 @@ Curves against cumulative presentations are the fair axis: a selective and a con
 compared at equal cost there. The log is a pure function of the history records, so a resumed run
 rebuilds it from the checkpoint's history instead of appending duplicates.
 
-What a sweep is compared by (:func:`close_job`): the HParams tab holds each job's schedule in the parametric
-schedule's words as numbers where they are numbers (p, n_1, ΣN_i, the cost in presentations and its ratio to
-conventional training at equal epochs; the growth, the N_i rule and the order as text) beside the job's own
-overrides (``.hydra/overrides.yaml``: the sweep's keys), and declares the *final* held-out RMS and nMSE (all
-held-out patterns, mean over replicas) and test-10 RMS as its metrics, so its table, parallel coordinates and
-scatter plots show the sweep. Those three are scalars at one step, the job's cost, so the Time Series card
-``final`` is the sweep's error–cost scatter; every final metric is also in a Markdown table in the Text tab. The
-Custom Scalars tab (:func:`layout_summary`, once per file) has one chart per quantity against presentations and
+What a sweep is compared by (its HParams, the final metrics at each job's cost) is :mod:`selpres.run.hparams`'s;
+the Custom Scalars tab (:func:`layout_summary`, once per file) has one chart per quantity against presentations and
 against epochs: the mean over replicas with its min–max band (a Margin chart), every run in one chart.
 """
 
@@ -159,11 +153,6 @@ def metrics_table(metrics: dict) -> str:
     return "\n".join(["| final metric | value |", "|---|---|", *rows])
 
 
-FINAL = {  # the HParams metrics: a scalar each at the job's cost -> the results.json summary it is the mean of
-    "final/heldout_rms_nm": "heldout_rms_nm_overall",
-    "final/heldout_nmse": "heldout_rms_nmse_overall",
-    "final/test10_rms_nm": "test10_rms_nm_overall",
-}
 CHARTS = (  # (title, the curve's tag stem): one Margin chart each, against presentations and against epochs
     ("held-out RMS (Nm), first eval.heldout_curve patterns", "heldout_rms_nm"),
     ("test-10 RMS (Nm)", "test10_rms_nm"),
@@ -202,74 +191,6 @@ def layout_summary():
     )
     meta = SummaryMetadata(plugin_data=SummaryMetadata.PluginData(plugin_name="custom_scalars"))
     return Summary(value=[Summary.Value(tag="custom_scalars__config__", tensor=tensor, metadata=meta)])
-
-
-def _number(text: str):
-    """An override's value as TensorBoard's HParams should hold it: a number where it is one, else its text."""
-    import yaml
-
-    try:
-        v = yaml.safe_load(text)
-    except yaml.YAMLError:
-        return text
-    return v if isinstance(v, (int, float, bool)) else text
-
-
-def overrides_of(folder: Path | None) -> dict:
-    """The job's own overrides (Hydra's ``.hydra/overrides.yaml``: what the sweep set) as {key: value}."""
-    path = None if folder is None else folder / ".hydra" / "overrides.yaml"
-    try:
-        import yaml
-
-        given = yaml.safe_load(path.read_text()) if path and path.is_file() else []
-    except (OSError, ValueError):
-        return {}
-    out = {}
-    for item in given if isinstance(given, list) else []:
-        key, eq, value = str(item).lstrip("+").partition("=")
-        if eq and not key.startswith("~"):
-            out[key] = _number(value)
-    return out
-
-
-def job_hparams(results: dict, folder: Path | None) -> dict:
-    """A finished job's hyperparameters for the HParams tab: its schedule in the parametric schedule's words, its
-    cost, the rest of what identifies it, then its own overrides (numbers as numbers)."""
-    cfg, sch = results.get("config") or {}, results["schedule"]
-    optim = cfg.get("optim") or {}
-    hp = {
-        "schedule": sch["name"],
-        "order": sch.get("order"),
-        "p": sch.get("p"),
-        "n1": sch.get("n1"),
-        "growth": sch.get("growth"),
-        "N_i rule": sch.get("profile"),
-        "sum N_i": sch.get("epochs_total"),
-        "budget": sch.get("budget"),
-        "cost (presentations)": results.get("presentations_done"),
-        "cost / conventional at equal epochs": sch.get("cost_ratio"),
-        "topology": results.get("topology"),
-        "seed": cfg.get("seed"),
-        "replicas": results.get("replicas"),
-        "optim": optim.get("_target_"),
-        "lr": optim.get("lr"),
-        "momentum": optim.get("momentum"),
-        "batch_size": optim.get("batch_size"),
-        "sizes": str(sch.get("sizes")),
-        "epochs": str(sch.get("epochs")),
-        "engine": results.get("engine"),
-        "engine_requested": results.get("engine_requested"),
-    }
-    return {**hp, **overrides_of(folder)}
-
-
-def close_job(tracker: Tracker, results: dict, folder: Path | None) -> None:
-    """The end of a job's log: the final metrics at its cost, its hyperparameters, every final metric as text."""
-    summary = results["summary"]
-    final = {tag: summary[k]["mean"] for tag, k in FINAL.items() if k in summary and summary[k]["mean"] is not None}
-    tracker.final(final, int(round(results.get("presentations_done") or 0)))
-    floor_nm = {f"final/floor_{k}_nm_overall": v["nm"]["overall"] for k, v in (results.get("floor") or {}).items()}
-    tracker.close(job_hparams(results, folder), {**{f"final/{k}": v["mean"] for k, v in summary.items()}, **floor_nm})
 
 
 def _varint(n: int) -> bytes:
@@ -414,7 +335,9 @@ class Tracker:
             return
         hp, mt = hparams_and_metrics(hparams, metrics)
         curves = {tag: None for tag in self._final_tags or self._curve_tags}
-        for summary in hparams_summaries(hp, curves):  # experiment, session start, session end
+        # the session's start and end; the experiment (which columns and metrics) is the sweep's, written once at its
+        # root after it (write_sweep_experiment), else TensorBoard infers it from the sessions
+        for summary in hparams_summaries(hp, curves)[1:]:
             self._append(self._event(wall_time=time.time(), summary=summary))
         if mt:
             self._append(self._event(wall_time=time.time(), summary=text_summary("final", metrics_table(mt))))

@@ -29,8 +29,9 @@ from selpres.run import floor, lock, orphan, stop
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
 from selpres.run.checks import check_seed
+from selpres.run.hparams import close_job
 from selpres.run.problem import Problem, job_engine, prepare
-from selpres.run.tracking import Tracker, close_job
+from selpres.run.tracking import Tracker
 from selpres.seeding import seed_everything
 from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
 

@@ -170,7 +170,7 @@ def sweep_rows(ctx: Context) -> tuple[list[dict], list[Point], list[Point], list
         row.update(
             p=g.sched["p"],
             sizes=" ".join(map(str, g.sched["sizes"])),
-            epochs=" ".join(map(str, g.sched["epochs"])),
+            epochs=" ".join(map(str, g.sched["epochs"])) + _partial(g.sched),
             presentations=g.cost,
             presentations_ci_lo=pt.cost_ci[0],
             presentations_ci_hi=pt.cost_ci[1],
@@ -197,6 +197,12 @@ def sweep_rows(ctx: Context) -> tuple[list[dict], list[Point], list[Point], list
             row[f"{role}_verdict"] = outcome(v)
             row[f"{role}_reading"] = reading({**v, "holm": True}, name=f"#{row['number']}")
     return rows, points, conv_points, keys
+
+
+def _partial(sched: dict) -> str:
+    """A partial last epoch (a budget's leftover), as N_i shows it."""
+    extra = sum(sched.get("extra_presentations") or [])
+    return f" (+{extra:,} presentations)" if extra else ""
 
 
 def _cost_ci(g: Group) -> list:
@@ -247,7 +253,9 @@ def best_text(rows: list[dict], budget: int | None) -> str:
         f"more and errs no more): {', '.join(map(name, on)) or 'no setting: conventional runs dominate every one'}."
     )
     if unsure:
-        text += f" Not resolved (dominated on the means, its interval reaching the front): {', '.join(map(name, unsure))}."
+        text += (
+            f" Not resolved (dominated on the means, its interval reaching the front): {', '.join(map(name, unsure))}."
+        )
     if budget is None:
         return text + " Name a cost with `selpres-report DIR --budget N` for the lowest error within it."
     within = [r for r in rows if r["presentations"] <= budget and r["heldout_nm_mean"] is not None]
@@ -259,7 +267,13 @@ def best_text(rows: list[dict], budget: int | None) -> str:
 
 def partners_text(ctx: Context, rows: list[dict]) -> str | None:
     """The partners the sweep lacks, and the one command that adds them; None when none is missing."""
-    missing = sorted({r["presentations"] for r in rows if r.get("partner_verdict") is None and "itself" not in r.get("partner_reading", "")})
+    missing = sorted(
+        {
+            r["presentations"]
+            for r in rows
+            if r.get("partner_verdict") is None and "itself" not in r.get("partner_reading", "")
+        }
+    )
     no_full = any(r.get("conventional_verdict") is None and r.get("conventional_reading") != "itself" for r in rows)
     if not missing and not no_full:
         return None
@@ -272,7 +286,10 @@ def partners_text(ctx: Context, rows: list[dict]) -> str | None:
         what.append("the full conventional run")
     command = rerun_command(ctx.sweep)
     how = f"`{command}`" if command else "the sweep's command with `partners=on`"
-    return f"**Missing partners:** {' and '.join(what)}, so those comparisons are not made. Add them (the sweep's jobs are found done): {how}"
+    return (
+        f"**Missing partners:** {' and '.join(what)}, so those comparisons are not made. Add them (the sweep's "
+        f"jobs are found done): {how}"
+    )
 
 
 NOTE = (

@@ -15,7 +15,7 @@ import math
 from selpres.report.compare import mean_curve
 from selpres.report.groups import base
 from selpres.report.sections.plots import family_styles, nm_log_axis, pyplot, save_png, thousands
-from selpres.report.sections.sweep import Point, full_run, number, value_of
+from selpres.report.sections.sweep import Point, full_run, number
 
 GRID_FILL = 0.5  # a grid is drawn when its settings fill at least half its cells
 
@@ -97,7 +97,9 @@ def draw_plane(rows: list[dict], points: list[Point], conv: list[Point], topolog
                 p.cost, st["mean"], yerr=_bars(st["mean"], *st["ci95"]), xerr=xerr, fmt=marker, ms=6, color=color,
                 mec="k", mew=0.5, capsize=2, elinewidth=0.9,
             )  # fmt: skip
-            legend.setdefault(f"{name} (numbers: the table's rows)" if len(names) > 1 else "settings (numbered as in the table)", h)
+            legend.setdefault(
+                f"{name} (numbers: the table's rows)" if len(names) > 1 else "settings (numbered as in the table)", h
+            )
             if pareto_of.get(p.number) == "Pareto":
                 (ring,) = ax.plot(p.cost, st["mean"], "o", ms=14, mfc="none", mec="k", mew=1.1)
                 legend["Pareto set (settings)"] = ring
@@ -173,7 +175,8 @@ def draw_grids(found: list[tuple[str, str, str, dict]]):
         ax.set_title(name, fontsize=9)
     fig.colorbar(im, ax=list(axes[0]), label="Δ held-out RMS vs partner (Nm)\n< 0 (blue): the setting errs less")
     fig.suptitle(
-        "Δ = setting − compute-matched partner, paired by seed\nhatched, n.r.: not resolved (no detectable difference, Holm)",
+        "Δ = setting − compute-matched partner, paired by seed\n"
+        "hatched, n.r.: not resolved (no detectable difference, Holm)",
         fontsize=9,
     )
     return fig
@@ -200,4 +203,3 @@ def figures(ctx, rows: list[dict], points: list[Point], conv: list[Point], keys:
     else:
         lines.append(f"No heat map: it needs a schedule swept over exactly two keys ({why}).")
     return figs, [f"![{caption}]({name})" for name, (caption, _) in figs.items()] + lines
-
