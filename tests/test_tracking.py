@@ -41,9 +41,7 @@ def test_curves_by_epoch_and_by_presentations(tmp_path):
     assert {"schedule", "topology", "seed", "lr", "momentum", "sizes", "epochs"} <= set(start.hparams)
     assert start.hparams["topology"].string_value == "6-13-2"
     assert start.hparams["sizes"].string_value == "[50, 100, 400, 800, 1002]"  # lists flattened to strings
-    experiment = plugin_data_pb2.HParamsPluginData.FromString(content["_hparams_/experiment"]).experiment
-    finals = ["final/heldout_rms_nm", "final/heldout_nmse", "final/test10_rms_nm"]
-    assert sorted(m.name.tag for m in experiment.metric_infos) == sorted(finals)  # the final numbers, not a curve's
+    assert "_hparams_/experiment" not in content  # the sweep's, once at its root (test_the_sweeps_hparams_experiment)
     # the schedule in the parametric schedule's words, numbers as numbers (parallel coordinates place them)
     assert start.hparams["p"].number_value == 4 and start.hparams["n1"].number_value == 50
     assert start.hparams["sum N_i"].number_value == 6 and start.hparams["growth"].string_value == "paper"
@@ -181,3 +179,38 @@ def test_hand_encoded_events_are_what_protobuf_serialises():
             summary = summary_pb2.Summary(value=[summary_pb2.Summary.Value(tag=t, simple_value=v) for t, v in scalars])
             want = event_pb2.Event(wall_time=wall, step=step, summary=summary).SerializeToString()
             assert enc.encode(scalars, step, wall) == want, (step, n, wall)
+
+
+def test_the_sweeps_hparams_experiment(tmp_path):
+    """After a sweep, one experiment at its root: every job's hyperparameters (numbers as numbers, text with its
+    values), the sweep's own columns marked as differing (TensorBoard shows those first), the final metrics declared;
+    TensorBoard's own reader lists every job as a session with its values."""
+    from tensorboard.backend.event_processing.plugin_event_multiplexer import EventMultiplexer
+    from tensorboard.plugins.hparams import api_pb2
+
+    from selpres.run.hparams import write_sweep_experiment
+
+    for p in (1, 2):
+        job = tmp_path / f"schedule.p={p}"
+        train(cfg_of("schedule=stages", f"schedule.p={p}", "schedule.total_epochs=4"), job)
+        (job / ".hydra").mkdir()
+        (job / ".hydra" / "overrides.yaml").write_text(f"- schedule=stages\n- schedule.p={p}\n")
+    write_sweep_experiment(tmp_path)
+    mux = EventMultiplexer().AddRunsFromDirectory(str(tmp_path))
+    mux.Reload()
+    content = mux.PluginRunToTagToContent("hparams")
+    assert [run for run, tags in content.items() if "_hparams_/experiment" in tags] == ["."]
+    experiment = plugin_data_pb2.HParamsPluginData.FromString(content["."]["_hparams_/experiment"]).experiment
+    finals = ["final/heldout_rms_nm", "final/heldout_nmse", "final/test10_rms_nm"]
+    assert [m.name.tag for m in experiment.metric_infos] == finals  # the final numbers, not a curve's last point
+    info = {h.name: h for h in experiment.hparam_infos}
+    number = api_pb2.DataType.Value("DATA_TYPE_FLOAT64")
+    assert info["p"].type == info["schedule.p"].type == info["cost (presentations)"].type == number
+    assert {k for k, h in info.items() if h.differs} == {"p", "schedule.p", "cost (presentations)"}  # the sweep
+    assert [v.string_value for v in info["growth"].domain_discrete.values] == ["geometric"]
+    sessions = {
+        run: plugin_data_pb2.HParamsPluginData.FromString(tags["_hparams_/session_start_info"]).session_start_info
+        for run, tags in content.items()
+        if "_hparams_/session_start_info" in tags
+    }
+    assert {run: s.hparams["p"].number_value for run, s in sessions.items()} == {"schedule.p=1": 1, "schedule.p=2": 2}
