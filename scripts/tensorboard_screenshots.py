@@ -123,6 +123,9 @@ function deep(pred) { const out = []; const walk = n => { if (!n) return; if (n.
   return out; }
 function clickText(text) { const hits = deep(n => (n.innerText || '').trim().toUpperCase() === text.toUpperCase());
   const el = hits[hits.length - 1]; if (el) { el.click(); return true; } return false; }
+function noSmoothing() { const found = deep(n => n.tagName === 'INPUT' && n.type === 'number' && n.value === '0.6');
+  found.forEach(i => { i.value = '0'; ['input', 'change'].forEach(e => i.dispatchEvent(new Event(e, {bubbles: true}))); });
+  return found.length; }
 function clickLabel(re) {
   const hits = deep(n => re.test(n.getAttribute('aria-label') || n.getAttribute('title') || ''));
   hits.forEach(h => h.click()); return hits.length; }
@@ -148,7 +151,7 @@ VIEWS = [  # (file, TensorBoard URL fragment, clicks in the page after it loads)
     ("hparams_table.png", "#hparams", []),
     ("hparams_parallel_coordinates.png", "#hparams", ["clickText('PARALLEL COORDINATES VIEW')"]),
     ("hparams_scatter.png", "#hparams", ["clickText('SCATTER PLOT MATRIX VIEW')"]),
-    ("custom_scalars.png", "#custom_scalars", ["clickLabel(/log/i)"]),
+    ("custom_scalars.png", "#custom_scalars", ["noSmoothing()", "clickLabel(/log/i)"]),
     ("time_series.png", "#timeseries", []),
 ]
 
