@@ -124,7 +124,8 @@ function deep(pred) { const out = []; const walk = n => { if (!n) return; if (n.
 function clickText(text) { const hits = deep(n => (n.innerText || '').trim().toUpperCase() === text.toUpperCase());
   const el = hits[hits.length - 1]; if (el) { el.click(); return true; } return false; }
 function noSmoothing() { const found = deep(n => n.tagName === 'INPUT' && n.type === 'number' && n.value === '0.6');
-  found.forEach(i => { i.value = '0'; ['input', 'change'].forEach(e => i.dispatchEvent(new Event(e, {bubbles: true}))); });
+  found.forEach(i => { i.value = '0';
+    ['input', 'change'].forEach(e => i.dispatchEvent(new Event(e, {bubbles: true}))); });
   return found.length; }
 function clickLabel(re) {
   const hits = deep(n => re.test(n.getAttribute('aria-label') || n.getAttribute('title') || ''));
