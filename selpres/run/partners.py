@@ -20,16 +20,14 @@ The report names the partners a sweep lacks and prints :func:`rerun_command`: th
 from __future__ import annotations
 
 import json
-import logging
 import os
 import shlex
+import sys
 from pathlib import Path
 from typing import Any
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf
-
-log = logging.getLogger("selpres")
 
 FULL_EPOCHS = 150  # the conventional preset's N (configs/schedule/conventional.yaml)
 
@@ -78,13 +76,13 @@ def add_partners(sweeper: Any, arguments: list[str], returns: list) -> list:
     sweep = Path(str(OmegaConf.select(sweeper.config, "hydra.sweep.dir")))
     budgets = costs(sweep)
     if not budgets:
-        log.warning("partners: no staged job of %s finished, so no cost to match", sweep)
+        print(f"partners: no staged job of {sweep} finished, so no cost to match", file=sys.stderr)
         return returns
     parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
     given = parser.parse_overrides(partner_overrides(sweeper._parse_config() + list(arguments), budgets))
     jobs = [job for batch in sweeper.split_arguments(given, None) for job in batch]
-    log.info("partners: conventional training stopped at %s presentations (%d jobs)",
-             ", ".join(f"{b:,}" for b in budgets), len(jobs))  # fmt: skip
+    listed = ", ".join(f"{b:,}" for b in budgets)  # on the sweep's console (its process logs only Hydra's lines)
+    print(f"partners: conventional training stopped at {listed} presentations ({len(jobs)} jobs)", file=sys.stderr)
     _more_jobs(len(jobs))
     returns.append(sweeper.launcher.launch(jobs, initial_job_idx=sum(len(r) for r in returns)))
     return returns
