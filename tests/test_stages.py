@@ -212,3 +212,22 @@ def test_the_documented_sweep_runs_every_combination(tmp_path):
         assert s["p"] == p and len(s["sizes"]) == p + 1 and s["sizes"][0] == math.floor(first * N + 0.5)
         assert sum(s["epochs"]) == 9 and r["presentations_done"] == sum(a * b for a, b in zip(s["sizes"], s["epochs"]))
     assert out.stderr.count("jobs done") == 8 and "sweep: 8/8 jobs done" in out.stderr  # the sweep's progress
+
+
+def test_an_appended_p_on_a_listed_schedule_is_refused(tmp_path):
+    """+schedule.p=1 on schedule=selective (the issue's lie: p = 4 ran, p: 1 recorded) is refused, nothing kept."""
+    out = subprocess.run(
+        [
+            sys.executable,
+            str(REPO / "train.py"),
+            "schedule=selective",
+            "+schedule.p=1",
+            f"hydra.run.dir={tmp_path / 'x'}",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and "schedule.p=1" in out.stderr
+    assert not (tmp_path / "x").exists()
