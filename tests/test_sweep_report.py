@@ -124,7 +124,7 @@ def test_without_partners_the_report_names_them_and_the_command(sweep, tmp_path)
     shutil.copytree(sweep, bare, ignore=shutil.ignore_patterns("partners"))
     report = Report.build(bare)
     text = section_of(report).markdown()
-    assert "**Missing partners:** conventional training stopped at" in text and "the full conventional run" in text
+    assert "**Missing partners:** one-stage training stopped at" in text and "the full one-stage run" in text
     command = "python train.py -m schedule=stages schedule.p=1,2 schedule.first=0.05,0.1"
     assert f"`{command}" in text and "partners=on`" in text
     assert "No heat map: the settings' compute-matched partners are missing" in text

@@ -38,7 +38,6 @@ from collections.abc import Mapping, Sequence
 
 from selpres.errors import ConfigError
 from selpres.presentation.schedule import Schedule, Stage, build_schedule
-from selpres.presentation.search import shaped_sizes
 
 PAPER_N = 1002  # the paper's exemplar set (section 5.1)
 _PAPER_SIZES = [50, 100, 400, 800, 1002]  # Table 1's n_i
@@ -204,7 +203,7 @@ def stage_sizes(p: int, first, growth, n: int) -> list[int]:
     elif growth == "geometric":
         sizes = [half_up(f ** (1 - i / p)) for i in range(p)] + [n]
     else:
-        sizes = shaped_sizes(p, f, 1.0, n)
+        sizes = [half_up(f + (1 - f) * i / p) for i in range(p)] + [n]
     bad = next((i for i in range(p) if sizes[i + 1] <= sizes[i]), None)
     if bad is not None:
         raise ConfigError(

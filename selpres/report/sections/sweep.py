@@ -20,14 +20,14 @@ Figures: :mod:`selpres.report.sections.sweep_plots`.
 
 from __future__ import annotations
 
-import json
-import math
 from dataclasses import dataclass, field
 
-from selpres.report.compare import Options, adjust_family, outcome, paired, paired_columns, reading
+from selpres.report.compare import Options, adjust_family, mean_curve, outcome, paired, paired_columns, reading
 from selpres.report.context import Context, Section
 from selpres.report.groups import Group, base, settings, varying
 from selpres.report.markdown import fmt, signed_interval, table
+from selpres.report.sections import sweep_plots
+from selpres.report.sections.sweep_plots import number
 from selpres.run.stats import summarize
 
 SAME_COST = 0.01  # a conventional run within 1 % of a setting's presentations is its compute-matched partner
@@ -159,7 +159,7 @@ def sweep_rows(ctx: Context) -> tuple[list[dict], list[Point], list[Point], list
     front: dict[int, str] = {}
     for t in ctx.topologies:
         front.update(pareto([p for p in points + conv_points if p.group.topology == t]))
-    rows, families = [], {"partner": [], "conventional": []}
+    rows, families = [], {"partner": [], "full": []}
     for pt in points:
         g, st = pt.group, pt.stats
         row = {"number": pt.number, "topology": g.topology, "setting": g.schedule}
@@ -175,7 +175,7 @@ def sweep_rows(ctx: Context) -> tuple[list[dict], list[Point], list[Point], list
             presentations_ci_lo=pt.cost_ci[0],
             presentations_ci_hi=pt.cost_ci[1],
             percent_of_conventional=100 * g.cost / conv_cost if conv_cost else None,
-            conventional_basis="the full conventional run" if full is not None else "T_con at equal epochs",
+            full_basis="the full one-stage run" if full is not None else "T_con at equal epochs",
             seeds=st["n"],
             diverged=g.n_diverged,
             heldout_nm_mean=st["mean"],
@@ -183,7 +183,7 @@ def sweep_rows(ctx: Context) -> tuple[list[dict], list[Point], list[Point], list
             heldout_nm_ci_hi=st["ci95"][1],
             pareto=front.get(id(g), "no results"),
         )
-        for role, other in (("partner", partner_of(g, conventional)), ("conventional", full)):
+        for role, other in (("partner", partner_of(g, conventional)), ("full", full)):
             if other is None or other is g:
                 row[f"{role}_reading"] = "itself" if other is g else f"no {role} run"
                 continue
@@ -225,8 +225,8 @@ def _verdict(r: dict, role: str) -> str:
 
 
 def sweep_markdown(rows: list[dict], keys: list[str]) -> str:
-    head = ["#", *keys, "p", "n_i", "N_i", "cost (presentations)", "% of conventional", "held-out RMS Nm [95 % CI]"]
-    head += ["Δ vs partner [95 % CI]: verdict", "Δ vs conventional [95 % CI]: verdict", "Pareto"]
+    head = ["#", *keys, "p", "n_i", "N_i", "cost (presentations)", "% of full training", "held-out RMS Nm [95 % CI]"]
+    head += ["Δ vs partner [95 % CI]: verdict", "Δ vs full training [95 % CI]: verdict", "Pareto"]
     tops = len({r["topology"] for r in rows}) > 1
     head = head[:1] + ["topology"] * tops + head[1:]
     body = []
@@ -238,7 +238,7 @@ def sweep_markdown(rows: list[dict], keys: list[str]) -> str:
         pct = "n/a" if r["percent_of_conventional"] is None else f"{r['percent_of_conventional']:.1f} %"
         cells = [str(r["number"]), *([r["topology"]] if tops else []), *(r[k] for k in keys)]
         cells += [str(r["p"]), r["sizes"], r["epochs"], f"{r['presentations']:,.0f}", pct, rms]
-        cells += [_verdict(r, "partner"), _verdict(r, "conventional"), r["pareto"]]
+        cells += [_verdict(r, "partner"), _verdict(r, "full"), r["pareto"]]
         body.append(cells)
     return table(head, body)
 
@@ -249,8 +249,8 @@ def best_text(rows: list[dict], budget: int | None) -> str:
     unsure = [r for r in rows if r["pareto"] == "not resolved"]
     name = lambda r: f"#{r['number']} ({r['presentations']:,.0f} t, {fmt(r['heldout_nm_mean'])} Nm)"
     text = (
-        "**Best is a trade-off, not one setting.** The Pareto set (no other run, conventional runs included, costs no "
-        f"more and errs no more): {', '.join(map(name, on)) or 'no setting: conventional runs dominate every one'}."
+        "**Best is a trade-off, not one setting.** The Pareto set (no other run, one-stage runs included, costs no "
+        f"more and errs no more): {', '.join(map(name, on)) or 'no setting: one-stage runs dominate every one'}."
     )
     if unsure:
         text += (
@@ -274,16 +274,16 @@ def partners_text(ctx: Context, rows: list[dict]) -> str | None:
             if r.get("partner_verdict") is None and "itself" not in r.get("partner_reading", "")
         }
     )
-    no_full = any(r.get("conventional_verdict") is None and r.get("conventional_reading") != "itself" for r in rows)
+    no_full = any(r.get("full_verdict") is None and r.get("full_reading") != "itself" for r in rows)
     if not missing and not no_full:
         return None
     from selpres.run.partners import rerun_command
 
     what = []
     if missing:
-        what.append("conventional training stopped at " + ", ".join(f"{c:,.0f}" for c in missing) + " presentations")
+        what.append("one-stage training stopped at " + ", ".join(f"{c:,.0f}" for c in missing) + " presentations")
     if no_full:
-        what.append("the full conventional run")
+        what.append("the full one-stage run (all n patterns, ΣN_i epochs)")
     command = rerun_command(ctx.sweep)
     how = f"`{command}`" if command else "the sweep's command with `partners=on`"
     return (
@@ -293,13 +293,14 @@ def partners_text(ctx: Context, rows: list[dict]) -> str | None:
 
 
 NOTE = (
-    "Cost: presentations (training plus the charge for choosing A_i), and as a share of the full conventional run's "
+    "Cost: presentations (training plus the charge for choosing A_i), and as a share of the full one-stage run's "
     "(else of T_con = n·ΣN_i at equal epochs). Held-out RMS: final, over all held-out patterns, mean over complete "
     "seeds with its 95 % t-interval. Δ: this setting − the other, paired by seed (negative: this setting errs less); "
     "the verdict is the paired t-test's (better / worse), else two one-sided tests' against ±m (equivalent), else "
     "*no detectable difference*, which does not rule out a real effect of the size its interval allows; p-values "
-    "Holm-adjusted within each family (every setting against its partner; every setting against conventional "
-    "training). *Partner*: conventional training stopped at the same cost (within 1 %), the same other settings. "
+    "Holm-adjusted within each family (every setting against its partner; every setting against full training). "
+    "*Partner*: one-stage training (all n patterns every epoch) stopped at the same cost (within 1 %), the same "
+    "other settings; *full training*: the longest such run of whole epochs (the paper's T_con, n·ΣN_i). "
     "*Pareto*: no other run costs no more and errs no more on the means; *not resolved*: dominated on the means, "
     "but its interval reaches the lowest error at its cost."
 )
@@ -312,21 +313,15 @@ def section(ctx: Context) -> Section | None:
     rows, points, conv_points, keys = sweep_rows(ctx)
     if len(points) < 2:
         return None
-    from selpres.report.sections import sweep_plots
-
     heading = title_of(keys, [p.group for p in points])
     lines = [best_text(rows, ctx.options.budget), sweep_markdown(rows, keys)]
     lines += [t for t in (partners_text(ctx, rows),) if t]
-    figures, figure_lines = sweep_plots.figures(ctx, rows, points, conv_points, keys)
+    curves = {}  # the full one-stage run's learning curve, per topology
+    for pt in points:
+        full = full_run(pt.group, [c.group for c in conv_points])
+        if full is not None and pt.group.topology not in curves:
+            curves[pt.group.topology] = mean_curve(full)
+    figures, figure_lines = sweep_plots.figures(ctx, rows, points, conv_points, keys, curves)
     margin = ctx.options.margin.describe("the setting")
     lines += [*figure_lines, NOTE + f" Margin m = {margin}."]
     return Section(heading, lines, csv={"sweep.csv": rows}, figures=figures, heading=heading)
-
-
-def number(text: str):
-    """A swept value as a number where it is one (for ordering axes), else its text."""
-    try:
-        v = json.loads(text)
-    except (TypeError, ValueError):
-        return text
-    return v if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else text

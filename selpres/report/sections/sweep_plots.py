@@ -10,12 +10,15 @@ the width of a README.
 
 from __future__ import annotations
 
+import json
 import math
+from typing import TYPE_CHECKING
 
-from selpres.report.compare import mean_curve
 from selpres.report.groups import base
 from selpres.report.sections.plots import family_styles, nm_log_axis, pyplot, save_png, thousands
-from selpres.report.sections.sweep import Point, full_run, number
+
+if TYPE_CHECKING:
+    from selpres.report.sections.sweep import Point
 
 GRID_FILL = 0.5  # a grid is drawn when its settings fill at least half its cells
 
@@ -50,7 +53,16 @@ def _front(points: list[Point]) -> list[tuple[float, float]]:
     return out
 
 
-def draw_plane(rows: list[dict], points: list[Point], conv: list[Point], topologies: list[str]):
+def number(text: str):
+    """A swept value as a number where it is one (for ordering rows and axes), else its text."""
+    try:
+        v = json.loads(text)
+    except (TypeError, ValueError):
+        return text
+    return v if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else text
+
+
+def draw_plane(rows: list[dict], points: list[Point], conv: list[Point], topologies: list[str], curves: dict):
     plt = pyplot()
     fig, axes = plt.subplots(
         1, len(topologies), figsize=(8.2 * len(topologies), 5.6), squeeze=False, layout="constrained"
@@ -66,18 +78,17 @@ def draw_plane(rows: list[dict], points: list[Point], conv: list[Point], topolog
             x = [p.cost for p in line]
             st = [p.stats for p in line]
             (h,) = ax.plot(x, [s["mean"] for s in st], "s-", color="0.35", ms=4, lw=1.2)
-            legend["conventional training stopped at each cost (final RMS): the line to beat"] = h
+            legend["one-stage training stopped at each cost (final RMS): the line to beat"] = h
             lo = [s["ci95"][0] if s["ci95"][0] is not None else s["mean"] for s in st]
             hi = [s["ci95"][1] if s["ci95"][1] is not None else s["mean"] for s in st]
             ax.fill_between(x, lo, hi, color="0.35", alpha=0.15, lw=0)
         shown = mine + line
         lo_x = min(p.cost for p in shown) * 0.9 if shown else 0
         hi_x = max(p.cost for p in shown) * 1.04 if shown else 1
-        full = full_run(mine[0].group, [p.group for p in conv]) if mine else None
-        curve = [(c, v) for c, v, _ in (mean_curve(full) if full is not None else []) if lo_x <= c <= hi_x]
+        curve = [(c, v) for c, v, _ in curves.get(t, []) if lo_x <= c <= hi_x]
         if curve:
             (h,) = ax.plot([c for c, _ in curve], [v for _, v in curve], "--", color="0.6", lw=0.9)
-            legend["the full conventional run's learning curve (held-out curve patterns)"] = h
+            legend["the full one-stage run's learning curve (held-out curve patterns)"] = h
         front = _front(shown)
         if len(front) > 1:
             (h,) = ax.step([c for c, _ in front], [e for _, e in front], where="post", color="k", lw=0.8, ls=":")
@@ -182,13 +193,14 @@ def draw_grids(found: list[tuple[str, str, str, dict]]):
     return fig
 
 
-def figures(ctx, rows: list[dict], points: list[Point], conv: list[Point], keys: list[str]):
-    """The section's figures ({file: (caption, draw(path))}) and its Markdown lines (the images, or why none)."""
+def figures(ctx, rows: list[dict], points: list[Point], conv: list[Point], keys: list[str], curves: dict):
+    """The section's figures ({file: (caption, draw(path))}) and its Markdown lines (the images, or why none);
+    ``curves``: topology -> the full one-stage run's mean held-out curve."""
     figs = {
         "sweep_error_cost.png": (
-            "error–cost plane: every setting numbered as in the table, the Pareto set ringed, conventional training "
+            "error–cost plane: every setting numbered as in the table, the Pareto set ringed, one-stage training "
             "stopped at each cost as the line to beat",
-            lambda path: save_png(draw_plane(rows, points, conv, ctx.topologies), path),
+            lambda path: save_png(draw_plane(rows, points, conv, ctx.topologies, curves), path),
         )
     }
     found, why = grids(rows, keys)
