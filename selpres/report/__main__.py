@@ -59,9 +59,16 @@ def main(argv: list[str] | None = None) -> int:
         help="Holm-adjust the paired tests' p-values within each family (one metric across the "
         "verdict table; the selection verdict table)",
     )
+    ap.add_argument(
+        "--budget",
+        type=int,
+        default=None,
+        metavar="N",
+        help="a sweep's best: the lowest error within N presentations (default: the Pareto set only)",
+    )
     a = ap.parse_args(argv)
     try:
-        options = Options(margin=Margin.parse(a.margin), holm=a.holm)
+        options = Options(margin=Margin.parse(a.margin), holm=a.holm, budget=a.budget)
     except ConfigError as e:
         return _error(str(e))
     if not a.dir.is_dir():

@@ -21,11 +21,11 @@ from selpres.report import plugins
 from selpres.report.compare import Options
 from selpres.report.context import Context, Section, experiment_of
 from selpres.report.markdown import to_csv
-from selpres.report.sections import runs
+from selpres.report.sections import runs, sweep
 from selpres.storage import atomic_write
 
 # the sections every report ends with, whatever its study; a section with nothing to show is left out
-GENERIC_SECTIONS = [runs.section]
+GENERIC_SECTIONS = [sweep.section, runs.section]
 
 
 def study_sections(ctx: Context, found: list[plugins.Study]) -> list[Section]:

@@ -23,10 +23,10 @@ from selpres.engines.optim import check_hparams, with_defaults
 from selpres.errors import ConfigError
 from selpres.patterns import Scaler
 from selpres.presentation.orders import make_order
-from selpres.presentation.proportions import fit_schedule, with_fraction_form
+from selpres.presentation.proportions import fit_schedule, schedule_of
 from selpres.presentation.pruning._job import Pruning, pruning_plan
 from selpres.presentation.sampler import SelectivePresentation
-from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
+from selpres.presentation.schedule import EpochPlan, Schedule
 from selpres.presentation.selection import StageSelection, stage_selection
 from selpres.run.checks import pruning_spec, validate
 from selpres.run.estimate import refuse_job
@@ -127,15 +127,18 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
     (``selpres.presentation.proportions``, logged), refusals with the fraction form, and a data file too short for
     the schedule named as such."""
     sch = plain(cfg.schedule)
-    sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
-    if note:
-        log.info(note)
     spec = pruning_spec(cfg.schedule)
     if spec is not None:  # checked in validate: sizes [1.0], a budget or one epoch count
+        sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
+        if note:
+            log.info(note)
         epochs = None if sch["epochs"] is None else int(sch["epochs"][0])
         return pruning_plan(*spec, task.n, budget, epochs, float(cfg.schedule.selection_cost)), note
     try:
-        return build_schedule(sizes, sch["epochs"], task.n, budget), note
+        schedule, note = schedule_of(sch, task.n)  # listed or parametric (selpres.presentation.proportions)
+        if note:
+            log.info(note)
+        return schedule, note
     except ConfigError as e:
         if e.key == "schedule.sizes" and task.info.get("kind") == "file":
             i = task.info
@@ -146,7 +149,7 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
                 f"holding out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} "
                 f"({e.allowed})",
             ) from None
-        raise with_fraction_form(e, sizes) from None
+        raise
 
 
 def engine_kind(cfg: DictConfig) -> str:

@@ -29,6 +29,7 @@ from selpres.run import floor, lock, orphan, stop
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
 from selpres.run.checks import check_seed
+from selpres.run.hparams import close_job
 from selpres.run.problem import Problem, job_engine, prepare
 from selpres.run.tracking import Tracker
 from selpres.seeding import seed_everything
@@ -244,13 +245,17 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
 
 
 def train(
-    cfg: DictConfig, out_dir: str | Path | None = None, on_stage_end: Callable[[dict, Problem], None] | None = None
+    cfg: DictConfig,
+    out_dir: str | Path | None = None,
+    on_stage_end: Callable[[dict, Problem], None] | None = None,
+    on_epoch: Callable[[dict, Problem], None] | None = None,
 ) -> dict:
     """Train ``cfg.replicas`` replicas through the schedule; returns the results dict.
 
     With ``out_dir`` the job logs to TensorBoard, checkpoints and writes ``results.json`` and ``weights.pt``
     there, and resumes from a checkpoint of the same config (``overwrite=true``: starts afresh).
-    ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it).
+    ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it);
+    ``on_epoch(record, problem)`` after every epoch, before ``on_stage_end`` (the command line's progress line).
     """
     with lock.holding(out_dir):  # one writer per job folder (selpres.run.lock)
         clock = Clock()
@@ -259,6 +264,8 @@ def train(
         with clock("loop"), stop.loop():
             for ep in job.prob.plan[job.progress.epoch :]:
                 rec = run_epoch(job, ep, clock)
+                if on_epoch is not None:
+                    on_epoch(rec, job.prob)
                 spent = job.prob.pruning is not None and job.prob.pruning.exhausted  # every replica spent its budget
                 if on_stage_end is not None and (ep.index in job.prob.stage_ends or spent):
                     on_stage_end(rec, job.prob)
@@ -303,23 +310,7 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
     }
     atomic_write(job.out / WEIGHTS, lambda f: torch.save(trained, f))
     write_json(job.out / RESULTS, results)
-    hp = {
-        "schedule": cfg.schedule.name,
-        "topology": cfg.topology.layers,
-        "seed": cfg.seed,
-        "replicas": len(prob.seeds),
-        "optim": cfg.optim._target_,
-        "lr": cfg.optim.get("lr"),
-        "momentum": cfg.optim.get("momentum"),
-        "batch_size": cfg.optim.batch_size,
-        "sizes": str(prob.schedule.sizes),
-        "epochs": str(prob.schedule.epochs),
-        "order": cfg.schedule.order,
-        "engine": results["engine"],
-        "engine_requested": results["engine_requested"],
-    }
-    floor_nm = {f"final/floor_{k}_nm_overall": v["nm"]["overall"] for k, v in results["floor"].items()}
-    job.tracker.close(hp, {**{f"final/{k}": v["mean"] for k, v in results["summary"].items()}, **floor_nm})
+    close_job(job.tracker, results, job.out)  # HParams, final metrics (selpres.run.tracking)
     if job.ckpts:
         job.ckpts.discard()
     return results
