@@ -12,7 +12,7 @@ import pytest
 from selpres.report.compare import Options
 from selpres.report.context import Context
 from selpres.run.train import train
-from selpres.studies import modern
+from selpres_studies import modern
 
 from conftest import REPO, cfg_of
 

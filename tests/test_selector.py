@@ -103,7 +103,8 @@ def _built(target=None, order="stratified", params=None, budget=None, epochs=(2,
     spec = SelectorSpec(order=order, target=target, params=params or {})
     from selpres.presentation.build import plan
 
-    schedule = plan(spec, sizes, None if budget else list(epochs[: len(sizes)]), 40, budget)
+    node = {"sizes": sizes, "epochs": None if budget else list(epochs[: len(sizes)]), "budget": budget}
+    schedule, _, budget = plan(spec, node, 40)
     return build_selector(spec, schedule, [0, 1], X, X, Y, budget)
 
 

@@ -42,10 +42,11 @@ def selector_class(spec: SelectorSpec) -> type[Selector]:
     return Staged if spec.target is None else named_class(spec.target)
 
 
-def plan(spec: SelectorSpec, sizes: list, epochs: list | None, n: int, budget: int | None) -> Schedule:
-    """The epochs the loop may run on U of ``n`` patterns (``sizes``/``budget`` fitted to n), as the selector's
-    class plans them: the configured stages, or a pruning policy's one stage."""
-    return selector_class(spec).schedule(dict(spec.params), sizes, epochs, n, budget, spec.selection_cost)
+def plan(spec: SelectorSpec, node: Mapping, n: int) -> tuple[Schedule, str | None, int | None]:
+    """The epochs the loop may run on U of ``n`` patterns from the ``schedule`` node (plain values), as the
+    selector's class plans them (the configured stages, or a pruning policy's one stage), how named counts were
+    applied, and the budget per replica its ledger runs against (None: the plan's epochs)."""
+    return selector_class(spec).schedule(node, n, dict(spec.params), spec.selection_cost)
 
 
 def build_selector(
@@ -57,7 +58,7 @@ def build_selector(
     Y: torch.Tensor,
     budget: int | None,
 ) -> tuple[Selector, Ledger]:
-    """The job's selector and its fresh ledger (``budget``: presentations per replica, fitted to n, or None).
+    """The job's selector and its fresh ledger (``budget``: presentations per replica, :func:`plan`'s, or None).
     ``X_raw``: U's raw inputs (the orders' space); ``X``, ``Y``: U scaled (what the networks see)."""
     epochs = None if budget is not None else schedule.total_epochs
     ledger = Ledger(schedule.n, seeds, budget, epochs, spec.selection_cost)

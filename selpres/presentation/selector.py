@@ -17,13 +17,15 @@ run against. results.json's cost and cost ratio are read from it.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from contextlib import nullcontext
 from dataclasses import dataclass
 
 import torch
 
 from selpres.errors import ConfigError
-from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
+from selpres.presentation.proportions import schedule_of
+from selpres.presentation.schedule import EpochPlan, Schedule
 from selpres.presentation.selection import errors_of, one_thread
 
 
@@ -238,9 +240,12 @@ class Selector:
         """The schedule around the selector (``name``: how the config names it), before any data is made."""
 
     @classmethod
-    def schedule(cls, params: dict, sizes: list, epochs: list | None, n: int, budget: int | None, cost: float):
-        """The epochs the loop may run (:class:`Schedule` on U of n patterns): the configured stages."""
-        return build_schedule(sizes, epochs, n, budget)
+    def schedule(cls, node: Mapping, n: int, params: dict, cost: float) -> tuple[Schedule, str | None, int | None]:
+        """The epochs the loop may run on U of n patterns, from the ``schedule`` node (plain values): the configured
+        stages, listed or parametric (``proportions.schedule_of``); how named counts were applied (None: as given);
+        the budget the ledger runs against (None: the plan is the whole cost)."""
+        schedule, note = schedule_of(node, n)
+        return schedule, note, None
 
     def planned_charge(self, schedule: Schedule) -> int:
         """Forward passes the selector is known, before training, to charge per replica (a rate schedule's

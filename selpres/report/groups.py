@@ -105,6 +105,23 @@ def job_cost(res: dict) -> int | float:
     return res["schedule"]["presentations"] + (res.get("selection_presentations") or 0)
 
 
+def conventional(res: dict) -> bool:
+    """Whether a finished job's results are conventional training: one stage of all of U, each epoch's every pattern
+    presented by the staged selector (a compute-matched run's cut last epoch too). Results written before the
+    selector was recorded: one stage and no pruning policy."""
+    if len(res["schedule"]["sizes"]) != 1:
+        return False
+    sel = res.get("selector")
+    return sel.get("name") == "staged" if isinstance(sel, dict) else not res.get("pruning")
+
+
+def replica_costs(res: dict) -> list[float]:
+    """Each replica's measured cost in presentations (trained and charged), from a job's results."""
+    if "cost" in res:
+        return res["cost"]["per_replica"]["spent"]
+    return (res.get("pruning") or {}).get("cost") or [res["presentations_done"]] * len(res.get("seeds") or [])
+
+
 def _sched_key(s: dict) -> tuple:
     return (tuple(s["sizes"]), tuple(s["epochs"]), tuple(s.get("extra_presentations") or []), s.get("order"))
 

@@ -22,6 +22,7 @@ from selpres.engines.activations import activation
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.errors import ConfigError
 from selpres.presentation.orders import make_order
+from selpres.presentation.proportions import check_form
 from selpres.presentation.pruning import REGISTRY as PRUNING
 from selpres.presentation.pruning._job import check_pruning
 from selpres.run.estimate import refuse_before_task
@@ -52,6 +53,7 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
     activation(cfg.model.activation)  # ConfigError naming model.activation
     spec = check_optim(cfg)  # ConfigError naming optim.<key>
     make_order(cfg.schedule.order)  # a built-in or an importable Order: ConfigError naming schedule.order
+    check_form(plain(cfg.schedule))  # listed sizes or the parametric keys, not both (selpres.presentation.proportions)
     pruning = pruning_spec(cfg.schedule)
     if pruning is not None:
         s = cfg.schedule

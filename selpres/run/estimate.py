@@ -189,8 +189,9 @@ def refuse_before_task(cfg) -> None:
 
 def refuse_job(cfg, sizes: tuple[int, ...], schedule, n: int, test_patterns: int, torch_eval: bool) -> None:
     """The full estimate, once the exemplar set's size and the schedule are known (before any replica)."""
-    budget = cfg.schedule.budget
-    key, value = ("schedule.budget", budget) if budget is not None else ("schedule.epochs", list(cfg.schedule.epochs))
+    s = cfg.schedule  # what sets the plan's length: a budget, the epochs listed, or ΣN_i (the parametric schedule)
+    name = next((k for k in ("budget", "epochs", "total_epochs") if s[k] is not None), "epochs")
+    key, value = f"schedule.{name}", list(s[name]) if name == "epochs" and s[name] is not None else s[name]
     epochs, presentations, every = schedule.total_epochs, schedule.presentations, int(cfg.eval.every)
     make = lambda r: estimate(r, sizes, n, epochs, presentations, test_patterns, torch_eval, every)
     refuse_unfit(make, int(cfg.replicas), key, value)

@@ -1,6 +1,6 @@
-"""The problem a config determines before the first update: validated data, schedule, samplers, initial weights
-(``prepare``, which writes nothing), and the engine that will train it (``job_engine``). The loop that runs it is
-``selpres.run.train``.
+"""The problem a config determines before the first update: validated data, schedule, the selector and its ledger,
+initial weights (``prepare``, which writes nothing), and the engine that will train it (``job_engine``). The loop
+that runs it is ``selpres.run.train``.
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ from dataclasses import dataclass
 import torch
 from omegaconf import DictConfig
 
-from selpres.data import paper as D
 from selpres.data.file import DataFileError
 from selpres.data.task import Task, load_task
 from selpres.engines.batch import BatchEngine
@@ -22,8 +21,8 @@ from selpres.engines.native_minibatch import make_minibatch_engine
 from selpres.engines.online import make_engine
 from selpres.engines.optim import check_hparams, with_defaults
 from selpres.errors import ConfigError
+from selpres.patterns import Scaler
 from selpres.presentation.build import SelectorSpec, build_selector, plan
-from selpres.presentation.proportions import fit_schedule, with_fraction_form
 from selpres.presentation.sampler import SelectivePresentation
 from selpres.presentation.schedule import EpochPlan, Schedule
 from selpres.presentation.selector import Ledger, Selector
@@ -43,7 +42,7 @@ class Problem:
     sizes: tuple[int, ...]
     schedule: Schedule
     seeds: list[int]
-    scaler: D.Scaler
+    scaler: Scaler
     X: torch.Tensor  # exemplar inputs, scaled
     Y: torch.Tensor  # exemplar targets, scaled
     tests: dict  # name -> (X scaled, Y in Nm)
@@ -87,7 +86,7 @@ def prepare(cfg: DictConfig) -> Problem:
     """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
     sizes = validate(cfg)
     task = load_task(*task_specs(cfg))
-    schedule, note = task_schedule(cfg, task)
+    schedule, note, budget = task_schedule(cfg, task)
     # scored in torch: batch methods, the mini-batch engine (what the native kernel cannot run), torch/reference
     torch_eval = (
         optim_spec(cfg).batch or minibatch_reason(cfg) is not None or cfg.engine.value in ("torch", "reference")
@@ -97,8 +96,7 @@ def prepare(cfg: DictConfig) -> Problem:
     seed = int(cfg.seed)  # read once: an OmegaConf access costs ~20 us, 1000 of them 23 ms at R = 1000
     seeds = [seed + r for r in range(cfg.replicas)]
     X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
-    fitted = fit_schedule(cfg.schedule.sizes, cfg.schedule.budget, task.n)[1]  # presentations per replica, or None
-    selector, ledger = build_selector(selector_spec(cfg), schedule, seeds, task.exemplar.X, X, Y, fitted)
+    selector, ledger = build_selector(selector_spec(cfg), schedule, seeds, task.exemplar.X, X, Y, budget)
     return Problem(
         sizes=sizes,
         schedule=schedule,
@@ -112,7 +110,7 @@ def prepare(cfg: DictConfig) -> Problem:
         ledger=ledger,
         task=task,
         schedule_note=note,
-        budget=fitted if fitted is not None else schedule.presentations + selector.planned_charge(schedule),
+        budget=budget if budget is not None else schedule.presentations + selector.planned_charge(schedule),
     )
 
 
@@ -123,16 +121,17 @@ def selector_spec(cfg: DictConfig) -> SelectorSpec:
     return SelectorSpec(str(s.order), int(s.strata_bins), float(s.selection_cost), target, params)
 
 
-def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
-    """The schedule on the task's n, as the job's selector plans it: the paper's counts by their proportions when n
-    is not 1002 (``selpres.presentation.proportions``, logged), refusals with the fraction form, and a data file too
-    short for the schedule named as such."""
+def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None, int | None]:
+    """The schedule on the task's n as the job's selector plans it (listed or parametric, the paper's counts by their
+    proportions when n is not 1002: ``selpres.presentation.proportions``, logged), how named counts were applied,
+    and the budget the selector runs against (None: the plan's epochs); a data file too short for the schedule named
+    as such."""
     sch = plain(cfg.schedule)
-    sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
-    if note:
-        log.info(note)
     try:
-        return plan(selector_spec(cfg), sizes, sch["epochs"], task.n, budget), note
+        schedule, note, budget = plan(selector_spec(cfg), sch, task.n)
+        if note:
+            log.info(note)
+        return schedule, note, budget
     except ConfigError as e:
         if e.key == "schedule.sizes" and task.info.get("kind") == "file":
             i = task.info
@@ -143,7 +142,7 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
                 f"holding out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} "
                 f"({e.allowed})",
             ) from None
-        raise with_fraction_form(e, sizes) from None
+        raise
 
 
 def engine_kind(cfg: DictConfig) -> str:

@@ -14,9 +14,7 @@ the same finished job.
 from __future__ import annotations
 
 import math
-import subprocess
 import time
-from pathlib import Path
 
 import torch
 from omegaconf import DictConfig
@@ -25,7 +23,7 @@ from selpres.data.file import file_digest
 from selpres.data.task import task_files
 from selpres.engines.activations import ACTIVATIONS
 from selpres.presentation.sampler import shuffle_implementation
-from selpres.run import floor
+from selpres.run import floor, provenance
 from selpres.run.optimizer import optim_spec
 from selpres.run.specs import recorded, task_specs
 from selpres.run.stats import summarize
@@ -160,7 +158,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "resumed_from_epoch": progress.resumed_from,
         "stale_checkpoint": progress.stale_checkpoint,
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        "git_commit": _git_commit(),
+        "provenance": provenance.record(),  # versions, commit (selpres's own checkout only), platform, native build
         "wall_seconds": seconds,
         "seconds_per_presentation": seconds["train"] / max(1, training * R),
         "summary": stats,
@@ -203,17 +201,3 @@ def pruning_record(selector: dict, cost: dict) -> dict:
         "left_out": per["left_out"],
         "epochs": per["epochs"],
     }
-
-
-def _git_commit() -> str | None:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=Path(__file__).parent,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        )
-        return out.stdout.strip() or None
-    except (OSError, subprocess.SubprocessError):
-        return None

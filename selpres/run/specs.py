@@ -26,6 +26,7 @@ from selpres.arms.sources import as_choice
 from selpres.data.routes import ROUTES, keys_of
 from selpres.data.spec import COMMON, CommonKeys, DataSpec
 from selpres.errors import ConfigError
+from selpres.presentation.proportions import RULE_KEYS
 from selpres.registry import Choice
 
 # The data node's keys when the schema typed every route's (before the routes declared their own): a job's config
@@ -67,9 +68,12 @@ def data_spec(node: Any) -> DataSpec:
 
 def recorded(cfg: Any) -> dict:
     """A job's config as plain values, as results.json records it and ``job_hash`` hashes it: the data node as its
-    spec (types converted), with the keys of :data:`TYPED_BEFORE` it lacks as unset."""
+    spec (types converted), with the keys of :data:`TYPED_BEFORE` it lacks as unset, and the parametric schedule's
+    keys only where set."""
     c = plain(cfg)
     c["data"] = {**dict.fromkeys(TYPED_BEFORE), **data_spec(cfg.data).as_dict()}
+    # the parametric schedule's keys only where set: a listed schedule's record (and identity) is what it was
+    c["schedule"] = {k: v for k, v in c["schedule"].items() if v is not None or k not in RULE_KEYS}
     return c
 
 

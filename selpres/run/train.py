@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 from omegaconf import DictConfig
 
-from selpres.data import paper as D
+from selpres.patterns import metric_names
 from selpres.presentation.sampler import shuffle_implementation
 from selpres.presentation.schedule import EpochPlan
 from selpres.presentation.selector import Network
@@ -30,6 +30,7 @@ from selpres.run import floor, lock, orphan, stop
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
 from selpres.run.checks import check_seed
+from selpres.run.hparams import close_job
 from selpres.run.problem import Problem, job_engine, prepare
 from selpres.run.tracking import Tracker
 from selpres.seeding import seed_everything
@@ -155,7 +156,7 @@ def final_scores(engine, prob: Problem) -> dict:
             per_joint = unit_sums.div(n).sqrt()
             scores[unit] = {
                 "overall": _rms(unit_sums, n),
-                **{joint: per_joint[:, k] for k, joint in enumerate(D.metric_names(sums.shape[1])[1:])},
+                **{joint: per_joint[:, k] for k, joint in enumerate(metric_names(sums.shape[1])[1:])},
             }
         scores["nmse"] = floor.nmse(sums * prob.nm2_per_scaled2, n, prob.tests[name][1])  # selpres.run.floor
         out[name] = scores
@@ -246,13 +247,17 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
 
 
 def train(
-    cfg: DictConfig, out_dir: str | Path | None = None, on_stage_end: Callable[[dict, Problem], None] | None = None
+    cfg: DictConfig,
+    out_dir: str | Path | None = None,
+    on_stage_end: Callable[[dict, Problem], None] | None = None,
+    on_epoch: Callable[[dict, Problem], None] | None = None,
 ) -> dict:
     """Train ``cfg.replicas`` replicas through the schedule; returns the results dict.
 
     With ``out_dir`` the job logs to TensorBoard, checkpoints and writes ``results.json`` and ``weights.pt``
     there, and resumes from a checkpoint of the same config (``overwrite=true``: starts afresh).
-    ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it).
+    ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it);
+    ``on_epoch(record, problem)`` after every epoch, before ``on_stage_end`` (the command line's progress line).
     """
     with lock.holding(out_dir):  # one writer per job folder (selpres.run.lock)
         clock = Clock()
@@ -261,6 +266,8 @@ def train(
         with clock("loop"), stop.loop():
             for ep in job.prob.plan[job.progress.epoch :]:
                 rec = run_epoch(job, ep, clock)
+                if on_epoch is not None:
+                    on_epoch(rec, job.prob)
                 spent = job.prob.ledger.exhausted  # every replica spent its budget
                 if on_stage_end is not None and (ep.index in job.prob.stage_ends or spent):
                     on_stage_end(rec, job.prob)
@@ -305,26 +312,7 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
     }
     atomic_write(job.out / WEIGHTS, lambda f: torch.save(trained, f))
     write_json(job.out / RESULTS, results)
-    hp = {
-        "schedule": cfg.schedule.name,
-        "topology": cfg.topology.layers,
-        "seed": cfg.seed,
-        "replicas": len(prob.seeds),
-        "optim": cfg.optim._target_,
-        "lr": cfg.optim.get("lr"),
-        "momentum": cfg.optim.get("momentum"),
-        "batch_size": cfg.optim.batch_size,
-        "sizes": str(prob.schedule.sizes),
-        "epochs": str(prob.schedule.epochs),
-        "order": cfg.schedule.order,
-        "selector": results["selector"]["name"],  # what chose the epochs (a user's class by its import path)
-        "cost_ratio": results["cost"]["cost_ratio"],  # measured: presented and charged over conventional's
-        "engine": results["engine"],
-        "engine_requested": results["engine_requested"],
-    }
-    floor_nm = {f"final/floor_{k}_nm_overall": v["nm"]["overall"] for k, v in results["floor"].items()}
-    cost = {"final/cost_ratio": results["cost"]["cost_ratio"], "final/cost": results["cost"]["presentations"]}
-    job.tracker.close(hp, {**{f"final/{k}": v["mean"] for k, v in results["summary"].items()}, **floor_nm, **cost})
+    close_job(job.tracker, results, job.out)  # HParams, final metrics (selpres.run.tracking)
     if job.ckpts:
         job.ckpts.discard()
     return results

@@ -18,12 +18,13 @@ stopped at the same total cost are compared at one cost by construction. Without
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
 import torch
 
 from selpres.errors import ConfigError
+from selpres.presentation.proportions import fit_schedule
 from selpres.presentation.schedule import EpochPlan, Schedule, Stage
 from selpres.presentation.selector import Ledger, Network, Presentation, Selector
 
@@ -132,13 +133,15 @@ class Policy(Selector):
             raise ConfigError("schedule.epochs", list(epochs), f"one entry [N]: {name} has one stage")
 
     @classmethod
-    def schedule(cls, params: dict, sizes: list, epochs: list | None, n: int, budget: int | None, cost: float):
-        """The epochs the loop may run: ``epochs`` as given, or (budget form) as many as the budget could buy at
-        the policy's cheapest epoch (:meth:`epoch_share`); the loop stops once the budget is spent."""
+    def schedule(cls, node: Mapping, n: int, params: dict, cost: float) -> tuple[Schedule, str | None, int | None]:
+        """The epochs the loop may run: ``epochs`` as given, or (budget form) as many as the budget (fitted to n
+        as a one-stage budget is) could buy at the policy's cheapest epoch (:meth:`epoch_share`), the loop stopping
+        once each replica's is spent."""
+        _, budget, note = fit_schedule(node["sizes"], node.get("budget"), n)
         if budget is None:
-            return Schedule((Stage(n, int(epochs[0])),))
+            return Schedule((Stage(n, int(node["epochs"][0])),)), note, None
         share = cls.epoch_share(cls.check(params, budget=budget, selection_cost=cost), cost)
-        return Schedule((Stage(n, math.ceil(budget / max(n * share, 1e-9)) + 1),))
+        return Schedule((Stage(n, math.ceil(budget / max(n * share, 1e-9)) + 1),)), note, budget
 
     @classmethod
     def epoch_share(cls, params: dict, selection_cost: float) -> float:
