@@ -19,7 +19,7 @@ The block API (imported on first use, so ``import selpres.report`` loads nothing
   ``load_jobs``, ``aggregate``, ``Group`` (one method's replicas on one topology, pooled by seed);
 - what the groups are: ``method_of`` (a job's method as it ran), ``method_labels`` (the one labelling of methods
   every section and study uses), ``job_cost`` and ``replica_costs`` (a job's measured cost: its mean, per replica),
-  ``conventional`` (whether a job was conventional training), ``optim_target``, ``settings``, ``setting_text``,
+  ``presents_all`` (whether a job was conventional training), ``optim_target``, ``settings``, ``setting_text``,
   ``varying``, ``base``, ``SETS``, ``UNITS``;
 - comparisons: ``Options`` and ``Margin`` (the equivalence margin, Holm), ``paired``, ``paired_columns``,
   ``outcome``, ``reading``, ``adjust_family``, ``comparisons``, ``mean_curve``, ``reach``, ``time_to_target_rows``,
@@ -67,7 +67,7 @@ _EXPORTS = {
     "method_labels": "selpres.report.groups",
     "job_cost": "selpres.report.groups",
     "replica_costs": "selpres.report.groups",
-    "conventional": "selpres.report.groups",
+    "presents_all": "selpres.report.groups",
     "settings": "selpres.report.groups",
     "setting_text": "selpres.report.groups",
     "varying": "selpres.report.groups",

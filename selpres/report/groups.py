@@ -105,7 +105,7 @@ def job_cost(res: dict) -> int | float:
     return res["schedule"]["presentations"] + (res.get("selection_presentations") or 0)
 
 
-def conventional(res: dict) -> bool:
+def presents_all(res: dict) -> bool:
     """Whether a finished job's results are conventional training: one stage of all of U, each epoch's every pattern
     presented by the staged selector (a compute-matched run's cut last epoch too). Results written before the
     selector was recorded: one stage and no pruning policy."""

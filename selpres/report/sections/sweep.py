@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from selpres.report.compare import Options, adjust_family, mean_curve, outcome, paired, paired_columns, reading
 from selpres.report.context import Context, Section
-from selpres.report.groups import Group, base, conventional, replica_costs, settings, varying
+from selpres.report.groups import Group, base, presents_all, replica_costs, settings, varying
 from selpres.report.markdown import fmt, signed_interval, table
 from selpres.report.sections import sweep_plots
 from selpres.report.sections.sweep_plots import Point, number
@@ -33,8 +33,8 @@ SCHEDULE = "schedule."
 
 
 def one_stage(g: Group) -> bool:
-    """Conventional training: one stage, every pattern presented (selpres.report.groups.conventional)."""
-    return conventional(g.used[0].results)
+    """Conventional training: one stage, every pattern presented (selpres.report.groups.presents_all)."""
+    return presents_all(g.used[0].results)
 
 
 def _rest(g: Group) -> dict[str, str]:
