@@ -5,7 +5,8 @@ A signal is first of all *recorded* (:func:`requested`), and only then raised wh
 what makes the stop certain: an exception raised at an arbitrary point can be lost (a C extension's start-up that
 clears it, a library's clean-up that replaces it by an error of its own half-built state, a finalizer that
 swallows it), while the record stays, and the job asks for it where it can answer it: when its task function
-starts, at the end of every epoch, and once more before the command exits (:func:`check`). A process that
+starts, at the end of every epoch, and once more before the command exits (:func:`check`); a raise that Python
+itself cannot pass on (in a finalizer) is dropped without its "Exception ignored" traceback. A process that
 received one of these signals therefore never ends as if it had not (exit 0), nor as a broken config (exit 1).
 
 While a stretch that must not be cut runs (an epoch with its checkpoint, the job's own clean-up:
@@ -20,6 +21,7 @@ are :mod:`selpres.run.job`'s (its table of outcomes).
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 from contextlib import contextmanager
 
@@ -52,6 +54,14 @@ def _handler(signum, frame) -> None:
         raise Interrupted(signum)
 
 
+def _unraisable(info) -> None:
+    """An :class:`Interrupted` raised where Python cannot pass it on (a finalizer, a weakref callback such as
+    importlib's module-lock clean-up) is dropped quietly: the record answers it. Anything else goes to the hook
+    that was there."""
+    if not isinstance(info.exc_value, Interrupted):
+        _state["unraisable"](info)
+
+
 def installed() -> bool:
     return signal.getsignal(signal.SIGINT) is _handler
 
@@ -60,6 +70,8 @@ def install() -> None:
     """Handle the signals here (the main thread), with no request pending: a process's first call, before it
     imports anything that takes time."""
     _state["signal"], _state["deferred"] = None, 0
+    if sys.unraisablehook is not _unraisable:
+        _state["unraisable"], sys.unraisablehook = sys.unraisablehook, _unraisable
     for s in SIGNALS:
         signal.signal(s, _handler)
 
