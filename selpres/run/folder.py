@@ -75,8 +75,10 @@ class Before:
         """Remove what this run created and put back what it overwrote; never touch anything else (what cannot be
         put back, in a folder that turned read-only meanwhile, stays, and is said)."""
         close_log(folder)  # nothing logged later (a library's exit message) writes there again
-        if self.created is not None:
-            shutil.rmtree(self.created, ignore_errors=True)
+        if self.created is not None:  # the job's folder, then the folders above it this run made, if still empty
+            shutil.rmtree(folder, ignore_errors=True)
+            if folder != self.created:
+                remove_empty(folder.parent, self.created)
             return
         try:
             for entry in folder.iterdir():

@@ -184,8 +184,9 @@ def _ended(e: BaseException, cfg: DictConfig, out: Path, before: folder.Before, 
 
     if isinstance(e, ConfigError | OmegaConfBaseException):
         why = str(e) if isinstance(e, ConfigError) else cli.hydra_line(e, [])
+        if os.environ.get(FULL_ERROR) and not isinstance(e, ConfigError):
+            traceback.print_exc()  # omegaconf's whole text, as Hydra prints it with HYDRA_FULL_ERROR=1
         if sweep:
-            log.error("config error: %s", why)
             folder.write_failure(out, cfg, why, "config")
         return Ending(REFUSED, {"why": why}), _undo(before, out, sweep)
     kept = folder.checkpointed(out)

@@ -54,8 +54,8 @@ def _command(args: list[str]) -> int:
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors here instead of printing them and exiting 1
     try:
         hydra.main(version_base="1.3", config_path=str(CONFIG_DIR), config_name="train")(job.run)()
-    except job.SweepJobError as e:  # a sweep's job that did not finish: its own line said why, as it ended
-        return stop.STATUS[stop.requested()] if stop.requested() else _say(f"error: {e}", 1)
+    except job.SweepJobError as e:  # a sweep's job that did not finish: its line again (a worker's went to its log)
+        return stop.STATUS[stop.requested()] if stop.requested() else _say(str(e), 1)
     except Exception as e:
         if stop.requested() is not None:  # an error a stop caused (omegaconf's clean-up replacing the interrupt)
             return _say(*_stopped())
