@@ -265,6 +265,8 @@ def stopped_outside(signum: int | None) -> tuple[str | None, int]:
     name, last = signal.Signals(signum).name, _STARTED[-1] if _STARTED else None
     if last is not None and last.outcome in (INTERRUPTED, TERMINATED):
         return None, stop.STATUS[signum]
+    if last is not None and last.outcome.code != 0 and len(_STARTED) == 1:  # it said how it ended, and was exiting
+        return None, last.outcome.code
     for at, created in _CREATED.items():
         folder.remove_empty(at, created)
     if orphan.sweep_parent() is None and os.environ.get(orphan.ENV):  # this process launched a sweep
