@@ -18,6 +18,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_outcomes import says
+
+from selpres.run import outcomes
 
 from conftest import REPO, cfg_of, compose, numbers
 
@@ -182,6 +185,8 @@ def test_sweep_workers_stop_when_the_sweep_is_killed_and_the_rerun_matches(tmp_p
     assert len(kept) >= 2 and not list(sweep.glob("*/results.json"))
     logs = " ".join(p.read_text() for p in sweep.glob("*/train.log"))
     assert logs.count("the sweep that launched this job is gone") == 2
+    said = re.findall(r"\] (the sweep that launched this job is gone .*)", logs)
+    assert len(said) == 2 and all(says(outcomes.ORPHANED, line) for line in said), said  # the table's row
     again = _train(*cmd)
     _, err = again.communicate(timeout=900)
     assert again.returncode == 0, err
@@ -397,6 +402,7 @@ def test_a_write_the_kernel_refuses_is_one_line_and_the_rerun_resumes(tmp_path):
     _, err = p.communicate(timeout=600)
     assert p.returncode == 2, err
     (line,) = err.strip().splitlines()
+    assert says(outcomes.WRITE_FAILED, line)  # the table's row
     assert line.startswith(f"error: cannot write {out}/results.json: File too large (errno 27)")
     assert "the last checkpoint is kept" in line and "Traceback" not in err
     assert (out / "checkpoint.pt").exists() and not list(out.glob(".*.tmp"))

@@ -15,7 +15,10 @@ import time
 
 import pytest
 import torch
+from test_outcomes import says
 from test_resume import COMMON, ROOT, newest_checkpoint, run
+
+from selpres.run import outcomes
 
 from conftest import numbers
 
@@ -50,7 +53,7 @@ def test_a_signal_mid_stage_checkpoints_there_and_the_rerun_resumes_it_exactly(t
     command = shlex.join(["python", "train.py", *COMMON, *ARGS, f"hydra.run.dir={out}"])
     line = f"stopped by {sig.name} after epoch {epoch}: checkpoint written in {out}; resume: {command}"
     assert line in output.splitlines() and "Traceback" not in output, output
-    assert not (out / "results.json").exists()
+    assert says(outcomes.TERMINATED, line) and not (out / "results.json").exists()  # the table's row
 
     resumed = subprocess.run(  # the command the line names, as a user would paste it
         [sys.executable, *shlex.split(line.partition("; resume: ")[2])[1:]],
