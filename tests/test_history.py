@@ -12,6 +12,7 @@ import pickle
 
 import pytest
 import torch
+from test_resume import newest_checkpoint
 
 from selpres.engines.model import init_replica_params
 from selpres.engines.online import make_engine
@@ -159,7 +160,7 @@ def killed_job(folder, monkeypatch):
         job.live(cfg_of(*JOB), folder)
     for name in ("results.json", "weights.pt"):
         (folder / name).unlink()
-    return read(folder / "checkpoint.alt.pt")  # the newer of the two: 9 epochs done of 10
+    return read(newest_checkpoint(folder)[0])  # the newer of the two, whichever name holds it: 9 epochs done of 10
 
 
 def as_legacy(folder, ck, extra: bytes = b"") -> None:

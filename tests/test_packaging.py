@@ -140,6 +140,10 @@ def test_selpres_train_runs_a_job_from_any_folder(installed, tmp_path):
     checkout = json.loads((tmp_path / "checkout" / "results.json").read_text())
     for key in ("summary", "replica_results", "schedule", "config_hash", "engine"):
         assert wheel[key] == checkout[key], key
+    assert (wheel["provenance"]["selpres"]["commit"], wheel["provenance"]["selpres"]["version"]) == (
+        None,
+        checkout["provenance"]["selpres"]["version"],
+    )  # an installed wheel has no commit of its own (issue 39)
 
 
 @pytest.mark.slow

@@ -69,7 +69,10 @@ def main(argv: list[str] | None = None) -> int:
             "that grid); run the report without --readme, or with it on a Table 1 sweep such as "
             "outputs/sweeps/table1"
         )
-    files = report.write(out)
+    try:
+        files = report.write(out)
+    except OSError as e:  # a full disk, a read-only folder (selpres.storage names the file): the results untouched
+        return _error(f"cannot write {e.filename or out}: {e.strerror or e} (errno {e.errno}); run the report again")
     print(report.markdown, end="")
     print(f"report written to {out}/ ({', '.join(files)})", file=sys.stderr)
     if a.readme is not None:
@@ -78,7 +81,10 @@ def main(argv: list[str] | None = None) -> int:
         command = " ".join(
             ["python -m selpres.report", shlex.quote(str(a.dir)), *flags, "--readme", shlex.quote(str(a.readme))]
         )
-        changed = update_readme(a.readme, report.readme_block(command))
+        try:
+            changed = update_readme(a.readme, report.readme_block(command))
+        except OSError as e:
+            return _error(f"cannot write {e.filename or a.readme}: {e.strerror or e} (errno {e.errno})")
         state = "rewritten" if changed else "already up to date"
         print(f"{a.readme}: Table 1 block {state}", file=sys.stderr)
     return 0

@@ -120,6 +120,8 @@ class Report:
             for name, (_, draw) in s.figures.items():
                 try:
                     draw(out / name)
+                except OSError:  # the disk refused the file: the report fails in one line (__main__), no gap
+                    raise
                 except Exception as e:  # the rest of the report is still written (see built)
                     print(f"warning: {name} not drawn: {type(e).__name__}: {e}", file=sys.stderr)
                     continue

@@ -8,10 +8,11 @@ sweep (``orphan``); Ctrl-C, SIGTERM and SIGUSR1 that stop a job with a checkpoin
 determines before the first update
 (``problem``: prepare, job_engine); the loop (``train``: start (resume) -> run_epoch ... -> finish);
 checkpoints and the append-only history (``checkpoint``); TensorBoard (``tracking``); results.json and a job's
-identity (``results``) with the seed statistics (``stats``) and the task's floor (``floor``); the command
-(``main``: ``selpres-train``, which train.py calls: Hydra's main on the package's configs), a job's life in its
-folder (``job``: the lock, skip or refuse, train, and the outcome of ``outcomes``; what a folder holds and how it
-is put back: ``folder``), what the command line prints (``cli``) and ``selpres-export`` (``export``).
+identity (``results``) with the seed statistics (``stats``), the task's floor (``floor``) and what ran
+(``provenance``: versions, commit, platform, native build); the command (``main``: ``selpres-train``, which
+train.py calls: Hydra's main on the package's configs), a job's life in its folder (``job``: the lock, skip or
+refuse, train, and the outcome of ``outcomes``; what a folder holds and how it is put back: ``folder``), what the
+command line prints (``cli``) and ``selpres-export`` (``export``).
 
 May import: every stage above it (``engines``, ``presentation``, ``data``, ``arms``) and the foundation.
 """

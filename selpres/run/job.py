@@ -52,6 +52,17 @@ COMMAND = "SELPRES_COMMAND"  # the command as typed (set by selpres.run.main; a 
 FULL_ERROR = "SELPRES_FULL_ERROR"  # set by selpres.run.main when the user asked for HYDRA_FULL_ERROR=1
 _CREATED: dict[Path, Path | None] = {}  # a single run's folder -> what of its path Hydra was about to create
 _STARTED: list[Ending | None] = []  # the jobs run() began in this process (None while one is under way)
+_UNFINISHED: list[str] = []  # the lines of this process's sweep jobs that did not finish, said when the sweep ends
+
+
+def new_command() -> None:
+    """Forget the jobs of an earlier command in this process (a test's, or a notebook's)."""
+    _CREATED.clear(), _STARTED.clear(), _UNFINISHED.clear()
+
+
+def unfinished() -> list[str]:
+    """The lines of the sweep jobs this process ran that did not finish (the basic launcher's), in order."""
+    return list(_UNFINISHED)
 
 
 class SweepJobError(CompactHydraException):
@@ -241,7 +252,11 @@ def _end(ending: Ending, out: Path, sweep: bool) -> float:
     if sweep:  # named by its folder, among the sweep's other jobs
         line = line.removeprefix("error: ")
         line = line if str(out) in line else f"{out}: {line}"
-    print(line, file=sys.stderr)
+    here = sweep and _sweeps_own_process() and outcome not in (INTERRUPTED, TERMINATED)
+    if here:  # said with the others when the sweep ends (selpres.run.main), after Hydra's own words
+        _UNFINISHED.append(line)
+    else:  # a launcher's worker (its own console or log), or a run that ends here
+        print(line, file=sys.stderr)
     if outcome is ORPHANED:  # this worker process stops (its launcher would hand it the next job)
         logging.shutdown()
         os._exit(outcome.code)
@@ -253,9 +268,14 @@ def _end(ending: Ending, out: Path, sweep: bool) -> float:
             # keeps waiting while SLURM requeues the job (preemption, `scontrol requeue`), which then resumes; a
             # result written here would count the job as done (submitit: done once a result file exists)
             sys.exit(outcome.code)
-        if orphan.sweep_parent() is None:  # the sweep's own process (the basic launcher): the signal stops it
+        if _sweeps_own_process():  # the basic launcher: the signal stops the sweep
             raise stop.Interrupted(stop.requested() or signal.SIGINT, "(said)")
     raise SweepJobError(line) from None
+
+
+def _sweeps_own_process() -> bool:
+    """Whether this process launched the sweep (its jobs run here: the basic launcher, joblib's n_jobs=1)."""
+    return os.environ.get(orphan.ENV, "").split(":")[1:2] == [str(os.getpid())] and orphan.sweep_parent() is None
 
 
 def stopped_outside(signum: int | None) -> tuple[str | None, int]:
@@ -269,7 +289,7 @@ def stopped_outside(signum: int | None) -> tuple[str | None, int]:
         return None, last.outcome.code
     for at, created in _CREATED.items():
         folder.remove_empty(at, created)
-    if orphan.sweep_parent() is None and os.environ.get(orphan.ENV):  # this process launched a sweep
+    if _sweeps_own_process():
         return f"stopped by {name}: the sweep stopped; the same command runs what is unfinished", stop.STATUS[signum]
     if not _STARTED:
         return f"stopped by {name} before the job started: nothing was written", stop.STATUS[signum]

@@ -41,21 +41,30 @@ def main() -> None:
 def _command(args: list[str]) -> int:
     import hydra
 
-    from selpres.run import cli, job
+    from selpres.run import cli, job, orphan
     from selpres.run.config import CONFIG_DIR, retired  # also registers the schema and resolvers
 
     refusal = retired(args)  # before Hydra: its own refusal of an unknown key would not name the new spelling
     if refusal is not None:
         return _say(f"error: {refusal}", 2)
-    os.environ[job.COMMAND] = _as_typed(sys.argv)
+    job.new_command()
     full = os.environ.get("HYDRA_FULL_ERROR") == "1"
+    before = {k: os.environ.get(k) for k in (job.COMMAND, job.FULL_ERROR, "HYDRA_FULL_ERROR", orphan.ENV)}
+    os.environ[job.COMMAND] = _as_typed(sys.argv)  # for the line that says how to resume (a sweep's workers too)
     if full:
         os.environ[job.FULL_ERROR] = "1"
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors here instead of printing them and exiting 1
     try:
         hydra.main(version_base="1.3", config_path=str(CONFIG_DIR), config_name="train")(job.run)()
-    except job.SweepJobError as e:  # a sweep's job that did not finish: its line again (a worker's went to its log)
-        return stop.STATUS[stop.requested()] if stop.requested() else _say(str(e), 1)
+        if stop.requested() is not None:  # a request whose raise was lost after the job answered (or before it ran)
+            return _say(*_stopped())
+        return 0
+    except KeyboardInterrupt:  # while Hydra composed or launched, or as a job said it (then no second line)
+        return _say(*_stopped())
+    except job.SweepJobError as e:  # a sweep's jobs that did not finish: each one's line (a worker's: the first)
+        if stop.requested():
+            return stop.STATUS[stop.requested()]
+        return _say("\n".join(job.unfinished() or [str(e)]), 1)
     except Exception as e:
         if stop.requested() is not None:  # an error a stop caused (omegaconf's clean-up replacing the interrupt)
             return _say(*_stopped())
@@ -65,12 +74,12 @@ def _command(args: list[str]) -> int:
             traceback.print_exc()
         line = cli.hydra_line(e, args)
         return _say(f"error: {line}", 2) if line else _say(f"error: {type(e).__name__}: {e}", 1)
-    finally:
-        if not full:
-            os.environ.pop("HYDRA_FULL_ERROR", None)
-    if stop.requested() is not None:  # a request whose raise was lost after the job answered (or before it ran)
-        return _say(*_stopped())
-    return 0
+    finally:  # the environment as it was (for a caller in the same process)
+        for k, v in before.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def _stopped() -> tuple[str | None, int]:

@@ -8,9 +8,7 @@ the same finished job.
 from __future__ import annotations
 
 import math
-import subprocess
 import time
-from pathlib import Path
 
 import torch
 from omegaconf import DictConfig
@@ -20,7 +18,7 @@ from selpres.data.task import task_files
 from selpres.engines.activations import ACTIVATIONS
 from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.sampler import shuffle_implementation
-from selpres.run import floor
+from selpres.run import floor, provenance
 from selpres.run.optimizer import optim_spec
 from selpres.run.specs import recorded, task_specs
 from selpres.run.stats import summarize
@@ -145,7 +143,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "resumed_from_epoch": progress.resumed_from,
         "stale_checkpoint": progress.stale_checkpoint,
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        "git_commit": _git_commit(),
+        "provenance": provenance.record(),  # versions, commit (selpres's own checkout only), platform, native build
         "wall_seconds": seconds,
         "seconds_per_presentation": seconds["train"] / max(1, training * R),
         "summary": stats,
@@ -157,17 +155,3 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "curves": progress.history,
         "config": recorded(cfg),
     }
-
-
-def _git_commit() -> str | None:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=Path(__file__).parent,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        )
-        return out.stdout.strip() or None
-    except (OSError, subprocess.SubprocessError):
-        return None

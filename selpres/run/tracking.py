@@ -70,7 +70,8 @@ class EventFile:
             self._file.flush()
 
     def close(self) -> None:
-        self._file.close()
+        with naming(self.path):  # the buffer's last bytes are written here: a full disk fails here too
+            self._file.close()
 
 
 def hparams_and_metrics(hparams: dict, metrics: dict) -> tuple[dict, dict]:
