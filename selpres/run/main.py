@@ -4,7 +4,7 @@
 recorded and answered, whatever swallows its raise), has Hydra compose the package's configs
 (:data:`selpres.run.config.CONFIG_DIR`: the same command composes the same config from a checkout, an editable
 install or a wheel, run from any folder) and run :func:`selpres.run.job.run` for each job, and ends the process
-as the job's outcome says (:data:`selpres.run.job.OUTCOMES`). Hydra's own refusal of a command line becomes one
+as the job's outcome says (:data:`selpres.run.outcomes.OUTCOMES`). Hydra's own refusal of a command line becomes one
 line, exit 2 (:func:`selpres.run.cli.hydra_line`; ``HYDRA_FULL_ERROR=1``: Hydra's whole text first). Only Hydra,
 omegaconf and the schema load before Hydra parses the command line: torch and the loop load for a job, not for
 ``--help`` or ``--cfg``.
@@ -23,13 +23,38 @@ from selpres.run import stop
 
 
 def main() -> None:
-    """The console script: the command, then the interpreter's exit made cheap."""
+    """The console script: the signals first, Hydra's main with the job's life as its task, one exit status."""
     stop.install()  # first: a Ctrl-C from here on is recorded and answered (selpres.run.stop)
+    before, code = {}, 0
     try:
-        code = _command(sys.argv[1:])
-    except KeyboardInterrupt:  # while Hydra and the schema load, before any folder: nothing was written
+        import hydra
+
+        from selpres.run import job, orphan
+        from selpres.run.config import CONFIG_DIR, retired  # also registers the schema and resolvers
+
+        refusal = retired(sys.argv[1:])  # before Hydra: its own refusal would not name the new spelling
+        if refusal is not None:
+            sys.exit(_say(f"error: {refusal}", 2))
+        job.new_command()
+        full = os.environ.get("HYDRA_FULL_ERROR") == "1"
+        before = {k: os.environ.get(k) for k in (job.COMMAND, job.FULL_ERROR, "HYDRA_FULL_ERROR", orphan.ENV)}
+        os.environ[job.COMMAND] = _as_typed(sys.argv)  # for the line that says how to resume (a sweep's workers too)
+        if full:
+            os.environ[job.FULL_ERROR] = "1"
+        os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors here instead of printing them and exiting 1
+        hydra.main(version_base="1.3", config_path=str(CONFIG_DIR), config_name="train")(job.run)()
+        if stop.requested() is not None:  # a request whose raise was lost after the job answered (or before it ran)
+            code = _say(*_stopped())
+    except KeyboardInterrupt:  # while Hydra and the schema load or compose, or as a job said it (then no second line)
         code = _say(*_stopped())
+    except Exception as e:
+        code = _failed(e, before.get("HYDRA_FULL_ERROR") == "1")
     finally:
+        for k, v in before.items():  # the environment as it was (for a caller in the same process)
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
         # Everything is written and closed by now; what remains is the interpreter's exit, whose cyclic-garbage
         # passes walk every object torch and Hydra made (0.3-0.5 s of a 2.5 s default run, measured with
         # `python -m selpres.bench.startup`). Frozen objects are skipped by those passes; atexit handlers
@@ -38,48 +63,20 @@ def main() -> None:
     sys.exit(code)
 
 
-def _command(args: list[str]) -> int:
-    import hydra
+def _failed(e: Exception, full: bool) -> int:
+    """An exception out of Hydra: a sweep's jobs that did not finish, a stop's aftermath, or Hydra's refusal."""
+    from selpres.run import cli, job
 
-    from selpres.run import cli, job, orphan
-    from selpres.run.config import CONFIG_DIR, retired  # also registers the schema and resolvers
-
-    refusal = retired(args)  # before Hydra: its own refusal of an unknown key would not name the new spelling
-    if refusal is not None:
-        return _say(f"error: {refusal}", 2)
-    job.new_command()
-    full = os.environ.get("HYDRA_FULL_ERROR") == "1"
-    before = {k: os.environ.get(k) for k in (job.COMMAND, job.FULL_ERROR, "HYDRA_FULL_ERROR", orphan.ENV)}
-    os.environ[job.COMMAND] = _as_typed(sys.argv)  # for the line that says how to resume (a sweep's workers too)
-    if full:
-        os.environ[job.FULL_ERROR] = "1"
-    os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors here instead of printing them and exiting 1
-    try:
-        hydra.main(version_base="1.3", config_path=str(CONFIG_DIR), config_name="train")(job.run)()
-        if stop.requested() is not None:  # a request whose raise was lost after the job answered (or before it ran)
-            return _say(*_stopped())
-        return 0
-    except KeyboardInterrupt:  # while Hydra composed or launched, or as a job said it (then no second line)
+    if isinstance(e, job.SweepJobError):  # each one's line (a worker's: the first, the others are in its log)
+        return stop.STATUS[stop.requested()] if stop.requested() else _say("\n".join(job.unfinished() or [str(e)]), 1)
+    if stop.requested() is not None:  # an error a stop caused (omegaconf's clean-up replacing the interrupt)
         return _say(*_stopped())
-    except job.SweepJobError as e:  # a sweep's jobs that did not finish: each one's line (a worker's: the first)
-        if stop.requested():
-            return stop.STATUS[stop.requested()]
-        return _say("\n".join(job.unfinished() or [str(e)]), 1)
-    except Exception as e:
-        if stop.requested() is not None:  # an error a stop caused (omegaconf's clean-up replacing the interrupt)
-            return _say(*_stopped())
-        if full:
-            import traceback
+    if full:
+        import traceback
 
-            traceback.print_exc()
-        line = cli.hydra_line(e, args)
-        return _say(f"error: {line}", 2) if line else _say(f"error: {type(e).__name__}: {e}", 1)
-    finally:  # the environment as it was (for a caller in the same process)
-        for k, v in before.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+        traceback.print_exc()
+    line = cli.hydra_line(e, sys.argv[1:])
+    return _say(f"error: {line}", 2) if line else _say(f"error: {type(e).__name__}: {e}", 1)
 
 
 def _stopped() -> tuple[str | None, int]:
