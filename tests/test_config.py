@@ -246,7 +246,7 @@ def _config_error(compose_cfg, *ov) -> ConfigError:
         (["+data.theta.lr=3"], "data.theta.lr", "one of the keys lo, hi, step of data.theta"),
         (["~data.theta.step"], "data.theta.step", "a value: data.kind=grid reads it"),
         (["data.test_patterns=1.5"], "data.test_patterns", "a whole number"),
-        (["+data.thetaa=1"], "data.thetaa", "unset (null) for data.kind=grid"),
+        (["+data.thetaa=1"], "data.thetaa", "unset (null): data.kind=grid (selpres.data.routes.grid.Grid) reads"),
         (["data.kind=zigzag"], "data.kind", "one of file, grid, sampled, or a class by its import path"),
         (["schedule.strata_bins=0"], "schedule.strata_bins", "0"),
         (["schedule.order=zigzag"], "schedule.order", "zigzag"),  # an order is a registry name or import path

@@ -102,6 +102,6 @@ def test_which_engine_runs_and_the_recorded_reason(overrides, engine):
     eng = job_engine(cfg, prepare(cfg))
     assert eng.name in engine
     if eng.name == "minibatch":  # engine=fast fell back from the native kernel: it says why (no compiler here ...)
-        assert eng.fallback_reason.startswith("native mini-batch kernel unavailable: ")
+        assert eng.fallback_reason  # the kernel's own reason, whole
     elif eng.name != "torch":  # (torch: the online engines' own fallback, said as such)
         assert eng.fallback_reason is None

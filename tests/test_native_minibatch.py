@@ -13,7 +13,7 @@ import torch
 
 from selpres.engines.minibatch import MiniBatchEngine
 from selpres.engines.model import BPN, init_replica_params, load_into
-from selpres.engines.native_minibatch import NativeMiniBatchEngine, make_minibatch_engine, native_reason
+from selpres.engines.native_minibatch import NativeMiniBatchEngine, native_reason
 
 from conftest import cfg_of, requires_native
 
@@ -206,18 +206,23 @@ def test_what_the_kernel_cannot_run_is_named():
 
 
 def test_fast_falls_back_to_the_torch_engine_and_says_why(monkeypatch, caplog):
-    from selpres.native import KernelUnavailable
+    from selpres.engines.factory import EngineSpec, build_engine
+    from selpres.errors import ConfigError
 
     monkeypatch.setenv("SELPRES_NO_NATIVE", "1")
     params = init_replica_params(SIZES, [0])
-    args = (SIZES, params, "adam", {"lr": 0.01}, B, "relu", "cosine", 100.0)
+    spec = EngineSpec("fast", "minibatch", SIZES, "adam", {"lr": 0.01}, B, "relu", "cosine", 100.0)
     with caplog.at_level(logging.WARNING, logger="selpres"):
-        eng = make_minibatch_engine("fast", *args)
-    assert eng.name == "minibatch" and eng.fallback_reason.endswith("disabled by SELPRES_NO_NATIVE")
-    assert any("disabled by SELPRES_NO_NATIVE" in r.getMessage() for r in caplog.records if r.name == "selpres")
-    with pytest.raises(KernelUnavailable):
-        make_minibatch_engine("native", *args)
-    assert make_minibatch_engine("torch", *args).fallback_reason is None
+        eng = build_engine(spec, params)
+    assert eng.name == "minibatch" and eng.fallback_reason == "disabled by SELPRES_NO_NATIVE"
+    (line,) = [r.getMessage() for r in caplog.records if r.name == "selpres" and r.levelno == logging.WARNING]
+    assert line == (
+        "engine 'fast' runs the minibatch engine: the native minibatch kernel cannot run this job: "
+        "disabled by SELPRES_NO_NATIVE"
+    )
+    with pytest.raises(ConfigError, match="engine='native'.*fast or torch.*disabled by SELPRES_NO_NATIVE"):
+        build_engine(spec.replace(requested="native"), params)
+    assert build_engine(spec.replace(requested="torch"), params).fallback_reason is None
 
 
 JOB = ["optim=adam_minibatch", "model.activation=relu", "replicas=3", "schedule.epochs=[2,2,2,2,2]"]
@@ -249,7 +254,7 @@ def test_engine_native_is_accepted_for_mini_batch_jobs_and_reference_is_not():
 
     validate(cfg_of(*JOB, "engine=native"))
     validate(cfg_of(*JOB, "engine=torch"))
-    with pytest.raises(ConfigError, match="fast, native or torch"):
+    with pytest.raises(ConfigError, match="engine='reference'.*fast, native or torch: .*model.activation=relu"):
         validate(cfg_of(*JOB, "engine=reference"))
 
 

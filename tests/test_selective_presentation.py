@@ -63,7 +63,7 @@ def test_named_schedules_are_the_config_files():
     assert {"infobatch", "selective_backprop"} <= pruning
     from selpres.presentation.pruning import REGISTRY
 
-    assert all(files[name]["pruning"]["_target_"] in REGISTRY.names for name in pruning)  # each a built-in policy
+    assert all(REGISTRY.canonical(files[name]["pruning"]["_target_"]) in REGISTRY.names for name in pruning)
     files = {name: f for name, f in files.items() if name not in pruning}
     assert set(files) == set(NAMED)
     with pytest.raises(ValueError, match="losses.*python train.py schedule=infobatch"):

@@ -15,6 +15,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.core.override_parser.types import Glob
 from omegaconf import OmegaConf
 
+from selpres.engines.optim import OPTIMIZERS
 from selpres.run.checks import validate
 from selpres.run.problem import prepare
 from selpres.run.results import job_hash
@@ -184,7 +185,7 @@ def test_every_rival_runs_its_whole_grid_at_the_papers_cost_and_at_the_selective
         grid: dict[int, set] = {PAPER_COST: set(), SELECTIVE_COST: set()}
         for name in (p for p in POINTS if family(p) == prefix):
             c = point(name)
-            assert c["optim"]["_target_"] == optim and len(c["schedule"]["sizes"]) == 1, name
+            assert OPTIMIZERS.canonical(c["optim"]["_target_"]) == optim and len(c["schedule"]["sizes"]) == 1, name
             assert c["schedule"]["name"] == ("conventional" if stated_cost(name) == PAPER_COST else "matched")
             grid[stated_cost(name)].add(tuple(c["optim"][k] for k in SWEPT[optim]))
         assert grid[PAPER_COST] == grid[SELECTIVE_COST] and len(grid[PAPER_COST]) >= 5, prefix
@@ -230,6 +231,6 @@ def test_a_tiny_sweep_runs_end_to_end_and_reports(tmp_path):
         res = jobs[name]
         assert res["status"] == "complete" and res["seeds"] == [0, 1]
         assert res["presentations_done"] == res["schedule"]["presentations"] == stated_cost(name)
-        assert res["config"]["optim"]["_target_"] == point(name)["optim"]["_target_"]
+        assert res["config"]["optim"]["_target_"] == OPTIMIZERS.canonical(point(name)["optim"]["_target_"])
     report_of(sweep, tmp_path / "r")
     assert (tmp_path / "r" / "report.md").is_file()

@@ -58,9 +58,9 @@ def bench_engine(
     table: EngineTable, name: str, R: int, epochs: int, repeats: int, threads=None, note: str = ""
 ) -> float:
     """One online engine's updates alone; returns ms per replica-run."""
-    from selpres.engines.online import make_engine
+    from selpres.engines.factory import EngineSpec, build_engine
 
-    make = lambda p: make_engine(name, SIZES, p, LR, MOM, 1, threads=threads)
+    make = lambda p: build_engine(EngineSpec.online(name, SIZES, LR, MOM, 1, threads), p)
     eng, sec = time_epochs(make, R, epochs, repeats)
     label = f"{name} engine" if name != "fast" else f"fast engine ({type(eng).__name__})"
     return table.record(label, R, getattr(eng, "threads", 1), epochs, sec, note)

@@ -24,6 +24,7 @@ from selpres.errors import ConfigError
 from selpres.presentation.orders import make_order
 from selpres.presentation.pruning import REGISTRY as PRUNING
 from selpres.presentation.pruning._job import check_pruning
+from selpres.run.config import undeclared
 from selpres.run.estimate import refuse_before_task
 from selpres.run.optimizer import check_optim
 from selpres.run.specs import plain, task_specs
@@ -46,7 +47,11 @@ def _walk(node, prefix=""):
 
 def validate(cfg: DictConfig) -> tuple[int, ...]:
     """Checks that need more than a type; returns the parsed topology. Raises ConfigError."""
-    for key, value in _walk(plain(cfg)):
+    c = plain(cfg)
+    appended = undeclared(c)  # +schedule.p=1: a key no code reads, never recorded as if it ran
+    if appended is not None:
+        raise ConfigError(*appended)
+    for key, value in _walk(c):
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
     activation(cfg.model.activation)  # ConfigError naming model.activation
@@ -110,7 +115,7 @@ def pruning_spec(s: DictConfig) -> tuple[str, dict] | None:
     target = params.pop("_target_", None)
     if target is None:
         raise ConfigError("schedule.pruning._target_", None, PRUNING.allowed())
-    return PRUNING.check(target), params
+    return PRUNING.canonical(PRUNING.check(target)), params
 
 
 def check_seed(cfg: DictConfig) -> None:

@@ -15,12 +15,8 @@ from omegaconf import DictConfig
 from selpres.data import paper as D
 from selpres.data.file import DataFileError
 from selpres.data.task import Task, load_task
-from selpres.engines.batch import BatchEngine
+from selpres.engines.factory import ONLINE, Engine, build_engine, mode_of
 from selpres.engines.model import init_replica_params
-from selpres.engines.native_minibatch import NAME as NATIVE_MINIBATCH
-from selpres.engines.native_minibatch import make_minibatch_engine
-from selpres.engines.online import make_engine
-from selpres.engines.optim import check_hparams, with_defaults
 from selpres.errors import ConfigError
 from selpres.presentation.orders import make_order
 from selpres.presentation.proportions import fit_schedule, with_fraction_form
@@ -30,7 +26,7 @@ from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
 from selpres.presentation.selection import StageSelection, stage_selection
 from selpres.run.checks import pruning_spec, validate
 from selpres.run.estimate import refuse_job
-from selpres.run.optimizer import minibatch_reason, optim_spec
+from selpres.run.optimizer import engine_spec
 from selpres.run.specs import plain, task_specs
 from selpres.seeding import derive_seed, generator
 
@@ -86,9 +82,7 @@ def prepare(cfg: DictConfig) -> Problem:
     task = load_task(*task_specs(cfg))
     schedule, note = task_schedule(cfg, task)
     # scored in torch: batch methods, the mini-batch engine (what the native kernel cannot run), torch/reference
-    torch_eval = (
-        optim_spec(cfg).batch or minibatch_reason(cfg) is not None or cfg.engine.value in ("torch", "reference")
-    )
+    torch_eval = engine_spec(cfg).mode != ONLINE or cfg.engine.value in ("torch", "reference")
     largest_test = max(len(task.tests.heldout.X), len(task.tests.test10.X))
     refuse_job(cfg, sizes, schedule, task.n, largest_test, torch_eval)  # before any replica's state is made
     seed = int(cfg.seed)  # read once: an OmegaConf access costs ~20 us, 1000 of them 23 ms at R = 1000
@@ -150,59 +144,15 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
 
 
 def engine_kind(cfg: DictConfig) -> str:
-    """The update a config's job runs: ``minibatch`` (selpres.engines.minibatch), ``batch`` (one step an epoch)
-    or ``online`` (the native, torch and reference engines: one update rule)."""
-    if minibatch_reason(cfg) is not None:
-        return "minibatch"
-    return "batch" if optim_spec(cfg).batch else "online"
+    """The update a config's job runs (selpres.engines.factory's mode): ``online``, ``minibatch`` or ``batch``."""
+    return engine_spec(cfg).mode
 
 
 def kind_of(engine_name: str | None) -> str:
     """:func:`engine_kind` of an engine that ran (results.json ``engine``; records older than it name none)."""
-    if engine_name == NATIVE_MINIBATCH:  # the mini-batch update, run by the native kernel
-        return "minibatch"
-    return engine_name if engine_name in ("minibatch", "batch") else "online"
+    return mode_of(engine_name)
 
 
-def job_engine(cfg: DictConfig, prob: Problem):
-    """The engine the config asks for; ``engine=native`` where the kernel cannot run is a user error.
-    Batch methods (QuickProp, Delta-Bar-Delta, Rprop, Adam, batch SGD) step once per epoch in torch."""
-    from selpres.native import KernelUnavailable
-
-    o = optim_spec(cfg)
-    kind = engine_kind(cfg)
-    if kind == "minibatch":  # the native mini-batch kernel (fast, native) or the torch mini-batch engine (torch)
-        log.info("engine=%s: the mini-batch update (%s)", cfg.engine.value, minibatch_reason(cfg))
-        try:
-            return make_minibatch_engine(
-                cfg.engine.value,
-                prob.sizes,
-                prob.init_params,
-                o.target,
-                with_defaults(o.target, o.params),  # the optimizer's defaults for unset keys, for both engines
-                o.batch_size,
-                cfg.model.activation,
-                o.lr_schedule,
-                prob.budget,
-                o.reduction,
-            )
-        except KernelUnavailable as exc:
-            raise ConfigError(
-                "engine", "native", f"fast or torch: the native mini-batch kernel cannot run this job ({exc})"
-            ) from None
-    if kind == "batch":
-        return BatchEngine(
-            prob.sizes,
-            prob.init_params,
-            o.target,
-            o.params,
-            sigmoid_prime_offset=o.sigmoid_prime_offset,
-            reduction=o.reduction,
-        )
-    try:
-        hp = check_hparams(o.target, o.params)  # the online rule, SGD with momentum: lr, momentum
-        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, hp["lr"], hp["momentum"], o.batch_size)
-    except KernelUnavailable as exc:
-        raise ConfigError(
-            "engine", cfg.engine.value, f"fast, torch or reference: the native kernel cannot run here ({exc})"
-        ) from None
+def job_engine(cfg: DictConfig, prob: Problem) -> Engine:
+    """The engine the config asks for, on the problem's network and planned cost (selpres.engines.factory)."""
+    return build_engine(engine_spec(cfg).replace(sizes=prob.sizes, horizon=prob.budget), prob.init_params)

@@ -123,7 +123,6 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "topology": cfg.topology.layers,
         "engine": engine.name,  # what ran
         "optimizer": spec.path,  # the class whose rule ran (selpres.engines.optim, or the user's own)
-        "optimizer_dropped": spec.dropped or None,  # keys of the optim group file the chosen class does not take
         "activation": ACTIVATIONS.path_of(cfg.model.activation),  # the hidden units' class that ran (a user's too)
         "engine_requested": cfg.engine.value,
         "engine_fallback": engine.fallback_reason,  # why "fast" did not run natively (None if it did)

@@ -22,7 +22,7 @@ from typing import Any
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import ConfigKeyError, OmegaConfBaseException
 
-from selpres.arms.sources import as_choice
+from selpres.arms.sources import SOURCES, as_choice
 from selpres.data.routes import ROUTES, keys_of
 from selpres.data.spec import COMMON, CommonKeys, DataSpec
 from selpres.errors import ConfigError
@@ -47,8 +47,10 @@ def plain(node: Any) -> Any:
 
 
 def robot_spec(node: Any) -> Choice:
-    """The robot node as (``_target_``, parameters): ConfigError naming ``robot._target_`` when it names none."""
-    return as_choice(plain(node))
+    """The robot node as (``_target_``, parameters), a built-in by its alias: ConfigError naming ``robot._target_``
+    when it names none."""
+    choice = as_choice(plain(node))
+    return Choice(SOURCES.canonical(choice.target), choice.params)
 
 
 def data_spec(node: Any) -> DataSpec:
@@ -67,9 +69,34 @@ def data_spec(node: Any) -> DataSpec:
 
 def recorded(cfg: Any) -> dict:
     """A job's config as plain values, as results.json records it and ``job_hash`` hashes it: the data node as its
-    spec (types converted), with the keys of :data:`TYPED_BEFORE` it lacks as unset."""
-    c = plain(cfg)
+    spec (types converted), with the keys of :data:`TYPED_BEFORE` it lacks as unset, and every registry's choice by
+    one name (:func:`canonical`: ``selpres.engines.optim.adam.Adam`` and ``adam`` are one job)."""
+    c = canonical(plain(cfg))
     c["data"] = {**dict.fromkeys(TYPED_BEFORE), **data_spec(cfg.data).as_dict()}
+    return c
+
+
+def canonical(c: dict) -> dict:
+    """A plain config with each registry's choice by its one name (:meth:`selpres.registry.Registry.canonical`): a
+    built-in named by its import path (the shipped files' spelling) as its alias (the command line's, and every
+    config's before the files named import paths), so hashes and recorded configs stay what they were."""
+    from selpres.engines.activations import ACTIVATIONS
+    from selpres.engines.optim import OPTIMIZERS
+    from selpres.presentation.orders import REGISTRY as ORDERS
+    from selpres.presentation.pruning import REGISTRY as PRUNING
+
+    c = dict(c)
+    for node, key, registry in (
+        ("robot", "_target_", SOURCES),
+        ("optim", "_target_", OPTIMIZERS),
+        ("model", "activation", ACTIVATIONS),
+        ("schedule", "order", ORDERS),
+    ):
+        if isinstance(c.get(node), dict) and key in c[node]:
+            c[node] = {**c[node], key: registry.canonical(c[node][key])}
+    pruning = (c.get("schedule") or {}).get("pruning")
+    if isinstance(pruning, dict) and "_target_" in pruning:
+        c["schedule"] = {**c["schedule"], "pruning": {**pruning, "_target_": PRUNING.canonical(pruning["_target_"])}}
     return c
 
 
