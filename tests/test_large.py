@@ -16,7 +16,7 @@ from omegaconf import OmegaConf
 
 from selpres.report.groups import label_methods
 from selpres.report.jobs import Job
-from selpres.run.checks import validate
+from selpres.run.resolve import resolve
 from selpres.run.specs import plain as to_container
 
 from conftest import compose, load_group
@@ -52,7 +52,7 @@ def test_one_command_runs_both_arms_each_with_its_network_every_n_and_schedule(j
     want = sorted((a, t, n, s) for (a, t), n, s in itertools.product(ARMS.items(), NS, SCHEDULES))
     assert got == want  # 18 jobs; a product of robot x topology would give 36, half of them refused
     for _, c in jobs:
-        sizes = validate(c)  # the network fits the arm's task: 3N inputs, N outputs
+        sizes = resolve(c).sizes  # the network fits the arm's task: 3N inputs, N outputs
         dof = {"two_link": 2, "puma560": 6}[arm_of(c)]
         assert (sizes[0], sizes[-1]) == (3 * dof, dof)
         assert c.data.kind == "sampled" and c.data.heldout == 10_000

@@ -250,35 +250,39 @@ def test_a_job_records_the_engine_that_ran_and_both_agree(tmp_path, monkeypatch)
 
 def test_engine_native_is_accepted_for_mini_batch_jobs_and_reference_is_not():
     from selpres.errors import ConfigError
-    from selpres.run.checks import validate
+    from selpres.run.resolve import resolve
 
-    validate(cfg_of(*JOB, "engine=native"))
-    validate(cfg_of(*JOB, "engine=torch"))
+    resolve(cfg_of(*JOB, "engine=native"))
+    resolve(cfg_of(*JOB, "engine=torch"))
     with pytest.raises(ConfigError, match="engine='reference'.*fast, native or torch: .*model.activation=relu"):
-        validate(cfg_of(*JOB, "engine=reference"))
+        resolve(cfg_of(*JOB, "engine=reference"))
 
 
 def test_engine_native_where_the_kernel_cannot_run_is_a_config_error(monkeypatch):
     from selpres.errors import ConfigError
     from selpres.run.problem import job_engine, prepare
+    from selpres.run.resolve import resolve
 
     monkeypatch.setenv("SELPRES_NO_NATIVE", "1")
     cfg = cfg_of(*JOB, "engine=native")
     with pytest.raises(ConfigError, match="disabled by SELPRES_NO_NATIVE"):
-        job_engine(cfg, prepare(cfg))
+        job = resolve(cfg)
+        job_engine(job, prepare(job))
 
 
 @requires_native
 def test_a_key_left_unset_gets_the_registrys_default_on_both_engines():
     """``optim.weight_decay=null`` with AdamW: the registry's default (0.01) on both engines, so they still agree."""
     from selpres.run.problem import job_engine, prepare
+    from selpres.run.resolve import resolve
 
     engines = []
     order = torch.randint(0, 300, (3, 64), generator=torch.Generator().manual_seed(0))
     for engine in ("native", "torch"):
         cfg = cfg_of(*JOB, "optim._target_=adamw", "optim.weight_decay=null", f"engine={engine}")
-        prob = prepare(cfg)
-        eng = job_engine(cfg, prob)
+        job = resolve(cfg)
+        prob = prepare(job)
+        eng = job_engine(job, prob)
         eng.train_epoch(prob.X, prob.Y, order)
         engines.append(eng)
     assert [e.name for e in engines] == ["minibatch-native", "minibatch"]

@@ -137,10 +137,10 @@ def test_a_built_in_by_its_path_or_its_alias_is_one_job():
     ],
 )
 def test_an_appended_key_no_code_reads_is_refused_in_every_node(overrides, key):
-    from selpres.run.checks import validate
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError) as e:
-        validate(compose(*overrides))
+        resolve(compose(*overrides))
     assert e.value.key == key and e.value.value == 1
 
 

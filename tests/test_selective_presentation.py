@@ -215,9 +215,10 @@ def test_errors_about_the_data():
 
 def test_the_cli_keeps_its_config_key_messages():
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError) as e:
-        prepare(cfg_of("schedule.sizes=[0.05,0.1,1]", "schedule.epochs=[1,1,1]"))
+        prepare(resolve(cfg_of("schedule.sizes=[0.05,0.1,1]", "schedule.epochs=[1,1,1]")))
     assert e.value.key == "schedule.sizes"
 
 
@@ -225,8 +226,9 @@ def test_the_library_sampler_is_the_clis_replica(X):
     """One implementation: seed s with the raw exemplar inputs gives exactly the order and every epoch of the CLI
     job's replica whose seed is s (replica r of seed=4 has seed 4 + r)."""
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
-    prob = prepare(cfg_of("schedule=selective", "seed=4", "replicas=2"))
+    prob = prepare(resolve(cfg_of("schedule=selective", "seed=4", "replicas=2")))
     for r, cli in enumerate(prob.samplers):
         mine = SelectivePresentation(prob.task.exemplar.X, schedule="selective", seed=4 + r)
         assert type(cli) is SelectivePresentation

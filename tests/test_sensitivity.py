@@ -16,8 +16,8 @@ from hydra.core.override_parser.types import Glob
 from omegaconf import OmegaConf
 
 from selpres.engines.optim import OPTIMIZERS
-from selpres.run.checks import validate
 from selpres.run.problem import prepare
+from selpres.run.resolve import resolve
 from selpres.run.results import job_hash
 from selpres.run.specs import plain as to_container
 
@@ -145,7 +145,7 @@ def test_costs_worked_by_hand():
         "qp_c70560_eps0.001_mu1.75": 70_560,  # a budget: 70 epochs of 1002 (70,140) + 420 of the 71st
     }
     for name, cost in by_hand.items():
-        assert prepare(composed(name)).schedule.presentations == cost
+        assert prepare(resolve(composed(name))).schedule.presentations == cost
 
 
 @pytest.mark.parametrize(
@@ -153,8 +153,7 @@ def test_costs_worked_by_hand():
 )
 def test_each_design_point_validates_and_costs_what_its_file_says(name):
     cfg = composed(name)
-    validate(cfg)
-    sch = prepare(cfg).schedule
+    sch = prepare(resolve(cfg)).schedule
     assert sch.presentations == stated_cost(name) == presentations(point(name)["schedule"])
 
 
