@@ -58,10 +58,10 @@ def check_plain(c: dict) -> None:
 def check(job: JobSpec) -> tuple[int, ...]:
     """Every check of a read job that needs no exemplar set, before the task is built but the last two (they build
     the arm or read a data file's header); returns the topology's widths, which fit the task."""
+    check_run(job.replicas, job.seed, job.threads, job.cadence)
     check_optim(job.optim, job.engine)  # the optimizer's keys, its modes against the units and the engine
     activation(job.activation)  # a built-in or an importable class with forward and prime (model.activation)
     check_schedule(job.schedule, job.optim)
-    check_run(job.replicas, job.seed, job.threads, job.cadence)
     refuse_before_task(job.replicas, job.layers, job.schedule)  # replicas=10^9: before the task is built
     return check_topology(job.layers, check_task(job.robot, job.data))
 

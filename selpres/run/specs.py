@@ -164,7 +164,6 @@ def optim_spec(node: Any) -> OptimSpec:
         )
     if "_target_" not in o:
         raise ConfigError(KEY, None, OPTIMIZERS.allowed())
-    target = OPTIMIZERS.canonical(OPTIMIZERS.check(o["_target_"]))
     b = o.get("batch_size")
     if isinstance(b, bool) or not isinstance(b, int) or b < 0:
         raise ConfigError(
@@ -173,6 +172,7 @@ def optim_spec(node: Any) -> OptimSpec:
     if o["lr_schedule"] not in LR_SCHEDULES:
         raise ConfigError("optim.lr_schedule", o["lr_schedule"], f"one of {', '.join(LR_SCHEDULES)}")
     offset, reduction = check_batch_options(o["sigmoid_prime_offset"], o["reduction"])
+    target = OPTIMIZERS.canonical(OPTIMIZERS.check(o["_target_"]))
     params = {k: v for k, v in o.items() if k != "_target_" and k not in HOW and v is not None}
     return OptimSpec(target, params, b, reduction, o["lr_schedule"], offset)
 
