@@ -14,6 +14,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf
 
+from selpres.arms.sources import SOURCES
 from selpres.report.groups import label_methods
 from selpres.report.jobs import Job
 from selpres.run.resolve import resolve
@@ -39,7 +40,7 @@ def swept_jobs(*command: str) -> list[list[str]]:
 
 
 def arm_of(cfg) -> str:
-    return cfg.robot.get("name") or cfg.robot._target_  # the two-link file sets no name
+    return cfg.robot.get("name") or SOURCES.canonical(cfg.robot._target_)  # the two-link file sets no name
 
 
 @pytest.fixture(scope="module")
@@ -112,6 +113,7 @@ def test_each_folder_is_named_by_its_overrides_inside_one_folder_per_n(jobs):
 def job(name: str, topology: str, robot: str, n: int, **robot_changes) -> Job:
     """A finished job as the report reads it: only the config matters for its label."""
     arm = {**to_container(load_group("robot", robot)), **robot_changes}
+    arm["_target_"] = SOURCES.canonical(arm["_target_"])  # results.json records a built-in source by its alias
     config = {"schedule": {"name": name}, "topology": {"layers": topology}, "robot": arm, "data": {"n": n}}
     return Job(Path(f"{robot}-{topology}-{name}-{n}"), "complete", name, topology, results={"config": config})
 

@@ -62,8 +62,10 @@ def parse_spec(node: Any, prefix: str, cls: type) -> Any:
         ("_target_", "kind", "name", "gravity", "end_point", "base", "tip", "convention", "links"),
         ("gravity", "links"),
     )
-    for k in ("_target_", "kind"):  # a robot node (configs/robot/*.yaml) or an arm's description (to_config)
-        if top.get(k, "serial") != "serial":
+    from selpres.arms.sources import SOURCES  # here: the sources build arms from this module
+
+    for k in ("_target_", "kind"):  # a robot node (configs/robot/*.yaml: its import path) or an arm's description
+        if SOURCES.canonical(top.get(k, "serial")) != "serial":
             raise ConfigError(f"{prefix}.{k}", top[k], "'serial' for selpres.arms.serial.SerialArm")
     convention = top.get("convention", "urdf")
     if convention not in ("urdf", "dh"):
