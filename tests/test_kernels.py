@@ -143,7 +143,7 @@ def test_wide_layer_does_not_overflow_the_stack(tmp_path):
     so a crash fails this test instead of killing pytest."""
     code = textwrap.dedent("""
         import torch
-        from conftest import online_engine
+        from selpres.engines.factory import EngineSpec, build_engine
         from selpres.engines.model import init_replica_params
         sizes = (6, 40000, 2)
         g = torch.Generator().manual_seed(0)
@@ -153,7 +153,7 @@ def test_wide_layer_does_not_overflow_the_stack(tmp_path):
         order = torch.tensor([[3, 1, 4, 0, 2]])
         out = []
         for name in ("native", "reference"):
-            eng = online_engine(name, sizes, params, 0.15, 0.9, 1, threads=1)
+            eng = build_engine(EngineSpec.online(name, sizes, 0.15, 0.9, 1, threads=1), params)
             out.append((eng.train_epoch(X, Y, order), eng.params()))
         (la, pa), (lb, pb) = out
         assert (la - lb).abs().max() <= 1e-12, (la, lb)
