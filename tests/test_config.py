@@ -108,7 +108,9 @@ def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, g
     assert len(prob.samplers) == len(prob.seeds) == cfg.replicas
     if group == "schedule":
         raw = OmegaConf.load(CONFIGS / "schedule" / f"{option}.yaml")
-        if raw.get("budget") is not None:
+        if raw.get("p") is not None:  # the parametric schedule: p + 1 stages, ΣN_i its total (tests/test_stages.py)
+            assert prob.schedule.p == raw.p and sum(prob.schedule.epochs) == raw.total_epochs
+        elif raw.get("budget") is not None:
             assert prob.schedule.presentations == raw.budget
         else:
             assert prob.schedule.epochs == list(raw.epochs)

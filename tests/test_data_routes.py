@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from selpres.data import paper as D
+from selpres.patterns import ExemplarSet, Patterns, TestSets
 from selpres.data.routes import DataRoute
 from selpres.data.task import Shape, Task, check_test_split
 from selpres.errors import ConfigError
@@ -50,12 +50,12 @@ class Line(DataRoute):
 
     def build(self, robot, data):
         x = torch.linspace(0.0, 1.0, data.n, dtype=torch.float64)[:, None]
-        exemplar = D.ExemplarSet(x, data.slope * x, n_candidates=data.n)
+        exemplar = ExemplarSet(x, data.slope * x, n_candidates=data.n)
         n_test, n_ex = check_test_split(data, data.n)
         held = torch.linspace(0.005, 0.995, 99, dtype=torch.float64)[:, None]
         t10 = torch.cat((x[:n_ex], held[: n_test - n_ex]))
-        tests = D.TestSets(D.Patterns(t10, data.slope * t10), torch.arange(n_test) < n_ex,
-                           D.Patterns(held, data.slope * held))
+        tests = TestSets(Patterns(t10, data.slope * t10), torch.arange(n_test) < n_ex,
+                         Patterns(held, data.slope * held))
         task = Task(exemplar, tests, None, ("x",), ("y",), {"kind": "line", "source": "data=line", "n": data.n})
         return replace(task, scaler=task.fit_scaler(data))
 
@@ -82,8 +82,9 @@ def test_a_new_route_is_one_module_and_one_yaml(tmp_path):
     registry lists it, ``data=line`` composes, validates and builds, its keys' types are checked as the schema
     checked the built-ins' (``data.slope=abc`` refused naming the key), its own check runs."""
     shutil.copytree(REPO / "selpres", tmp_path / "selpres", ignore=shutil.ignore_patterns("__pycache__", "*.so"))
+    shutil.copytree(REPO / "configs", tmp_path / "configs")
     (tmp_path / "selpres" / "data" / "routes" / "line.py").write_text(LINE)
-    (tmp_path / "selpres" / "configs" / "data" / "line.yaml").write_text(LINE_YAML)
+    (tmp_path / "configs" / "data" / "line.yaml").write_text(LINE_YAML)
     code = f"""
 import sys; sys.path.insert(0, sys.argv[1])
 import selpres
@@ -201,3 +202,17 @@ def test_recorded_configs_keep_the_keys_and_hash_of_the_typed_schema():
     # the hashes main gave these configs before the data node was opened (a0ffa29)
     assert job_hash(compose()) == "d8fadaa1d4080fe3"
     assert job_hash(compose("data=sampled")) == "a18ed62083ecded8"
+
+
+def test_a_spec_reads_by_name_as_a_dict_and_a_config_node_do():
+    """The data room's functions read their node by name (``data["theta"]``): a spec, a plain dict and a config node
+    alike, so no room below ``run`` needs a config reader; a key the route does not have is a KeyError naming it."""
+    from selpres.run.specs import data_spec, plain
+
+    node = compose("data=sampled").data
+    spec = data_spec(node)
+    for key in ("kind", "heldout", "scaling", "q", "accel_limit"):  # common keys and the route's own
+        assert spec[key] == plain(node)[key] == plain(node[key]), key
+    assert spec["accel_limit"] == spec.accel_limit
+    with pytest.raises(KeyError, match="theta"):
+        spec["theta"]  # the grid route's key: not one of data.kind=sampled

@@ -129,11 +129,11 @@ TOL = 1e-12
 @pytest.fixture(scope="module")
 def scaled_exemplar(exemplar):
     """The exemplar set as the network sees it (inputs and targets in [0.1, 0.9])."""
-    from selpres.data.paper import Scaler
+    from selpres.patterns import Scaler
 
     from conftest import load_group
 
-    scaler = Scaler.fit(exemplar, load_group("data", "paper"))
+    scaler = Scaler.fit(exemplar, load_group("data", "paper").scaling)
     return scaler.transform_x(exemplar.X), scaler.transform_y(exemplar.Y)
 
 

@@ -127,7 +127,7 @@ def test_a_built_in_by_its_path_or_its_alias_is_one_job():
 @pytest.mark.parametrize(
     "overrides, key",
     [
-        (["+schedule.p=1"], "schedule.p"),
+        (["+schedule.q=1"], "schedule.q"),
         (["+eval.foo=1"], "eval.foo"),
         (["+foo=1"], "foo"),
         (["+optim.foo=1"], "optim.foo"),
@@ -147,7 +147,7 @@ def test_an_appended_key_no_code_reads_is_refused_in_every_node(overrides, key):
 @pytest.mark.parametrize(
     "overrides, refused",
     [
-        (["-m", "+schedule.p=1,2"], "schedule.p=1,2: schedule has no such key"),
+        (["-m", "+schedule.q=1,2"], "schedule.q=1,2: schedule has no such key"),
         (["+model.units=3"], "model.units=3: model has no such key (it declares activation)"),
         (["+experiment=table1", "+data.n=30", "+optim.foo=1", "+hydra.job.foo=1"], None),  # groups; open nodes
     ],
@@ -158,13 +158,14 @@ def test_the_command_line_refuses_an_appended_key_before_hydra_starts(overrides,
 
 
 def test_a_sweep_over_an_unread_key_is_refused_before_any_job(tmp_path):
-    """``-m +schedule.p=1,2`` ran p = 4 twice and recorded p: 1 and p: 2; now: one line, exit 2, nothing written."""
+    """``-m +schedule.p=1,2`` ran p = 4 twice and recorded p: 1 and p: 2 (before the schema declared p); a key the
+    schema does not declare is now refused in one line, exit 2, nothing written, before any job."""
     import subprocess
 
     env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
     sweep = tmp_path / "sweep"
     done = subprocess.run(
-        [sys.executable, "train.py", "-m", "+schedule.p=1,2", f"hydra.sweep.dir={sweep}"],
+        [sys.executable, "train.py", "-m", "+schedule.q=1,2", f"hydra.sweep.dir={sweep}"],
         cwd=REPO,
         env=env,
         capture_output=True,
@@ -173,5 +174,5 @@ def test_a_sweep_over_an_unread_key_is_refused_before_any_job(tmp_path):
     )
     assert done.returncode == 2 and not sweep.exists(), done.stderr[-2000:]
     (line,) = done.stderr.strip().splitlines()
-    assert line.startswith("error: schedule.p=1,2: schedule has no such key (it declares name, sizes, epochs")
+    assert line.startswith("error: schedule.q=1,2: schedule has no such key (it declares name, sizes, epochs")
     assert line.endswith("): no code would read it")

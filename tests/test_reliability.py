@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from selpres.run.checkpoint import Checkpoints
+
 from conftest import REPO, cfg_of, compose, numbers
 
 TINY = ["data.heldout=300", "eval.heldout_curve=300", "logging.progress=false"]
@@ -91,7 +93,7 @@ def test_two_processes_on_one_folder_history_once_each(tmp_path, kill):
     first = _train(*args)
     time.sleep(0.3)
     second = _train(*args)
-    _wait_for(lambda: (out / "checkpoint.pt").exists() or first.poll() is not None, what="a checkpoint")
+    _wait_for(lambda: Checkpoints.present(out) or first.poll() is not None, what="a checkpoint")
     if kill:
         first.send_signal(signal.SIGKILL)
         second.send_signal(signal.SIGKILL)
@@ -171,7 +173,7 @@ def test_sweep_workers_stop_when_the_sweep_is_killed_and_the_rerun_matches(tmp_p
     ]
     cmd = ["-m", "hydra/launcher=local2", f"hydra.sweep.dir={sweep}", *job, "seed=0,1"]
     parent = _train(*cmd)
-    _wait_for(lambda: len(list(sweep.glob("*/checkpoint.pt"))) == 2, what="both jobs' checkpoints")
+    _wait_for(lambda: sum(map(Checkpoints.present, sweep.glob("*/"))) == 2, what="both jobs' checkpoints")
     workers = _children(parent.pid)
     assert len(workers) >= 2  # two loky workers (and resource trackers)
     parent.send_signal(signal.SIGKILL)
@@ -373,7 +375,7 @@ def test_a_kill_during_the_final_writes_is_cleaned_up_by_the_rerun(tmp_path, mon
     monkeypatch.undo()
     (out / ".results.json.x1y2.tmp").write_bytes(b"half")
     (out / "notes.txt").write_text("the user's")
-    assert (out / "checkpoint.pt").exists() and (out / "history.jsonl").exists()
+    assert Checkpoints.present(out) and (out / "history.jsonl").exists()  # either name of the pair holds one
     before = (out / "results.json").read_bytes()
     cli._run_locked(cfg, out, multirun=False)
     names = sorted(p.name for p in out.iterdir())
@@ -401,7 +403,7 @@ def test_a_write_the_kernel_refuses_is_one_line_and_the_rerun_resumes(tmp_path):
     (line,) = err.strip().splitlines()
     assert line.startswith(f"error: cannot write {out}/results.json: File too large (errno 27)")
     assert "the last checkpoint is kept" in line and "Traceback" not in err
-    assert (out / "checkpoint.pt").exists() and not list(out.glob(".*.tmp"))
+    assert Checkpoints.present(out) and not list(out.glob(".*.tmp"))  # either name of the pair: the re-run resumes
     again = _train(*args)
     _, err = again.communicate(timeout=600)
     assert again.returncode == 0, err

@@ -64,7 +64,8 @@ def test_named_schedules_are_the_config_files():
     from selpres.presentation.pruning import REGISTRY
 
     assert all(REGISTRY.canonical(files[name]["pruning"]["_target_"]) in REGISTRY.names for name in pruning)
-    files = {name: f for name, f in files.items() if name not in pruning}
+    # the parametric schedule (stages.yaml) is the config's; its instances, the presets, are NAMED
+    files = {name: f for name, f in files.items() if name not in pruning and "p" not in f}
     assert set(files) == set(NAMED)
     with pytest.raises(ValueError, match="losses.*python train.py schedule=infobatch"):
         SelectivePresentation(torch.rand(100, 6), schedule="infobatch")
@@ -428,8 +429,8 @@ def test_examples_run(tmp_path):
 
 
 def test_the_bench_row_runs(capsys):
-    """selpres/bench/sampler.py on a small set: one row per loop kind, both samplers present n every epoch."""
-    from selpres.bench.sampler import bench_sampler
+    """studies/selpres_bench/sampler.py on a small set: one row per loop kind, both samplers present n every epoch."""
+    from selpres_bench.sampler import bench_sampler
 
     bench_sampler(quick=True, n=3000, batch=64)
     rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("sampler  ")]

@@ -90,8 +90,8 @@ def test_compute_matched_schedule_spends_the_budget():
 
 def test_saved_weights_and_scaler_reproduce_the_reported_error(tmp_path):
     """weights.pt is enough to use a trained net: BPN + saved scaler give results.json's held-out RMS."""
-    from selpres.data.paper import Scaler, rms_errors
     from selpres.engines.model import BPN, load_into
+    from selpres.patterns import Scaler, rms_errors
     from selpres.run.problem import prepare
     from selpres.run.resolve import resolve
 

@@ -3,10 +3,10 @@
 A ``data`` node is open: ``kind`` names its route (a built-in of ``selpres.data.routes`` or a route class by its
 import path), the keys below (:class:`CommonKeys`) are every route's, and the rest are the route's own, declared
 by its ``Keys`` dataclass. ``DataSpec`` holds the common keys as fields and the route's keys in ``params``, as
-plain values (strings for enums, dicts for nested nodes, lists for boxes); the route's keys read by attribute as
-well (``data.n``, ``data.theta``), so the functions of this room read a spec as they read a plain dict
-(``cfg_get``). The dataclasses here say the types; ``selpres.run.specs`` checks a composed node against them
-(this room imports no omegaconf), so a new route's keys edit no schema.
+plain values (strings for enums, dicts for nested nodes, lists for boxes); every key reads by name
+(``data["theta"]``), so the functions of this room read a spec as they read a plain dict or a config node, and the
+route's keys by attribute as well (``data.n``). The dataclasses here say the types; ``selpres.run.specs`` checks a
+composed node against them (this room imports no omegaconf), so a new route's keys edit no schema.
 """
 
 from __future__ import annotations
@@ -66,6 +66,13 @@ class DataSpec:
         if name in params:
             return params[name]
         raise AttributeError(f"data.{name}: not a key of data.kind={self.__dict__.get('kind')}")
+
+    def __getitem__(self, key: str) -> Any:
+        """Any key by name, a common one or the route's (``data["theta"]``), as a plain dict reads it."""
+        try:
+            return getattr(self, key)
+        except AttributeError as e:
+            raise KeyError(key) from e
 
     @classmethod
     def of(cls, node: Mapping[str, Any]) -> DataSpec:

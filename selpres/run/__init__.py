@@ -8,7 +8,8 @@ the optimizer's in ``optimizer``, the memory and time estimates of ``estimate``)
 checkpoint written (``stop``); what a resolved job determines before the first update (``problem``: prepare,
 job_engine); the loop (``train``: resolve -> start (resume) -> run_epoch ... -> finish, reading the JobSpec);
 checkpoints and the append-only history (``checkpoint``); TensorBoard (``tracking``); results.json and a job's
-identity (``results``) with the seed statistics (``stats``) and the task's floor (``floor``); the guard that
+identity (``results``) with the seed statistics (``stats``), the task's floor (``floor``) and what ran
+(``provenance``: versions, commit, platform, native build); the guard that
 train.py imports before Hydra starts (``guard``: lock, what a refusal removes, Ctrl-C), Hydra's main on the
 package's configs (``main``: ``selpres-train``, which train.py calls), the task function around ``train()``
 (``cli``) and ``selpres-export`` (``export``).

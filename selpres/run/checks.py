@@ -21,6 +21,7 @@ from selpres.engines.activations import activation
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.errors import ConfigError
 from selpres.presentation.orders import make_order
+from selpres.presentation.proportions import check_form
 from selpres.presentation.pruning._job import check_pruning
 from selpres.registry import Choice
 from selpres.run.config import undeclared
@@ -69,6 +70,7 @@ def check(job: JobSpec) -> tuple[int, ...]:
 def check_schedule(s: ScheduleSpec, optim: OptimSpec) -> None:
     """The order, the pruning policy around the schedule and the optimizer, the strata and the choosing charge."""
     make_order(s.order)  # a built-in or an importable Order: ConfigError naming schedule.order
+    check_form(s.node)  # listed sizes or the parametric keys, not both (selpres.presentation.proportions)
     if s.pruning is not None:
         kw = dict(sizes=s.sizes, order=s.order, budget=s.budget, epochs=s.epochs, selection_cost=s.selection_cost)
         check_pruning(*s.pruning, **kw)

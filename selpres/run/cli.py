@@ -34,7 +34,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from selpres.errors import ConfigError
-from selpres.run import guard, lock, optimizer, orphan, stop
+from selpres.run import guard, lock, optimizer, orphan, progress, stop
 from selpres.run.checkpoint import Checkpoints
 from selpres.run.problem import Problem, engine_kind, kind_of
 from selpres.run.results import job_hash
@@ -180,7 +180,8 @@ def _run_locked(cfg: DictConfig, out: Path, multirun: bool) -> float:
             log.info("already done: %s (overwrite=true to run it again)", out / RESULTS)
             _leftovers(out, cfg)
         else:
-            res = train(cfg, out, on_stage_end=print_stage if cfg.logging.progress else None)
+            line = progress.EpochLine.for_run(multirun) if cfg.logging.progress else None  # a terminal's line
+            res = train(cfg, out, on_stage_end=print_stage if cfg.logging.progress else None, on_epoch=line)
     except orphan.SweepGone as e:
         _orphaned(out, str(e))
     except ConfigError as e:

@@ -208,8 +208,9 @@ class Work:
 
 def refuse_job(w: Work) -> None:
     """The full estimate, once the exemplar set's size and the schedule are known (before any replica)."""
-    budget, written = w.planned.budget, w.planned.epochs
-    key, value = ("schedule.budget", budget) if budget is not None else ("schedule.epochs", list(written))
+    s = w.planned.node  # what sets the plan's length: a budget, the epochs listed, or ΣN_i (the parametric schedule)
+    name = next((k for k in ("budget", "epochs", "total_epochs") if s.get(k) is not None), "epochs")
+    key, value = f"schedule.{name}", list(s[name]) if name == "epochs" and s.get(name) is not None else s.get(name)
     epochs, presentations = w.schedule.total_epochs, w.schedule.presentations
     make = lambda r: estimate(r, w.sizes, w.n, epochs, presentations, w.test_patterns, w.torch_eval, w.heldout_every)
     refuse_unfit(make, int(w.replicas), key, value)

@@ -42,7 +42,7 @@ def main() -> None:
     finally:
         # Everything is written and closed by now; what remains is the interpreter's exit, whose cyclic-garbage
         # passes walk every object torch and Hydra made (0.3-0.5 s of a 2.5 s default run, measured with
-        # `python -m selpres.bench.startup`). Frozen objects are skipped by those passes; atexit handlers
+        # `python -m selpres_bench.startup`). Frozen objects are skipped by those passes; atexit handlers
         # (logging's flush, weakref finalizers) still run.
         gc.freeze()
 

@@ -12,17 +12,17 @@ from dataclasses import dataclass
 
 import torch
 
-from selpres.data import paper as D
 from selpres.data.file import DataFileError
 from selpres.data.task import Task, load_task
 from selpres.engines.factory import ONLINE, Engine, build_engine
 from selpres.engines.model import init_replica_params
 from selpres.errors import ConfigError
+from selpres.patterns import Scaler
 from selpres.presentation.orders import make_order
-from selpres.presentation.proportions import fit_schedule, with_fraction_form
+from selpres.presentation.proportions import fit_schedule, schedule_of
 from selpres.presentation.pruning._job import Pruning, pruning_plan
 from selpres.presentation.sampler import SelectivePresentation
-from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
+from selpres.presentation.schedule import EpochPlan, Schedule
 from selpres.presentation.selection import StageSelection, stage_selection
 from selpres.run.estimate import Work, refuse_job
 from selpres.run.resolve import engine_kind, kind_of
@@ -39,7 +39,7 @@ class Problem:
     sizes: tuple[int, ...]
     schedule: Schedule
     seeds: list[int]
-    scaler: D.Scaler
+    scaler: Scaler
     X: torch.Tensor  # exemplar inputs, scaled
     Y: torch.Tensor  # exemplar targets, scaled
     tests: dict  # name -> (X scaled, Y in Nm)
@@ -119,14 +119,17 @@ def task_schedule(sch: ScheduleSpec, task: Task) -> tuple[Schedule, str | None]:
     """The schedule on the task's n: the paper's counts by their proportions when n is not 1002
     (``selpres.presentation.proportions``, logged), refusals with the fraction form, and a data file too short for
     the schedule named as such."""
-    sizes, budget, note = fit_schedule(sch.sizes, sch.budget, task.n)
-    if note:
-        log.info(note)
     if sch.pruning is not None:  # checked in resolve: sizes [1.0], a budget or one epoch count
+        sizes, budget, note = fit_schedule(sch.sizes, sch.budget, task.n)
+        if note:
+            log.info(note)
         epochs = None if sch.epochs is None else int(sch.epochs[0])
         return pruning_plan(*sch.pruning, task.n, budget, epochs, float(sch.selection_cost)), note
     try:
-        return build_schedule(sizes, sch.epochs, task.n, budget), note
+        schedule, note = schedule_of(sch.node, task.n)  # listed or parametric (selpres.presentation.proportions)
+        if note:
+            log.info(note)
+        return schedule, note
     except ConfigError as e:
         if e.key == "schedule.sizes" and task.info.get("kind") == "file":
             i = task.info
@@ -137,7 +140,7 @@ def task_schedule(sch: ScheduleSpec, task: Task) -> tuple[Schedule, str | None]:
                 f"holding out {i['heldout']:,}): too few for schedule.sizes={sch.sizes} "
                 f"({e.allowed})",
             ) from None
-        raise with_fraction_form(e, sizes) from None
+        raise
 
 
 def job_engine(job: JobSpec, prob: Problem) -> Engine:

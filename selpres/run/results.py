@@ -8,9 +8,7 @@ threads, checkpoints, the sweep's name, overwrite) are left out, so changing the
 from __future__ import annotations
 
 import math
-import subprocess
 import time
-from pathlib import Path
 
 import torch
 from omegaconf import DictConfig
@@ -19,7 +17,7 @@ from selpres.engines.activations import ACTIVATIONS
 from selpres.engines.factory import Engine
 from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.sampler import shuffle_implementation
-from selpres.run import floor
+from selpres.run import floor, provenance
 from selpres.run.specs import JobSpec, identity, recorded, task_specs
 from selpres.run.stats import summarize
 
@@ -134,7 +132,7 @@ def build(job: JobSpec, prob, engine: Engine, final: dict, progress, seconds: di
         "resumed_from_epoch": progress.resumed_from,
         "stale_checkpoint": progress.stale_checkpoint,
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        "git_commit": _git_commit(),
+        "provenance": provenance.record(),  # versions, commit (selpres's own checkout only), platform, native build
         "wall_seconds": seconds,
         "seconds_per_presentation": seconds["train"] / max(1, training * R),
         "summary": stats,
@@ -146,17 +144,3 @@ def build(job: JobSpec, prob, engine: Engine, final: dict, progress, seconds: di
         "curves": progress.history,
         "config": job.config,
     }
-
-
-def _git_commit() -> str | None:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=Path(__file__).parent,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        )
-        return out.stdout.strip() or None
-    except (OSError, subprocess.SubprocessError):
-        return None

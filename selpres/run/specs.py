@@ -38,6 +38,7 @@ from selpres.engines.optim import KEY, OPTIMIZERS, modes
 from selpres.engines.optim._base import MINIBATCH, ONLINE
 from selpres.errors import ConfigError
 from selpres.presentation.orders import REGISTRY as ORDERS
+from selpres.presentation.proportions import RULE_KEYS
 from selpres.presentation.pruning import REGISTRY as PRUNING
 from selpres.registry import Choice
 from selpres.storage import stable_hash
@@ -85,13 +86,14 @@ def data_spec(node: Any) -> DataSpec:
 
 @dataclass(frozen=True)
 class ScheduleSpec:
-    """The schedule node: the stages as written (``sizes``: counts or fractions of n; ``epochs`` per stage, or a
-    ``budget`` of presentations), the order that grows A_i (a built-in's alias or an import path), its strata, the
-    charge per candidate scored, and the pruning policy (its alias or import path, its parameters) or None.
-    ``node``: the whole node as plain values, for a schedule's keys of its own."""
+    """The schedule node: the stages as written (``sizes``: counts or fractions of n, None in the parametric form;
+    ``epochs`` per stage, or a ``budget`` of presentations), the order that grows A_i (a built-in's alias or an import
+    path), its strata, the charge per candidate scored, and the pruning policy (its alias or import path, its
+    parameters) or None. ``node``: the whole node as plain values, the parametric form's keys included
+    (``selpres.presentation.proportions.schedule_of`` reads them)."""
 
     name: str
-    sizes: list
+    sizes: list | None
     epochs: list[int] | None
     budget: int | None
     order: str
@@ -103,9 +105,10 @@ class ScheduleSpec:
 
 def schedule_spec(node: Any) -> ScheduleSpec:
     s = plain(node)
-    epochs = None if s["epochs"] is None else list(s["epochs"])
+    sizes = None if s.get("sizes") is None else list(s["sizes"])  # None: the parametric form (p, first, growth, ...)
+    epochs = None if s.get("epochs") is None else list(s["epochs"])
     order = ORDERS.canonical(s["order"])
-    args = (s["name"], list(s["sizes"]), epochs, s["budget"], order, s["strata_bins"], s["selection_cost"])
+    args = (s["name"], sizes, epochs, s.get("budget"), order, s["strata_bins"], s["selection_cost"])
     return ScheduleSpec(*args, pruning=pruning_spec(s.get("pruning")), node=s)
 
 
@@ -275,10 +278,12 @@ def read(c: dict) -> JobSpec:
 def recorded(cfg: Any, data: DataSpec | None = None) -> dict:
     """A job's config as plain values, as results.json records it and ``identity`` hashes it: the data node as its
     spec (``data``, or read from the config; types converted), with the keys of :data:`TYPED_BEFORE` it lacks as
-    unset, and every registry's choice by one name (:func:`canonical`: ``selpres.engines.optim.adam.Adam`` and
-    ``adam`` are one job)."""
+    unset, every registry's choice by one name (:func:`canonical`: ``selpres.engines.optim.adam.Adam`` and ``adam``
+    are one job), and the parametric schedule's keys only where set."""
     c = canonical(plain(cfg))
     c["data"] = {**dict.fromkeys(TYPED_BEFORE), **(data or data_spec(c["data"])).as_dict()}
+    # the parametric schedule's keys only where set: a listed schedule's record (and identity) is what it was
+    c["schedule"] = {k: v for k, v in c["schedule"].items() if v is not None or k not in RULE_KEYS}
     return c
 
 

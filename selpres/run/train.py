@@ -23,13 +23,14 @@ from pathlib import Path
 import torch
 from omegaconf import DictConfig
 
-from selpres.data import paper as D
 from selpres.engines.factory import Engine
+from selpres.patterns import metric_names
 from selpres.presentation.sampler import epoch_orders, shuffle_implementation
 from selpres.presentation.schedule import EpochPlan
 from selpres.run import floor, lock, orphan, stop
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
+from selpres.run.hparams import close_job
 from selpres.run.problem import Problem, job_engine, prepare
 from selpres.run.resolve import resolve
 from selpres.run.specs import Cadence, JobSpec
@@ -125,7 +126,7 @@ def final_scores(engine, prob: Problem) -> dict:
             per_joint = unit_sums.div(n).sqrt()
             scores[unit] = {
                 "overall": _rms(unit_sums, n),
-                **{joint: per_joint[:, k] for k, joint in enumerate(D.metric_names(sums.shape[1])[1:])},
+                **{joint: per_joint[:, k] for k, joint in enumerate(metric_names(sums.shape[1])[1:])},
             }
         scores["nmse"] = floor.nmse(sums * prob.nm2_per_scaled2, n, prob.tests[name][1])  # selpres.run.floor
         out[name] = scores
@@ -226,14 +227,18 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
 
 
 def train(
-    cfg: DictConfig, out_dir: str | Path | None = None, on_stage_end: Callable[[dict, Problem], None] | None = None
+    cfg: DictConfig,
+    out_dir: str | Path | None = None,
+    on_stage_end: Callable[[dict, Problem], None] | None = None,
+    on_epoch: Callable[[dict, Problem], None] | None = None,
 ) -> dict:
     """Train ``cfg.replicas`` replicas through the schedule of the composed config ``cfg``; returns the results dict.
     Its first step resolves ``cfg`` into a checked :class:`~selpres.run.resolve.JobSpec`: what follows reads that.
 
     With ``out_dir`` the job logs to TensorBoard, checkpoints and writes ``results.json`` and ``weights.pt``
     there, and resumes from a checkpoint of the same config (``overwrite=true``: starts afresh).
-    ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it).
+    ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it);
+    ``on_epoch(record, problem)`` after every epoch, before ``on_stage_end`` (the command line's progress line).
     """
     with lock.holding(out_dir):  # one writer per job folder (selpres.run.lock)
         clock = Clock()
@@ -242,6 +247,8 @@ def train(
         with clock("loop"), stop.loop():
             for ep in job.prob.plan[job.progress.epoch :]:
                 rec = run_epoch(job, ep, clock)
+                if on_epoch is not None:
+                    on_epoch(rec, job.prob)
                 spent = job.prob.pruning is not None and job.prob.pruning.exhausted  # every replica spent its budget
                 if on_stage_end is not None and (ep.index in job.prob.stage_ends or spent):
                     on_stage_end(rec, job.prob)
@@ -286,23 +293,7 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
     }
     atomic_write(job.out / WEIGHTS, lambda f: torch.save(trained, f))
     write_json(job.out / RESULTS, results)
-    hp = {
-        "schedule": spec.schedule.name,
-        "topology": spec.layers,
-        "seed": spec.seed,
-        "replicas": len(prob.seeds),
-        "optim": spec.optim.target,
-        "lr": spec.optim.params.get("lr"),
-        "momentum": spec.optim.params.get("momentum"),
-        "batch_size": spec.optim.batch_size,
-        "sizes": str(prob.schedule.sizes),
-        "epochs": str(prob.schedule.epochs),
-        "order": spec.schedule.order,
-        "engine": results["engine"],
-        "engine_requested": results["engine_requested"],
-    }
-    floor_nm = {f"final/floor_{k}_nm_overall": v["nm"]["overall"] for k, v in results["floor"].items()}
-    job.tracker.close(hp, {**{f"final/{k}": v["mean"] for k, v in results["summary"].items()}, **floor_nm})
+    close_job(job.tracker, results, job.out)  # HParams, final metrics (selpres.run.tracking)
     if job.ckpts:
         job.ckpts.discard()
     return results

@@ -15,7 +15,7 @@ them. Each is a ``torch.optim.Optimizer`` here (the definition of correct), step
 
 Each optimizer is one module here exporting ``OPTIMIZER`` (a ``torch.optim.Optimizer`` subclass): the registry
 :data:`OPTIMIZERS` lists the modules (``optim._target_: adam`` names ``adam.py``), so adding one is a module
-and a YAML in ``selpres/configs/optim/``. A user's own is named by its import path (``optim._target_:
+and a YAML in ``configs/optim/``. A user's own is named by its import path (``optim._target_:
 torch.optim.NAdam``, ``mylion.Lion``). A class takes the config's flat keys as keyword arguments (a built-in's
 ``hparams`` checks them, with their defaults, without building an optimizer: the first
 ``torch.optim.Optimizer`` of a process imports torch._dynamo, about 1.3 s, which a job on the native engine
