@@ -111,6 +111,12 @@ def test_a_config_keeps_its_hash(overrides, chash):
     assert job_hash(compose(*overrides)) == chash
 
 
+def test_the_serial_spec_knows_its_source_by_both_names():
+    from selpres.arms.spec import SERIAL
+
+    assert SERIAL == ("serial", SOURCES.path_of("serial"))
+
+
 def test_a_built_in_by_its_path_or_its_alias_is_one_job():
     pairs = [
         ("optim._target_=adam", "optim._target_=selpres.engines.optim.adam.Adam"),
