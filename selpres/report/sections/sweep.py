@@ -20,14 +20,12 @@ Figures: :mod:`selpres.report.sections.sweep_plots`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 from selpres.report.compare import Options, adjust_family, mean_curve, outcome, paired, paired_columns, reading
 from selpres.report.context import Context, Section
 from selpres.report.groups import Group, base, settings, varying
 from selpres.report.markdown import fmt, signed_interval, table
 from selpres.report.sections import sweep_plots
-from selpres.report.sections.sweep_plots import number
+from selpres.report.sections.sweep_plots import Point, number
 from selpres.run.stats import summarize
 
 SAME_COST = 0.01  # a conventional run within 1 % of a setting's presentations is its compute-matched partner
@@ -50,23 +48,6 @@ def _rest(g: Group) -> dict[str, str]:
 
 def _whole_epochs(g: Group) -> bool:
     return not any(g.sched.get("extra_presentations") or [])
-
-
-@dataclass
-class Point:
-    """One setting or conventional run: its cost and its final held-out RMS over seeds."""
-
-    group: Group
-    number: int = 0  # its row in the table (settings only)
-    cost_ci: list = field(default_factory=lambda: [None, None])  # where seeds cost differently (pruning)
-
-    @property
-    def stats(self) -> dict:
-        return summarize(self.group.values("heldout").values())
-
-    @property
-    def cost(self) -> float:
-        return self.group.cost
 
 
 def roles(groups: dict) -> tuple[list[Group], list[Group]]:

@@ -12,15 +12,30 @@ from __future__ import annotations
 
 import json
 import math
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
 
-from selpres.report.groups import base
+from selpres.report.groups import Group, base
 from selpres.report.sections.plots import family_styles, nm_log_axis, pyplot, save_png, thousands
-
-if TYPE_CHECKING:
-    from selpres.report.sections.sweep import Point
+from selpres.run.stats import summarize
 
 GRID_FILL = 0.5  # a grid is drawn when its settings fill at least half its cells
+
+
+@dataclass
+class Point:
+    """One setting or conventional run: its cost and its final held-out RMS over seeds."""
+
+    group: Group
+    number: int = 0  # its row in the table (settings only)
+    cost_ci: list = field(default_factory=lambda: [None, None])  # where seeds cost differently (pruning)
+
+    @property
+    def stats(self) -> dict:
+        return summarize(self.group.values("heldout").values())
+
+    @property
+    def cost(self) -> float:
+        return self.group.cost
 
 
 def _bars(mean, lo, hi):
