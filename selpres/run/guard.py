@@ -18,7 +18,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from selpres.run import lock, orphan, stop
-from selpres.run.config import retired
+from selpres.run.config import retired, unread
 
 
 @dataclass
@@ -149,7 +149,7 @@ def guarded(main) -> None:
     folder, writes ``.hydra/``) prints one line and exits 130, a SIGTERM or SIGUSR1 143 (selpres.run.stop),
     removing only what this run created. A retired spelling (``schedule.prune_ratio=0.3``) is refused in one line
     naming the new one, before anything is written."""
-    refusal = retired(sys.argv[1:])
+    refusal = retired(sys.argv[1:]) or unread(sys.argv[1:])  # before a sweep launches: +schedule.p=1,2
     if refusal is not None:
         print(f"error: {refusal}", file=sys.stderr)
         sys.exit(2)
