@@ -13,7 +13,7 @@ import runpy
 import sys
 from pathlib import Path
 
-OUT = Path(__file__).resolve().parents[1] / "selpres" / "configs" / "design" / "modern_curve"
+OUT = Path(__file__).resolve().parents[1] / "configs" / "design" / "modern_curve"
 MODERN = runpy.run_path(str(Path(__file__).with_name("make_modern_designs.py")))
 # arm -> the doubling budgets (epochs): from the old study's N up to where a job still takes about a minute
 BUDGETS = {"two_link": [20 * 2**k for k in range(8)], "puma560": [5 * 2**k for k in range(7)]}

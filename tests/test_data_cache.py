@@ -247,7 +247,7 @@ def test_two_processes_building_one_task_at_once_both_get_it(cache):
     code = (
         "import json, os; from selpres.run.config import compose_train; import selpres.data.task as T; "
         "from selpres.run.specs import task_specs; "
-        "c = compose_train(os.path.abspath('selpres/configs'), ['data.heldout=2000']); "
+        "c = compose_train(os.path.abspath('configs'), ['data.heldout=2000']); "
         "t = T.load_task(*task_specs(c)); "
         "print(json.dumps([t.info['cache'].split()[0], float(t.tests.heldout.X.sum())]))"
     )

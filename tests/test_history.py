@@ -15,10 +15,9 @@ import torch
 from test_resume import newest_checkpoint
 
 from selpres.engines.model import init_replica_params
-from selpres.engines.online import make_engine
 from selpres.run.checkpoint import Checkpoints, Progress, dumps, encode, read
 
-from conftest import cfg_of, numbers, run_python
+from conftest import cfg_of, numbers, online_engine, run_python
 
 SIZES = (6, 3, 2)
 JOB = ["schedule.epochs=[2,2,2,2,2]", "checkpoint.every=1", "data.heldout=300", "eval.heldout_curve=300"]
@@ -39,7 +38,7 @@ def record(epoch: int) -> dict:
 
 
 def engine_of(seeds=(0, 1)):
-    return make_engine("torch", SIZES, init_replica_params(SIZES, list(seeds)), 0.15, 0.9, 1)
+    return online_engine("torch", SIZES, init_replica_params(SIZES, list(seeds)), 0.15, 0.9, 1)
 
 
 def make_legacy(folder, records, epoch: int, engine, extra: bytes = b"") -> None:
@@ -210,7 +209,7 @@ def test_a_checkpoint_of_this_hash_whose_engine_state_does_not_fit_is_set_aside(
     load_state_dict; now one warning, the files aside, a fresh start on the engine's own initial weights."""
     Checkpoints(tmp_path, "h").save(engine_of(), Progress([record(-1), record(0)], [None, None], epoch=1))
     sizes = (6, 4, 2)
-    other = make_engine("torch", sizes, init_replica_params(sizes, [0, 1]), 0.15, 0.9, 1)
+    other = online_engine("torch", sizes, init_replica_params(sizes, [0, 1]), 0.15, 0.9, 1)
     initial = [p.clone() for p in other.params()]
     with caplog.at_level("WARNING", logger="selpres"):
         back = Checkpoints(tmp_path, "h").resume(other, 2)

@@ -172,10 +172,10 @@ def test_a_finished_job_of_another_update_is_run_again(tmp_path, caplog, monkeyp
 )
 def test_a_policy_checks_its_own_parameters_naming_the_key(overrides, key, allowed):
     from selpres.errors import ConfigError
-    from selpres.run.checks import validate
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError, match=allowed) as e:
-        validate(cfg_of(*overrides))
+        resolve(cfg_of(*overrides))
     assert e.value.key == key
 
 

@@ -228,30 +228,32 @@ def table():
 def test_a_range_float64_cannot_scale_is_refused_naming_file_column_and_line(tmp_path, table):
     from selpres.data.file import DataFileError
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     X, Y = table
     X1 = X.copy()
     X1[5, 0], X1[7, 0] = 1e308, -1e308  # rows 5 and 7: lines 7 and 9 (line 1 is the header)
     with pytest.raises(DataFileError, match=r"inputs\.csv: column 'a', line (7|9): .*cannot be scaled in float64"):
-        prepare(_file_cfg(_csv(tmp_path / "inputs.csv", X1, Y)))
+        prepare(resolve(_file_cfg(_csv(tmp_path / "inputs.csv", X1, Y))))
     Y2 = Y.copy()
     Y2[9] = 1e308  # a target: its squared errors in its own unit would overflow
     with pytest.raises(DataFileError, match=r"target\.csv: column 'y', line 11: 1e\+308: .*target column"):
-        prepare(_file_cfg(_csv(tmp_path / "target.csv", X, Y2)))
+        prepare(resolve(_file_cfg(_csv(tmp_path / "target.csv", X, Y2))))
 
 
 def test_a_column_collapsed_by_an_outlier_is_named_and_recorded(tmp_path, table, caplog):
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     X, Y = table
     X3 = X.copy()
     X3[11, 1] = 1e6
     with caplog.at_level("WARNING", logger="selpres"):
-        prob = prepare(_file_cfg(_csv(tmp_path / "outlier.csv", X3, Y)))
+        prob = prepare(resolve(_file_cfg(_csv(tmp_path / "outlier.csv", X3, Y))))
     (warning,) = prob.task.info["warnings"]
     assert "column 'b'" in warning and "line 13" in warning and "1000000.0" in warning
     assert warning in caplog.text
-    assert prepare(_file_cfg(_csv(tmp_path / "ok.csv", X, Y))).task.info["warnings"] == []
+    assert prepare(resolve(_file_cfg(_csv(tmp_path / "ok.csv", X, Y)))).task.info["warnings"] == []
 
 
 @pytest.mark.parametrize(
@@ -284,10 +286,11 @@ def test_a_file_that_is_not_utf8_text_is_one_short_line(tmp_path, content, where
 def test_work_that_cannot_fit_is_refused_from_the_estimate(overrides, key, monkeypatch):
     from selpres.errors import ConfigError
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     monkeypatch.setenv("SELPRES_MEMORY_LIMIT", "4e9")
     with pytest.raises(ConfigError) as e:
-        prepare(compose(*overrides))
+        prepare(resolve(compose(*overrides)))
     assert e.value.key == key
     assert "needs an estimated" in str(e.value) and "4.0 GB available (SELPRES_MEMORY_LIMIT)" in str(e.value)
 

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from selpres.data.paper import ExemplarSet, Patterns, Scaler, TestSets
+from selpres.patterns import ExemplarSet, Patterns, Scaler, TestSets
 from selpres.storage import atomic_write, flatten, why_unreadable
 
 log = logging.getLogger("selpres")

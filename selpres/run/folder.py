@@ -136,7 +136,7 @@ def finished(folder: Path, cfg: DictConfig) -> tuple[dict, str] | None:
     """The finished job in ``folder``, if any: (its results, how its config differs from this one; '' when it is
     this job). One it no longer counts as (the engines that ran it are not those this config now runs on, a file
     that lacks what a finished job holds) is None: it is run again, and says so."""
-    from selpres.run.problem import engine_kind, kind_of
+    from selpres.run.resolve import engine_kind, kind_of
     from selpres.run.results import job_hash
 
     try:
@@ -163,8 +163,7 @@ def finished(folder: Path, cfg: DictConfig) -> tuple[dict, str] | None:
 
 def differences(old, cfg: DictConfig, most: int = 6) -> str:
     """The keys whose values differ between a finished job's recorded config and this one's, ``key: old → new``."""
-    from selpres.run.results import NOT_IDENTITY
-    from selpres.run.specs import recorded
+    from selpres.run.specs import NOT_IDENTITY, recorded
 
     if not isinstance(old, dict):
         return "its results.json records no config"

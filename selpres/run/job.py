@@ -109,7 +109,7 @@ def run(cfg: DictConfig, out: Path | None = None) -> float:
                 before = folder.Before.look(out, created)
                 stop.phase("during set-up")
                 try:
-                    from selpres.run import optimizer
+                    from selpres.run import optimizer, progress
                     from selpres.run.train import train  # torch: seconds, in which a Ctrl-C is this job's to answer
 
                     optimizer.composed_from(hc.runtime.choices.get("optim") if hc else None)  # what a _target_ leaves
@@ -132,7 +132,9 @@ def run(cfg: DictConfig, out: Path | None = None) -> float:
                             with stop.deferred():
                                 folder.write_record(out, cfg, HydraConfig.instance().cfg, hc.overrides.task)
                         stop.check("during set-up")
-                        res = train(cfg, out, on_stage_end=cli.print_stage if cfg.logging.progress else None)
+                        shown = cfg.logging.progress  # a stage's line, and on a terminal the epoch's line (progress)
+                        line = progress.EpochLine.for_run(sweep) if shown else None
+                        res = train(cfg, out, on_stage_end=cli.print_stage if shown else None, on_epoch=line)
                         epoch = res.get("resumed_from_epoch")
                         outcome, fields = (DONE, {}) if epoch is None else (RESUMED, {"epoch": epoch})
                         fields["results"] = out / RESULTS

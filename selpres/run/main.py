@@ -30,9 +30,10 @@ def main() -> None:
         import hydra
 
         from selpres.run import job, orphan
-        from selpres.run.config import CONFIG_DIR, retired  # also registers the schema and resolvers
+        from selpres.run.config import CONFIG_DIR, retired, unread  # also registers the schema and resolvers
 
-        refusal = retired(sys.argv[1:])  # before Hydra: its own refusal would not name the new spelling
+        # before Hydra: its own refusal would not name the new spelling; an unread key before a sweep launches
+        refusal = retired(sys.argv[1:]) or unread(sys.argv[1:])
         if refusal is not None:
             sys.exit(_say(f"error: {refusal}", 2))
         job.new_command()
@@ -57,7 +58,7 @@ def main() -> None:
                 os.environ[k] = v
         # Everything is written and closed by now; what remains is the interpreter's exit, whose cyclic-garbage
         # passes walk every object torch and Hydra made (0.3-0.5 s of a 2.5 s default run, measured with
-        # `python -m selpres.bench.startup`). Frozen objects are skipped by those passes; atexit handlers
+        # `python -m selpres_bench.startup`). Frozen objects are skipped by those passes; atexit handlers
         # (logging's flush, weakref finalizers) still run.
         gc.freeze()
     sys.exit(code)
