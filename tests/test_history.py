@@ -152,11 +152,11 @@ def straight(tmp_path_factory):
 
 def killed_job(folder, monkeypatch):
     """A job folder as a kill after its last checkpoint leaves it (checkpoints and history, no results)."""
-    from selpres.run import cli
+    from selpres.run import job
 
     with monkeypatch.context() as m:
         m.setattr(Checkpoints, "discard", lambda self: None)
-        cli._run_locked(cfg_of(*JOB), folder, multirun=False)
+        job.run(cfg_of(*JOB), folder)
     for name in ("results.json", "weights.pt"):
         (folder / name).unlink()
     return read(newest_checkpoint(folder)[0])  # the newer of the two, whichever name holds it: 9 epochs done of 10
@@ -221,14 +221,14 @@ def test_a_checkpoint_of_this_hash_whose_engine_state_does_not_fit_is_set_aside(
 
 
 def test_a_finished_results_json_that_lacks_its_summary_is_redone_not_a_crash(tmp_path, caplog):
-    from selpres.run import cli
+    from selpres.run import job
 
     cfg, out = cfg_of("schedule.epochs=[1,1,1,1,1]"), tmp_path / "job"
-    cli._run_locked(cfg, out, multirun=False)
+    job.run(cfg, out)
     good = json.loads((out / "results.json").read_text())
     cut = {k: v for k, v in good.items() if k != "summary"}
     (out / "results.json").write_text(json.dumps(cut))
     with caplog.at_level("WARNING", logger="selpres"):
-        cli._run_locked(cfg, out, multirun=False)  # was KeyError: 'summary' on every re-run
+        job.run(cfg, out)  # was KeyError: 'summary' on every re-run
     assert "lacks what a finished job holds (KeyError: 'summary')" in caplog.text
     assert numbers(json.loads((out / "results.json").read_text())) == numbers(good)

@@ -121,7 +121,7 @@ class TrainConfig:
 
 
 # Spellings users typed that the schema no longer has -> the new spelling (refused in one line by
-# selpres.run.guard before Hydra composes: Hydra's own refusal of an unknown key does not name the new one)
+# selpres.run.main before Hydra composes: Hydra's own refusal of an unknown key does not name the new one)
 RETIRED = {
     "schedule.prune_ratio": "schedule.pruning.prune_ratio",
     "schedule.delta": "schedule.pruning.delta",

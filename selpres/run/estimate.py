@@ -18,7 +18,7 @@ The limit is what this process may still allocate: ``MemAvailable`` (/proc/memin
 what the process's own caps leave (``ulimit -v``: RLIMIT_AS less the address space it has mapped, VmSize;
 ``ulimit -d``: RLIMIT_DATA less its data segment, VmData), whichever is lowest; ``SELPRES_MEMORY_LIMIT`` (bytes)
 sets it, for a machine shared with other work (and for tests). An allocation that fails all the same (torch
-raises RuntimeError "can't allocate memory", not MemoryError) is the same one-line refusal (selpres.run.cli).
+raises RuntimeError "can't allocate memory", not MemoryError) is the same one-line refusal (selpres.run.job).
 
 Time: a lower bound, at speeds no engine here reaches (10 us an epoch for the loop's bookkeeping, 0.1 ns per
 weight per presentation and replica, ~10x faster than the native kernel's one-off timing); a plan whose lower

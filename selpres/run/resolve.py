@@ -31,7 +31,7 @@ def resolve(cfg: Any) -> JobSpec:
 def engine_kind(cfg: Any) -> str:
     """The update a config's job runs (selpres.engines.factory's mode: ``online``, ``minibatch`` or ``batch``), read
     from its optim node, hidden units and engine alone: a finished job whose results.json names an engine of another
-    mode is another update's, and is run again (``selpres.run.cli``)."""
+    mode is another update's, and is run again (``selpres.run.folder.finished``)."""
     c = plain({"optim": cfg.optim, "activation": cfg.model.activation, "engine": cfg.engine})
     return engine_spec(optim_spec(c["optim"]), c["activation"], c["engine"]).mode
 

@@ -258,17 +258,16 @@ def train(
                 if spent:
                     break
                 due, more = job.checkpoint_due(ep), ep.index < len(job.prob.plan) - 1
-                stopping = more and (orphan.gone() or stop.requested() is not None)  # gone, or SIGTERM/SIGUSR1
+                stopping = stop.requested() is not None or (more and orphan.gone())  # a signal, or the sweep gone
                 if due or (stopping and job.ckpts is not None):
                     with clock("checkpoint"):
                         job.progress.seconds = clock.snapshot()
                         job.ckpts.save(job.engine, job.progress)
                         job.tracker.flush()
-                if stopping:
-                    kept = "checkpoint written" if job.ckpts is not None else "no checkpoint: the re-run starts afresh"
+                if stopping:  # what was kept is said by selpres.run.job
                     if stop.requested() is not None:
-                        raise stop.Terminated(stop.requested(), f"after epoch {ep.index + 1} ({kept})")
-                    raise orphan.SweepGone(f"after epoch {ep.index + 1} ({kept})")
+                        raise stop.Interrupted(stop.requested(), f"after epoch {ep.index + 1}")
+                    raise orphan.SweepGone(f"after epoch {ep.index + 1}")
         with clock("eval"):
             final = final_scores(job.engine, job.prob)
         return finish(job, final, clock.snapshot())
