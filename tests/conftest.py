@@ -108,3 +108,11 @@ def report_of(sweep, out) -> None:
     """``python -m selpres.report sweep --out out``, which must succeed."""
     done = run_python("-m", "selpres.report", str(sweep), "--out", str(out))
     assert done.returncode == 0, done.stderr[-3000:]
+
+
+def online_engine(requested: str, sizes, params, lr: float, momentum: float, batch_size: int, threads=None):
+    """The online SGD engine ``requested`` (fast, native, torch, reference) as a job builds it
+    (``selpres.engines.factory.build_engine``): the paper's rule at ``lr``, ``momentum``, on ``batch_size``."""
+    from selpres.engines.factory import EngineSpec, build_engine
+
+    return build_engine(EngineSpec.online(requested, sizes, lr, momentum, batch_size, threads), params)

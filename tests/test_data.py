@@ -55,7 +55,7 @@ def test_data_config_has_exactly_the_agreed_keys():
         "test_seed",
         "scaling",
     }
-    assert DATA_CFG.kind == "grid" and ROBOT_CFG._target_ == "two_link"
+    assert DATA_CFG.kind == "grid" and ROBOT_CFG._target_ == "selpres.arms.sources.two_link.TwoLink"
     assert set(DATA_CFG.scaling.keys()) == {"mode", "margin", "lo", "hi"}
     assert set(ROBOT_CFG.keys()) == {"_target_", "m1", "m2", "l1", "l2", "g"}
 

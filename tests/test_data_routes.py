@@ -91,17 +91,18 @@ import selpres
 assert selpres.__file__.startswith(sys.argv[1]), selpres.__file__
 from selpres.data.routes import ROUTES
 from selpres.errors import ConfigError
-from selpres.run.checks import validate
+from selpres.run.resolve import resolve
 from selpres.run.config import CONFIG_DIR, compose_train
 from selpres.run.problem import prepare
+from selpres.run.resolve import resolve
 print(ROUTES.names)
 cfg = compose_train(CONFIG_DIR, ["data=line", "data.slope=2", *{JOB!r}])
-print(validate(cfg))
-task = prepare(cfg).task
+print(resolve(cfg).sizes)
+task = prepare(resolve(cfg)).task
 print(bool((task.exemplar.Y == 2 * task.exemplar.X).all()), task.n, task.info["route_class"])
 for bad in (["data.slope=abc"], ["data.n=1"], ["data.kind=lines"]):
     try:
-        validate(compose_train(CONFIG_DIR, ["data=line", *{JOB!r}, *bad]))
+        resolve(compose_train(CONFIG_DIR, ["data=line", *{JOB!r}, *bad]))
     except ConfigError as e:
         print(e)
 """
@@ -135,20 +136,20 @@ USERS = ["data=file", "data.kind=my_line.Line", "data.heldout=99"]
 
 
 def test_a_users_route_by_its_import_path(user_route):
-    from selpres.run.checks import validate
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     cfg = compose(*USERS, "+data.n=30", "+data.slope=-0.5", *JOB)
-    assert validate(cfg) == (1, 3, 1)
-    task = prepare(cfg).task
+    assert resolve(cfg).sizes == (1, 3, 1)
+    task = prepare(resolve(cfg)).task
     assert task.n == 30 and (task.exemplar.Y == -0.5 * task.exemplar.X).all()
     assert task.info["route_class"] == "my_line.Line"
     with pytest.raises(ConfigError, match=r"^data.n='many' is not allowed: expected a whole number$"):
-        validate(compose(*USERS, "+data.n=many", *JOB))
+        resolve(compose(*USERS, "+data.n=many", *JOB))
     with pytest.raises(ConfigError, match=r"^data.n=None is not allowed: expected a value: data.kind=my_line.Line"):
-        validate(compose(*USERS, *JOB))
+        resolve(compose(*USERS, *JOB))
     with pytest.raises(ConfigError, match=r"^data.kind='my_line.Nope' is not allowed: .*it has no 'Nope'"):
-        validate(compose(*USERS, "data.kind=my_line.Nope", *JOB))
+        resolve(compose(*USERS, "data.kind=my_line.Nope", *JOB))
 
 
 def test_a_users_route_module_is_part_of_the_stored_tasks_key(user_route, tmp_path, monkeypatch):

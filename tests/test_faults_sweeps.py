@@ -61,15 +61,9 @@ print(json.dumps({"code": ran.code, "err": ran.err, "fired": disk.fired}))
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,  # Hydra's traceback, not a broken test
-    reason="Hydra writes a sweep job's record (.hydra/config.yaml) before selpres's job code runs, and only a single "
-    "run's entry turns its failure into one line (selpres.run.guard._save_config_refusing): the sweep's entry must "
-    "too (the life helper's files, issue 39)",
-)
 def test_a_fault_while_hydra_writes_a_sweep_jobs_record_is_one_line(tmp_path):
-    """In a process of its own: a single run earlier in this one leaves the entry's hook on Hydra in place."""
+    """Hydra's record of a job is written by the job once it holds its folder (selpres.run.job), a sweep's job as a
+    single run: its failure fails that job in one line. In a process of its own, as a user's sweep runs."""
     from conftest import run_python
 
     folder = tmp_path / "sweep"

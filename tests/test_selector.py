@@ -184,6 +184,7 @@ def test_the_clocks_nested_phases_count_each_second_once(monkeypatch):
 
 def test_a_job_of_every_kind_has_one_selector_and_one_ledger():
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     for overrides in (
         [],
@@ -191,7 +192,7 @@ def test_a_job_of_every_kind_has_one_selector_and_one_ledger():
         ["schedule=infobatch", "schedule.epochs=[3]"],
         ["schedule=seta", "schedule.epochs=null", "schedule.budget=5000"],
     ):
-        prob = prepare(cfg_of(*overrides, "replicas=2"))
+        prob = prepare(resolve(cfg_of(*overrides, "replicas=2")))
         assert isinstance(prob.selector, Selector) and isinstance(prob.ledger, Ledger)
         assert prob.selector.source.samplers is prob.samplers and len(prob.samplers) == 2
         assert not hasattr(prob, "pruning") and not hasattr(prob, "selection")

@@ -139,9 +139,10 @@ REFUSED = [  # (overrides, the key named, words of what is allowed)
 @pytest.mark.parametrize("overrides,key,words", REFUSED, ids=[" ".join(r[0][1:]) for r in REFUSED])
 def test_unbuildable_schedules_are_refused_naming_the_keys(overrides, key, words):
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError) as e:
-        prepare(cfg_of(*overrides))
+        prepare(resolve(cfg_of(*overrides)))
     assert e.value.key == key and words in str(e.value), str(e.value)
     assert "\n" not in str(e.value)
 
@@ -150,12 +151,13 @@ def test_sizes_not_nested_are_refused_without_a_fraction_form_that_is_as_wrong()
     """Decreasing counts: their fractions decrease too, so no fraction form is suggested; counts that only miss n
     still get theirs."""
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError) as e:
-        prepare(cfg_of("schedule.sizes=[100,50,1002]", "schedule.epochs=[1,1,1]"))
+        prepare(resolve(cfg_of("schedule.sizes=[100,50,1002]", "schedule.epochs=[1,1,1]")))
     assert "strictly increasing" in str(e.value) and "as fractions" not in str(e.value)
     with pytest.raises(ConfigError) as e:
-        prepare(cfg_of("schedule.sizes=[100,200,500]", "schedule.epochs=[1,1,1]"))
+        prepare(resolve(cfg_of("schedule.sizes=[100,200,500]", "schedule.epochs=[1,1,1]")))
     assert "schedule.sizes=[0.2,0.4,1.0]" in str(e.value)
 
 

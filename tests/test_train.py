@@ -93,12 +93,13 @@ def test_saved_weights_and_scaler_reproduce_the_reported_error(tmp_path):
     from selpres.engines.model import BPN, load_into
     from selpres.patterns import Scaler, rms_errors
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     cfg = cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2")
     res = train(cfg, tmp_path)
     saved = torch.load(tmp_path / "weights.pt")
     scaler = Scaler(**saved["scaler"])
-    X_scaled, Y_nm = prepare(cfg).tests["heldout"]
+    X_scaled, Y_nm = prepare(resolve(cfg)).tests["heldout"]
     for r in range(2):
         net = load_into(BPN(saved["topology"]), saved["params"], r)
         with torch.no_grad():

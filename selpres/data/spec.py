@@ -86,7 +86,8 @@ class DataSpec:
         keys = keys_of(route)
         for k, v in node.items():
             if k not in COMMON and k not in keys and v is not None:
-                raise ConfigError(f"data.{k}", v, f"unset (null) for data.kind={kind}, which reads {list(keys)}")
+                where = f"{route.__module__}.{route.__qualname__}"
+                raise ConfigError(f"data.{k}", v, f"unset (null): data.kind={kind} ({where}) reads {list(keys)}")
         for k in COMMON:
             if node.get(k) is None:
                 raise ConfigError(f"data.{k}", None, f"a value: data.kind={kind} reads it")

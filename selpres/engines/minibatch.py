@@ -19,7 +19,7 @@ they cannot, replica-batched in eager torch with a hand-written backward (checke
   ``counts[r]`` entries of ``order[r]`` and a mini-batch's loss is the mean of ``weights · loss`` over its
   patterns (InfoBatch's rescaled loss); a replica with nothing left in a mini-batch does not step. (The
   online engines do the same for the paper's network, so pruning jobs with sigmoid units and SGD at a
-  constant rate run there, on the native kernel: ``selpres.run.optimizer.minibatch_reason``.)
+  constant rate run there, on the native kernel: ``selpres.engines.factory.mode_for``.)
 
 Loss per pattern: ``mse`` over the outputs (``reduction=mean``: the online engines' loss; ``sum``:
 Rumelhart's ½Σe², for configs written for batch mode). ``last_losses`` holds every presented pattern's loss
@@ -37,7 +37,7 @@ from selpres.engines.activations import activation as units
 from selpres.engines.inputs import check_inputs, check_patterns, pruned_epoch_args, pruned_mean
 from selpres.engines.model import forward_replicas
 from selpres.engines.online import ScoredByPredict
-from selpres.engines.optim import make_optimizer
+from selpres.engines.optim import make_optimizer, with_defaults
 from selpres.engines.optim._replicas import ReplicaSteps
 
 LR_SCHEDULES = ("constant", "cosine")
@@ -57,6 +57,14 @@ class MiniBatchEngine(ScoredByPredict):
 
     name = "minibatch"
 
+    @classmethod
+    def from_spec(cls, spec, params):
+        """An engine of ``spec`` (:class:`selpres.engines.factory.EngineSpec`): the optimizer's keys with its
+        defaults for the unset ones (as the native kernel fills them), the units, rate schedule and reduction."""
+        hp = with_defaults(spec.optimizer, spec.hparams)
+        args = (spec.batch_size, spec.activation, spec.lr_schedule, spec.horizon, spec.reduction)
+        return cls(spec.sizes, params, spec.optimizer, hp, *args)
+
     def __init__(
         self,
         sizes,
@@ -68,7 +76,6 @@ class MiniBatchEngine(ScoredByPredict):
         lr_schedule: str = "constant",
         horizon: float = 1.0,
         reduction: str = "mean",
-        fallback_reason: str | None = None,
     ):
         self.sizes = tuple(int(s) for s in sizes)
         if len(params) != 2 * (len(self.sizes) - 1):
@@ -78,7 +85,7 @@ class MiniBatchEngine(ScoredByPredict):
         self.optimizer, self.batch_size, self.activation = optimizer, int(batch_size), activation
         self.act = units(activation)  # forward(z), prime(z, a): selpres.engines.activations
         self.lr_schedule, self.horizon, self.reduction = lr_schedule, float(horizon), reduction
-        self.fallback_reason = fallback_reason
+        self.fallback_reason: str | None = None  # set by selpres.engines.factory when it stands in for the kernel
         self.R = params[0].shape[0]
         # every replica's weights in one row of a flat [R, P] tensor (and its gradient likewise): the optimizer
         # steps it in a dozen ops; self.p / self._g are per-layer views into them

@@ -8,7 +8,7 @@ file and renamed, so parallel processes may race safely; a ``.sha256`` sidecar w
 marks it complete. Before any library is opened the CPU must list AVX2 and FMA (a cache shared between
 machines ends in a fallback, never in SIGILL); a cached library that fails its checksum (truncated,
 corrupt, unfinished) is rebuilt. Anything missing (no compiler, a failed or timed-out build, no AVX2/FMA,
-``SELPRES_NO_NATIVE=1``) raises :class:`KernelUnavailable` with the reason, and ``make_engine("fast")``
+``SELPRES_NO_NATIVE=1``) raises :class:`KernelUnavailable` with the reason, and ``engine=fast``
 falls back to pure torch. Only successes are remembered in the process: a later load retries a failed build.
 """
 

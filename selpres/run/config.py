@@ -11,6 +11,8 @@ or checks its own keys, so a new choice edits no schema.
 
 from __future__ import annotations
 
+import dataclasses
+import typing
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
@@ -119,7 +121,7 @@ class TrainConfig:
 
 
 # Spellings users typed that the schema no longer has -> the new spelling (refused in one line by
-# selpres.run.guard before Hydra composes: Hydra's own refusal of an unknown key does not name the new one)
+# selpres.run.main before Hydra composes: Hydra's own refusal of an unknown key does not name the new one)
 RETIRED = {
     "schedule.prune_ratio": "schedule.pruning.prune_ratio",
     "schedule.delta": "schedule.pruning.delta",
@@ -133,6 +135,53 @@ def retired(overrides: list[str]) -> str | None:
         key, eq, value = arg.lstrip("+~").partition("=")
         if key in RETIRED:
             return f"{key}{eq}{value} is no longer a key: use {RETIRED[key]}{eq}{value} (the pruning policy's node)"
+    return None
+
+
+def undeclared(c: dict) -> tuple[str, Any, str] | None:
+    """(key, value, what is allowed) of the first key of a typed node of the plain config ``c`` that the schema does
+    not declare (``+schedule.q=1``, ``+eval.foo=1``, ``+foo=1``), or None. Such a key was appended (Hydra's ``+``)
+    and no code reads it: a job that ran with it would record a setting that did not run. The open nodes (robot,
+    data, optim, schedule.pruning) are their classes' to check."""
+    return _undeclared(c, TrainConfig, "")
+
+
+def _undeclared(c: dict, schema: type, prefix: str) -> tuple[str, Any, str] | None:
+    hints = typing.get_type_hints(schema)
+    for k, v in c.items():
+        if not prefix and k == "hydra":
+            continue
+        if k not in hints:
+            node = prefix.rstrip(".") or "the config"
+            keys = ", ".join(hints)
+            return f"{prefix}{k}", v, f"a key {node} declares ({keys}): no code reads {prefix}{k}"
+        if dataclasses.is_dataclass(hints[k]) and isinstance(v, dict):
+            found = _undeclared(v, hints[k], f"{prefix}{k}.")
+            if found:
+                return found
+    return None
+
+
+def unread(overrides: list[str]) -> str | None:
+    """The one-line refusal of the first command-line override that appends (``+``/``++``) a key to a typed node of
+    the schema that declares no such key (``+schedule.q=1,2``), or None: said before Hydra composes or a sweep
+    launches anything. Config groups (``+experiment=...``) and the open nodes (checked per job by the class they
+    name) pass."""
+    for arg in overrides:
+        if not arg.startswith("+") or "=" not in arg:
+            continue
+        key, _, value = arg.lstrip("+").partition("=")
+        if "/" in key or key.startswith("hydra") or (CONFIG_DIR / key).is_dir():
+            continue
+        schema, parts = TrainConfig, key.split(".")
+        for i, part in enumerate(parts):
+            hints = typing.get_type_hints(schema)
+            if part not in hints:
+                node = ".".join(parts[:i]) or "the config"
+                return f"{key}={value}: {node} has no such key (it declares {', '.join(hints)}): no code would read it"
+            if not dataclasses.is_dataclass(hints[part]):
+                break
+            schema = hints[part]
     return None
 
 

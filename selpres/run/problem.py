@@ -1,6 +1,7 @@
-"""The problem a config determines before the first update: validated data, schedule, the selector and its ledger,
-initial weights (``prepare``, which writes nothing), and the engine that will train it (``job_engine``). The loop
-that runs it is ``selpres.run.train``.
+"""The problem a resolved job determines before the first update: validated data, schedule, the selector and its
+ledger, initial weights (``prepare``, which writes nothing), and the engine that will train it (``job_engine``,
+through ``selpres.engines.factory.build_engine``). It reads the job's specs (``selpres.run.specs.JobSpec``), never
+the config. The loop that runs it is ``selpres.run.train``.
 """
 
 from __future__ import annotations
@@ -10,26 +11,20 @@ import logging
 from dataclasses import dataclass
 
 import torch
-from omegaconf import DictConfig
 
 from selpres.data.file import DataFileError
 from selpres.data.task import Task, load_task
-from selpres.engines.batch import BatchEngine
+from selpres.engines.factory import ONLINE, Engine, build_engine
 from selpres.engines.model import init_replica_params
-from selpres.engines.native_minibatch import NAME as NATIVE_MINIBATCH
-from selpres.engines.native_minibatch import make_minibatch_engine
-from selpres.engines.online import make_engine
-from selpres.engines.optim import check_hparams, with_defaults
 from selpres.errors import ConfigError
 from selpres.patterns import Scaler
-from selpres.presentation.build import SelectorSpec, build_selector, plan
+from selpres.presentation.build import build_selector, plan
 from selpres.presentation.sampler import SelectivePresentation
 from selpres.presentation.schedule import EpochPlan, Schedule
 from selpres.presentation.selector import Ledger, Selector
-from selpres.run.checks import pruning_spec, validate
-from selpres.run.estimate import refuse_job
-from selpres.run.optimizer import minibatch_reason, optim_spec
-from selpres.run.specs import plain, task_specs
+from selpres.run.estimate import Work, refuse_job
+from selpres.run.resolve import engine_kind, kind_of
+from selpres.run.specs import JobSpec, ScheduleSpec
 from selpres.seeding import derive_seed
 
 log = logging.getLogger("selpres")
@@ -37,7 +32,7 @@ log = logging.getLogger("selpres")
 
 @dataclass
 class Problem:
-    """Everything a config determines before the first update."""
+    """Everything a job determines before the first update."""
 
     sizes: tuple[int, ...]
     schedule: Schedule
@@ -82,21 +77,19 @@ class Problem:
         return self.nm_per_scaled.square()
 
 
-def prepare(cfg: DictConfig) -> Problem:
-    """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
-    sizes = validate(cfg)
-    task = load_task(*task_specs(cfg))
-    schedule, note, budget = task_schedule(cfg, task)
+def prepare(job: JobSpec) -> Problem:
+    """The resolved job against the exemplar set; raises ConfigError, writes nothing."""
+    task = load_task(job.robot, job.data)
+    sch = job.schedule
+    schedule, note, budget = task_schedule(sch, task)
     # scored in torch: batch methods, the mini-batch engine (what the native kernel cannot run), torch/reference
-    torch_eval = (
-        optim_spec(cfg).batch or minibatch_reason(cfg) is not None or cfg.engine.value in ("torch", "reference")
-    )
+    torch_eval = job.engine.mode != ONLINE or job.engine.requested in ("torch", "reference")
     largest_test = max(len(task.tests.heldout.X), len(task.tests.test10.X))
-    refuse_job(cfg, sizes, schedule, task.n, largest_test, torch_eval)  # before any replica's state is made
-    seed = int(cfg.seed)  # read once: an OmegaConf access costs ~20 us, 1000 of them 23 ms at R = 1000
-    seeds = [seed + r for r in range(cfg.replicas)]
+    work = Work(job.replicas, job.sizes, sch, schedule, task.n, largest_test, job.cadence.heldout_every, torch_eval)
+    refuse_job(work)  # before any replica's state is made
+    seeds, sizes = job.seeds, job.sizes
     X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
-    selector, ledger = build_selector(selector_spec(cfg), schedule, seeds, task.exemplar.X, X, Y, budget)
+    selector, ledger = build_selector(sch.selector, schedule, seeds, task.exemplar.X, X, Y, budget)
     return Problem(
         sizes=sizes,
         schedule=schedule,
@@ -114,21 +107,13 @@ def prepare(cfg: DictConfig) -> Problem:
     )
 
 
-def selector_spec(cfg: DictConfig) -> SelectorSpec:
-    """``schedule.*`` as the plain spec the presentation room builds a job's selector from."""
-    s = cfg.schedule
-    target, params = pruning_spec(s) or (None, {})
-    return SelectorSpec(str(s.order), int(s.strata_bins), float(s.selection_cost), target, params)
-
-
-def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None, int | None]:
+def task_schedule(sch: ScheduleSpec, task: Task) -> tuple[Schedule, str | None, int | None]:
     """The schedule on the task's n as the job's selector plans it (listed or parametric, the paper's counts by their
-    proportions when n is not 1002: ``selpres.presentation.proportions``, logged), how named counts were applied,
-    and the budget the selector runs against (None: the plan's epochs); a data file too short for the schedule named
-    as such."""
-    sch = plain(cfg.schedule)
+    proportions when n is not 1002: ``selpres.presentation.proportions``, logged; a pruning policy's one stage),
+    how named counts were applied, and the budget the selector runs against (None: the plan's epochs); a data file
+    too short for the schedule named as such."""
     try:
-        schedule, note, budget = plan(selector_spec(cfg), sch, task.n)
+        schedule, note, budget = plan(sch.selector, sch.node, task.n)
         if note:
             log.info(note)
         return schedule, note, budget
@@ -139,66 +124,16 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None, in
                 i["path"],
                 "rows",
                 f"{i['rows']:,} rows ({task.n:,} for training after "
-                f"holding out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} "
+                f"holding out {i['heldout']:,}): too few for schedule.sizes={sch.sizes} "
                 f"({e.allowed})",
             ) from None
         raise
 
 
-def engine_kind(cfg: DictConfig) -> str:
-    """The update a config's job runs: ``minibatch`` (selpres.engines.minibatch), ``batch`` (one step an epoch)
-    or ``online`` (the native, torch and reference engines: one update rule)."""
-    if minibatch_reason(cfg) is not None:
-        return "minibatch"
-    return "batch" if optim_spec(cfg).batch else "online"
+def job_engine(job: JobSpec, prob: Problem) -> Engine:
+    """The engine the job asks for, its replicas from the problem's initial weights, its planned cost the problem's
+    (a cosine rate's horizon): ``selpres.engines.factory.build_engine`` chooses, and falls back once saying why."""
+    return build_engine(job.engine.replace(horizon=prob.budget), prob.init_params)
 
 
-def kind_of(engine_name: str | None) -> str:
-    """:func:`engine_kind` of an engine that ran (results.json ``engine``; records older than it name none)."""
-    if engine_name == NATIVE_MINIBATCH:  # the mini-batch update, run by the native kernel
-        return "minibatch"
-    return engine_name if engine_name in ("minibatch", "batch") else "online"
-
-
-def job_engine(cfg: DictConfig, prob: Problem):
-    """The engine the config asks for; ``engine=native`` where the kernel cannot run is a user error.
-    Batch methods (QuickProp, Delta-Bar-Delta, Rprop, Adam, batch SGD) step once per epoch in torch."""
-    from selpres.native import KernelUnavailable
-
-    o = optim_spec(cfg)
-    kind = engine_kind(cfg)
-    if kind == "minibatch":  # the native mini-batch kernel (fast, native) or the torch mini-batch engine (torch)
-        log.info("engine=%s: the mini-batch update (%s)", cfg.engine.value, minibatch_reason(cfg))
-        try:
-            return make_minibatch_engine(
-                cfg.engine.value,
-                prob.sizes,
-                prob.init_params,
-                o.target,
-                with_defaults(o.target, o.params),  # the optimizer's defaults for unset keys, for both engines
-                o.batch_size,
-                cfg.model.activation,
-                o.lr_schedule,
-                prob.budget,
-                o.reduction,
-            )
-        except KernelUnavailable as exc:
-            raise ConfigError(
-                "engine", "native", f"fast or torch: the native mini-batch kernel cannot run this job ({exc})"
-            ) from None
-    if kind == "batch":
-        return BatchEngine(
-            prob.sizes,
-            prob.init_params,
-            o.target,
-            o.params,
-            sigmoid_prime_offset=o.sigmoid_prime_offset,
-            reduction=o.reduction,
-        )
-    try:
-        hp = check_hparams(o.target, o.params)  # the online rule, SGD with momentum: lr, momentum
-        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, hp["lr"], hp["momentum"], o.batch_size)
-    except KernelUnavailable as exc:
-        raise ConfigError(
-            "engine", cfg.engine.value, f"fast, torch or reference: the native kernel cannot run here ({exc})"
-        ) from None
+__all__ = ["Problem", "prepare", "task_schedule", "job_engine", "engine_kind", "kind_of"]  # the last two: run/cli's

@@ -1,16 +1,16 @@
 """The training loop: one job trains R replicas of one (schedule, topology) through every stage.
 
-Read top to bottom: ``prepare`` (``selpres.run.problem``) turns a config into a validated problem (data,
-schedule, the selector and its ledger, initial weights) without writing anything; ``train`` runs the epochs of the
-schedule's plan, asking the selector what each replica presents (``selpres.presentation.selector``: the same
-question of every method) and the engine for the updates, charges the ledger, scores the test sets, logs,
-checkpoints, and returns the results that ``results.json`` holds.
+Read top to bottom: ``train`` resolves the config into a checked job (``selpres.run.resolve``: read once, never
+again), ``prepare`` (``selpres.run.problem``) turns that into a validated problem (data, schedule, the selector and
+its ledger, initial weights) without writing anything; the loop runs the epochs of the schedule's plan, asking the
+selector what each replica presents (``selpres.presentation.selector``: the same question of every method) and the
+engine for the updates, charges the ledger, scores the test sets, logs, checkpoints, and returns the results that
+``results.json`` holds.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import logging
 import math
 import time
@@ -22,6 +22,7 @@ from pathlib import Path
 import torch
 from omegaconf import DictConfig
 
+from selpres.engines.factory import Engine
 from selpres.patterns import metric_names
 from selpres.presentation.sampler import shuffle_implementation
 from selpres.presentation.schedule import EpochPlan
@@ -29,9 +30,10 @@ from selpres.presentation.selector import Network
 from selpres.run import floor, lock, orphan, stop
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
-from selpres.run.checks import check_seed
 from selpres.run.hparams import close_job
 from selpres.run.problem import Problem, job_engine, prepare
+from selpres.run.resolve import resolve
+from selpres.run.specs import Cadence, JobSpec
 from selpres.run.tracking import Tracker
 from selpres.seeding import seed_everything
 from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
@@ -105,20 +107,6 @@ def _rms_nm(sums: torch.Tensor, n: int, prob: Problem) -> torch.Tensor:
     return _rms(sums * prob.nm2_per_scaled2, n)
 
 
-@dataclass(frozen=True)
-class Cadence:
-    """The config values the loop reads every epoch, read once: an OmegaConf access costs ~10 us, and an
-    epoch's bookkeeping at R = 1 must stay below its updates (~0.3 ms)."""
-
-    heldout_every: int  # eval.every
-    heldout_curve: int  # eval.heldout_curve
-    checkpoint_every: int  # checkpoint.every
-
-    @classmethod
-    def of(cls, cfg: DictConfig) -> Cadence:
-        return cls(int(cfg.eval.every), int(cfg.eval.heldout_curve), int(cfg.checkpoint.every))
-
-
 def curve_point(engine, prob: Problem, cad: Cadence, ep: EpochPlan | None, loss, progress: Progress) -> dict:
     """One history record: where the job is, the training MSE, test-10 RMS and (when due) held-out RMS."""
     epoch = -1 if ep is None else ep.index
@@ -167,51 +155,44 @@ def final_scores(engine, prob: Problem) -> dict:
 class Job:
     """A job under way: its problem, engine, progress and where it writes (``out`` None: nowhere)."""
 
-    cfg: DictConfig
+    spec: JobSpec
     prob: Problem
-    engine: object
+    engine: Engine
     progress: Progress
-    chash: str
     out: Path | None
     ckpts: Checkpoints | None
     tracker: Tracker
     net: Network  # the replicas' networks as the selector may ask them, and the clock
 
-    @functools.cached_property
-    def cadence(self) -> Cadence:
-        return Cadence.of(self.cfg)
-
     def checkpoint_due(self, ep: EpochPlan) -> bool:
-        every = self.cadence.checkpoint_every
+        every = self.spec.cadence.checkpoint_every
         every = every and (ep.index + 1) % every == 0
         last = ep.index == len(self.prob.plan) - 1
         return self.ckpts is not None and not last and (ep.index in self.prob.stage_ends or bool(every))
 
 
-def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
-    """Validate and prepare; resume from this job's checkpoint if there is one (overwrite: start afresh)."""
-    check_seed(cfg)  # before seeding: seed=2^64 would overflow torch.manual_seed
-    seed_everything(cfg.seed)
-    if cfg.threads > 0:
-        torch.set_num_threads(cfg.threads)
-    prob = prepare(cfg)
-    engine = job_engine(cfg, prob)
+def start(spec: JobSpec, out_dir: str | Path | None, clock: Clock) -> Job:
+    """Prepare the resolved job; resume from its checkpoint if there is one (overwrite: start afresh)."""
+    seed_everything(spec.seed)
+    if spec.threads > 0:
+        torch.set_num_threads(spec.threads)
+    prob = prepare(spec)
+    engine = job_engine(spec, prob)
     if shuffle_implementation() != "native":
         log.warning("the per-epoch shuffles run in numpy (slower, the same permutations): %s", shuffle_implementation())
     out = Path(out_dir) if out_dir is not None else None
-    chash = results_json.job_hash(cfg)
     parts = {"selector": prob.selector, "ledger": prob.ledger}  # every method's state: every job resumes exactly
-    ckpts = Checkpoints(out, chash, parts) if out is not None and cfg.checkpoint.enabled else None
-    if ckpts and cfg.overwrite:
+    ckpts = Checkpoints(out, spec.hash, parts) if out is not None and spec.checkpoints else None
+    if ckpts and spec.overwrite:
         ckpts.discard()
     progress = ckpts.resume(engine, len(prob.seeds)) if ckpts else Progress.fresh(len(prob.seeds))
     clock.add(progress.seconds)
     # the event file goes into the job's own folder: TensorBoard names the run by it (the overrides), not '…/tb'
-    tracker = Tracker(out if out else Path("tb"), cfg.logging.tensorboard and out is not None, cfg.logging.per_replica)
+    tracker = Tracker(out if out else Path("tb"), spec.tensorboard and out is not None, spec.per_replica)
     tracker.replay(progress.history)
-    job = Job(cfg, prob, engine, progress, chash, out, ckpts, tracker, Network(engine, prob.X, prob.Y, clock))
+    job = Job(spec, prob, engine, progress, out, ckpts, tracker, Network(engine, prob.X, prob.Y, clock))
     if not progress.history:  # the untrained network: every curve starts at 0 presentations
-        record(job, {**curve_point(engine, prob, job.cadence, None, None, progress), "work_seconds": 0.0})
+        record(job, {**curve_point(engine, prob, job.spec.cadence, None, None, progress), "work_seconds": 0.0})
     return job
 
 
@@ -232,14 +213,14 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
             prob.X, prob.Y, shown.order, weights=shown.weights, counts=shown.counts, spent=ledger.clock()
         )
     ledger.record(shown, ep)
-    prob.selector.observe(shown, getattr(job.engine, "last_losses", None))  # (a batch engine keeps none)
+    prob.selector.observe(shown, job.engine.last_losses)  # [R, m] after a pruned epoch, else [R, 0]
     progress.epoch = ep.index + 1
     # whole presentations on the curve (each replica's exact cost: results.json's cost)
     progress.presentations = round(ledger.mean("spent"))
     progress.selection_presentations = round(ledger.mean("charged"))
     with clock("eval"):
         mark_diverged(progress, job.engine, shown.presented(loss), ep.index)
-        rec = curve_point(job.engine, prob, job.cadence, ep, loss, progress)
+        rec = curve_point(job.engine, prob, job.spec.cadence, ep, loss, progress)
     rec["work_seconds"] = clock.work()
     with clock("log"):
         record(job, rec)
@@ -252,7 +233,8 @@ def train(
     on_stage_end: Callable[[dict, Problem], None] | None = None,
     on_epoch: Callable[[dict, Problem], None] | None = None,
 ) -> dict:
-    """Train ``cfg.replicas`` replicas through the schedule; returns the results dict.
+    """Train ``cfg.replicas`` replicas through the schedule of the composed config ``cfg``; returns the results dict.
+    Its first step resolves ``cfg`` into a checked :class:`~selpres.run.resolve.JobSpec`: what follows reads that.
 
     With ``out_dir`` the job logs to TensorBoard, checkpoints and writes ``results.json`` and ``weights.pt``
     there, and resumes from a checkpoint of the same config (``overwrite=true``: starts afresh).
@@ -262,7 +244,7 @@ def train(
     with lock.holding(out_dir):  # one writer per job folder (selpres.run.lock)
         clock = Clock()
         with clock("prepare"):
-            job = start(cfg, out_dir, clock)
+            job = start(resolve(cfg), out_dir, clock)
         with clock("loop"), stop.loop():
             for ep in job.prob.plan[job.progress.epoch :]:
                 rec = run_epoch(job, ep, clock)
@@ -277,17 +259,16 @@ def train(
                 if spent:
                     break
                 due, more = job.checkpoint_due(ep), ep.index < len(job.prob.plan) - 1
-                stopping = more and (orphan.gone() or stop.requested() is not None)  # gone, or SIGTERM/SIGUSR1
+                stopping = stop.requested() is not None or (more and orphan.gone())  # a signal, or the sweep gone
                 if due or (stopping and job.ckpts is not None):
                     with clock("checkpoint"):
                         job.progress.seconds = clock.snapshot()
                         job.ckpts.save(job.engine, job.progress)
                         job.tracker.flush()
-                if stopping:
-                    kept = "checkpoint written" if job.ckpts is not None else "no checkpoint: the re-run starts afresh"
+                if stopping:  # what was kept is said by selpres.run.job
                     if stop.requested() is not None:
-                        raise stop.Terminated(stop.requested(), f"after epoch {ep.index + 1} ({kept})")
-                    raise orphan.SweepGone(f"after epoch {ep.index + 1} ({kept})")
+                        raise stop.Interrupted(stop.requested(), f"after epoch {ep.index + 1}")
+                    raise orphan.SweepGone(f"after epoch {ep.index + 1}")
         with clock("eval"):
             final = final_scores(job.engine, job.prob)
         return finish(job, final, clock.snapshot())
@@ -296,8 +277,8 @@ def train(
 def finish(job: Job, final: dict, seconds: dict) -> dict:
     """results.json, weights.pt (everything needed to use a trained net: load_into(BPN(topology), params, r)
     + the scaler) and the TensorBoard hparams; the checkpoint is no longer needed."""
-    cfg, prob = job.cfg, job.prob
-    results = results_json.build(cfg, job.chash, prob, job.engine, final, job.progress, seconds)
+    spec, prob = job.spec, job.prob
+    results = results_json.build(spec, prob, job.engine, final, job.progress, seconds)
     for line in results["floor_warnings"]:
         log.warning("%s", line)
     if job.out is None:
@@ -305,10 +286,10 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
     trained = {
         "params": job.engine.params(),
         "seeds": prob.seeds,
-        "topology": cfg.topology.layers,
-        "activation": cfg.model.activation,  # load_into(BPN(topology, activation=...), params, r)
+        "topology": spec.layers,
+        "activation": spec.activation,  # load_into(BPN(topology, activation=...), params, r)
         "scaler": dataclasses.asdict(prob.scaler),
-        "config_hash": job.chash,
+        "config_hash": spec.hash,
     }
     atomic_write(job.out / WEIGHTS, lambda f: torch.save(trained, f))
     write_json(job.out / RESULTS, results)

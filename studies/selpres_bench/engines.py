@@ -5,7 +5,6 @@ from __future__ import annotations
 import statistics
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import torch
 
@@ -58,9 +57,9 @@ def bench_engine(
     table: EngineTable, name: str, R: int, epochs: int, repeats: int, threads=None, note: str = ""
 ) -> float:
     """One online engine's updates alone; returns ms per replica-run."""
-    from selpres.engines.online import make_engine
+    from selpres.engines.factory import EngineSpec, build_engine
 
-    make = lambda p: make_engine(name, SIZES, p, LR, MOM, 1, threads=threads)
+    make = lambda p: build_engine(EngineSpec.online(name, SIZES, LR, MOM, 1, threads), p)
     eng, sec = time_epochs(make, R, epochs, repeats)
     label = f"{name} engine" if name != "fast" else f"fast engine ({type(eng).__name__})"
     return table.record(label, R, getattr(eng, "threads", 1), epochs, sec, note)
@@ -92,13 +91,13 @@ def bench_batch_engines(table: EngineTable, quick: bool, configs: Path) -> None:
     engine table beside the online rows: the same random data and presentations, so ms per replica-run and
     the ratio compare directly. The note gives ms per epoch of all R replicas. Timed at one thread (as the
     sensitivity sweep's jobs run) and, at R = 1000, at torch's default threads."""
-    from selpres.run.problem import job_engine
+    from selpres.engines.factory import build_engine
+    from selpres.run.resolve import resolve
 
     default_threads = torch.get_num_threads()
     for name in BATCH_OPTIMIZERS:
-        cfg = compose_train(configs, [f"optim={name}"])
-        # job_engine reads only the problem's topology and initial weights: the engine a job builds
-        make = lambda p, cfg=cfg: job_engine(cfg, SimpleNamespace(sizes=SIZES, init_params=p))
+        spec = resolve(compose_train(configs, [f"optim={name}"])).engine.replace(sizes=SIZES)
+        make = lambda p, spec=spec: build_engine(spec, p)  # the engine a job of optim=<name> builds
         plan = [(1, 30, 3, 1), (30, 10, 3, 1), (1000, 1 if quick else 3, 1, 1)]
         if default_threads > 1:
             plan.append((1000, 1 if quick else 3, 1, default_threads))

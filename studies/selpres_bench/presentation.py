@@ -107,8 +107,8 @@ def bench_selection(quick: bool, configs: Path) -> bool:
     draw, at R = 1, 30, 1000; then whole selective 6-13-2 jobs at R = 30 and 1000 (R = 30 only with
     --quick) per order: the "select" clock phase against "train", and the charged presentations against
     the trained ones. Returns False if a job failed."""
+    from selpres.engines.factory import EngineSpec, build_engine
     from selpres.engines.model import init_replica_params
-    from selpres.engines.online import make_engine
     from selpres.presentation.orders import priority_orders
     from selpres.presentation.orders._loss import enlarge_by_loss
     from selpres.presentation.orders.reselect import reselected_orders
@@ -124,7 +124,7 @@ def bench_selection(quick: bool, configs: Path) -> bool:
     for R in (1, 30, 1000):
         params = init_replica_params(SIZES, list(range(R)))
         orders = torch.stack(priority_orders(X, "stratified", [generator(s, "subset") for s in range(R)], 2))
-        eng, seeds = make_engine("fast", SIZES, params, 0.15, 0.9, 1), list(range(R))  # as a job scores
+        eng, seeds = build_engine(EngineSpec.online("fast", SIZES, 0.15, 0.9), params), list(range(R))  # as a job
         batched = functools.partial(lambda o, e: enlarge_by_loss(o, errors_of(e, X, Y), 50, 50, True), orders, eng)
         loop = functools.partial(_per_replica_enlargement, params, X, Y, orders, 50, 50)
         with one_thread():  # as a job chooses

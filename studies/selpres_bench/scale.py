@@ -90,8 +90,8 @@ def engine_rows(repeats: int, presentations: int) -> list[dict]:
     (``time.thread_time``: R = 4 is one group, trained in the calling thread, no pool; the process's time
     would also count torch's OpenMP threads spinning after a torch call), so time spent descheduled by
     other sessions on shared cores does not count; slower memory and caches do."""
+    from selpres.engines.factory import EngineSpec, build_engine
     from selpres.engines.model import init_replica_params
-    from selpres.engines.online import make_engine
     from selpres.native import staging
 
     rows = []
@@ -117,7 +117,7 @@ def engine_rows(repeats: int, presentations: int) -> list[dict]:
             for _ in range(repeats):
                 for n, staged in paths:  # interleaved: a load change hits every size and path alike
                     staging.STAGE_BYTES = threshold if staged else 1 << 62
-                    engine = make_engine("fast", topology, [p.clone() for p in params], 0.01, 0.9, 1)
+                    engine = build_engine(EngineSpec.online("fast", topology, 0.01, 0.9), [p.clone() for p in params])
                     name = engine.name
                     X, Y = sets[n]
                     if staged and name == "native":  # the one-off copy is timed in its own row, not here
@@ -181,8 +181,8 @@ def staging_rows(repeats: int) -> list[dict]:
 def padding_rows(repeats: int, presentations: int) -> list[dict]:
     """Seconds per epoch of ``presentations`` per replica for R = 12 (no padded lane) and R = 10 (two),
     after a warm-up epoch of as many presentations, interleaved over the repeats."""
+    from selpres.engines.factory import EngineSpec, build_engine
     from selpres.engines.model import init_replica_params
-    from selpres.engines.online import make_engine
 
     gen = torch.Generator().manual_seed(0)
     X = torch.rand(PADDING_N, PADDING_TOPOLOGY[0], dtype=torch.float64, generator=gen)
@@ -190,7 +190,7 @@ def padding_rows(repeats: int, presentations: int) -> list[dict]:
     engines, orders = {}, {}
     for R in PADDING_REPLICAS:
         params = init_replica_params(PADDING_TOPOLOGY, list(range(R)))
-        engines[R] = make_engine("fast", PADDING_TOPOLOGY, params, 0.15, 0.9, 1)  # the paper's lr, momentum
+        engines[R] = build_engine(EngineSpec.online("fast", PADDING_TOPOLOGY, 0.15, 0.9), params)  # the paper's
         orders[R] = torch.randint(PADDING_N, (R, presentations), generator=gen)
         engines[R].train_epoch(X, Y, orders[R])  # warm-up: not timed
     times: dict[int, list[float]] = {R: [] for R in PADDING_REPLICAS}
