@@ -66,18 +66,19 @@ def test_selective_backprop_selection_follows_the_percentile_rule():
     beta = 2.0
     P = backprop_probability(losses, beta)[0]
     assert P.tolist() == pytest.approx([f**beta for f in by_hand])
-    from selpres.presentation.pruning._job import Pruning
+    from selpres.presentation.pruning.selective_backprop import SelectiveBackprop
+    from selpres.presentation.selector import Ledger
 
-    pr = Pruning("selective_backprop", {"beta": beta}, 6, [7], None, 10, 1 / 3)
+    pr = SelectiveBackprop({"beta": beta}, Ledger(6, [7], None, 10, 1 / 3))
     draws, hits = 4000, torch.zeros(6)
     order = torch.arange(6).unsqueeze(0)
     for e in range(draws):
-        choice = pr.policy.choose(e, order, losses)
+        choice = pr.choose(e, order, losses)
         hits[choice.order[0, : int(choice.counts[0])]] += 1
     freq = hits / draws
     sd = (P * (1 - P) / draws).sqrt()
     assert ((freq - P).abs() <= 5 * sd + 1e-9).all()
-    assert float(pr.charged[0]) == pytest.approx(draws * 6 / 3)  # every candidate's forward pass charged
+    assert float(pr.ledger.charged[0]) == pytest.approx(draws * 6 / 3)  # every candidate's forward pass charged
 
 
 @pytest.mark.parametrize("schedule", ["infobatch", "selective_backprop", "seta"])

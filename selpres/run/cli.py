@@ -176,10 +176,10 @@ def summary_table(results: dict) -> str:
         ),
         (
             "cost T/t",
-            f"{sch['presentations']:,} presentations  (T_con/t at equal epochs "
-            f"{sch['conventional_presentations']:,}; ratio {sch['cost_ratio']:.3f})"
+            f"{_count(sch['presentations'])} presentations  (T_con/t at equal epochs "
+            f"{_count(sch['conventional_presentations'])}; ratio {sch['cost_ratio']:.3f})"
             + (
-                f" + {results['selection_presentations']:,} charged for choosing A_i"
+                f" + {_count(results['selection_presentations'])} charged for choosing A_i"
                 if results.get("selection_presentations")
                 else ""
             ),
@@ -194,3 +194,8 @@ def summary_table(results: dict) -> str:
         rows.append(("held-out nMSE", f"{fmt('heldout_rms_nmse_overall')}   (predicting the mean: {base:.4f} Nm)"))
     w = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)
+
+
+def _count(x: float) -> str:
+    """Presentations as the summary says them: whole ones with thousands separators, a mean over replicas to 0.1."""
+    return f"{int(x):,}" if float(x).is_integer() else f"{x:,.1f}"
