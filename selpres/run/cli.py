@@ -44,8 +44,9 @@ def hydra_line(e: BaseException, overrides: list[str]) -> str | None:
             value = given.partition("=")[2] if given else getattr(cause, "value", None)
             return f"{key}={value!r} is not allowed: expected {_expected(cause)}"
         if type(cause).__name__ == "MissingMandatoryValue" and key:
-            group = key.partition(".")[0]
-            return f"{key} has no value (???): expected {key}=<value>, or a {group}= option that sets it"
+            group, dot, _ = key.partition(".")
+            option = f", or a {group}= option that sets it" if dot else ""  # a top-level key belongs to no group
+            return f"{key} has no value (???): expected {key}=<value>{option}"
         msg = str(getattr(cause, "msg", "") or text).strip().splitlines()[0]
         return f"{key}: {msg}" if key and key not in msg else msg
     if isinstance(e, ConfigCompositionException):

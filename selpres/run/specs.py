@@ -56,7 +56,7 @@ NOT_IDENTITY = ("logging", "overwrite", "threads", "checkpoint", "name")  # knob
 def plain(node: Any) -> Any:
     """Plain, resolved values of a config node (or of a container holding nodes): dicts, lists, scalars."""
     if isinstance(node, (DictConfig, ListConfig)):
-        return OmegaConf.to_container(node, resolve=True, enum_to_str=True)
+        return OmegaConf.to_container(node, resolve=True, enum_to_str=True, throw_on_missing=True)
     if isinstance(node, Mapping):
         return {k: plain(v) for k, v in node.items()}
     if isinstance(node, (list, tuple)):
