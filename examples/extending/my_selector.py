@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import torch
 
-from selpres.presentation.selector import Presentation, Selector
+from selpres import Presentation, Selector
 
 
 class LossWeighted(Selector):
