@@ -94,7 +94,7 @@ def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
         "replicas=3",
     )
     res = train(cfg)
-    pr = res["pruning"]
+    pr = res["cost"]["per_replica"]
     # Adam with ReLU: a mini-batch engine, the native kernel's where it builds (tests/test_native_pruning.py: the
     # paper's regime runs on the online native kernel)
     assert res["engine"] in ("minibatch-native", "minibatch")
@@ -103,13 +103,13 @@ def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
         if res["engine"] == "minibatch-native"
         else "unavailable" in res["engine_fallback"]
     )
-    for cost in pr["cost"]:
+    for cost in pr["spent"]:
         assert 6000 - (1 + 1 / 3) < cost <= 6000 + 1e-9
     assert res["presentations_done"] == pytest.approx(6000, abs=2)
     if schedule == "selective_backprop":
-        assert all(c > 0 for c in pr["charged_presentations"])
+        assert all(c > 0 for c in pr["charged"])
     else:
-        assert all(c == 0 for c in pr["charged_presentations"]) and all(x > 0 for x in pr["left_out"])
+        assert all(c == 0 for c in pr["charged"]) and all(x > 0 for x in pr["left_out"])
 
 
 def test_a_finished_job_of_another_update_is_run_again(tmp_path, caplog, monkeypatch):
@@ -200,6 +200,6 @@ def test_results_record_the_policy_that_ran():
     from selpres.run.train import train
 
     res = train(cfg_of("schedule=infobatch", "schedule.epochs=[2]", "replicas=2"))
-    assert res["pruning"]["kind"] == "infobatch"
-    assert res["pruning"]["policy"] == "selpres.presentation.pruning.infobatch.InfoBatch"
-    assert res["pruning"]["prune_ratio"] == 0.5 and res["pruning"]["delta"] == 0.875
+    assert res["selector"]["name"] == "infobatch"
+    assert res["selector"]["class"] == "selpres.presentation.pruning.infobatch.InfoBatch"
+    assert res["selector"]["prune_ratio"] == 0.5 and res["selector"]["delta"] == 0.875

@@ -130,7 +130,7 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
     a = json.loads((killed / "results.json").read_text())
     b = json.loads((straight / "results.json").read_text())
     assert numbers(a) == numbers(b)  # the curves without their wall seconds
-    for key in ("presentations_done", "selection_presentations", "cost", "pruning"):
+    for key in ("presentations_done", "selection_presentations", "cost", "selector"):
         assert a[key] == b[key], key
     assert a["resumed_from_epoch"] == epoch_at_kill and b["resumed_from_epoch"] is None
     wa = torch.load(killed / "weights.pt")["params"]

@@ -139,7 +139,7 @@ def test_prune_ratio_0_with_one_group_is_conventional_training():
     common = ("schedule.epochs=[3]", "replicas=2", "schedule.order=random")
     plain = train(cfg_of("schedule=conventional", *common))
     seta = train(cfg_of("schedule=seta_random", "schedule.pruning.prune_ratio=0", *common))
-    assert seta["pruning"]["left_out"] == [0.0, 0.0]
+    assert seta["cost"]["per_replica"]["left_out"] == [0.0, 0.0]
     assert seta["replica_results"] == plain["replica_results"]
     assert seta["summary"] == plain["summary"]
 
@@ -148,11 +148,11 @@ def test_a_budget_run_stops_at_it_and_is_charged_like_infobatch():
     from selpres.run.train import train
 
     res = train(cfg_of("schedule=seta", "schedule.epochs=null", "schedule.budget=5000", "replicas=2"))
-    pr = res["pruning"]
-    assert pr["policy"] == "selpres.presentation.pruning.seta.SeTa"
-    for cost, trained in zip(pr["cost"], pr["trained_presentations"]):
+    pr = res["cost"]["per_replica"]
+    assert res["selector"]["class"] == "selpres.presentation.pruning.seta.SeTa"
+    for cost, trained in zip(pr["spent"], pr["trained"]):
         assert 5000 - 1 < cost <= 5000 + 1e-9 and cost == trained  # choosing is not charged: scores are free
-    assert pr["charged_presentations"] == [0.0, 0.0] and all(x > 0 for x in pr["left_out"])
+    assert pr["charged"] == [0.0, 0.0] and all(x > 0 for x in pr["left_out"])
 
 
 def test_a_sweep_over_seta_and_its_dynamic_random_control_from_the_command_line(tmp_path):
@@ -175,5 +175,5 @@ def test_a_sweep_over_seta_and_its_dynamic_random_control_from_the_command_line(
     }
     assert set(runs) == {"seta", "seta_random"}
     for res in runs.values():
-        assert res["status"] == "complete" and res["pruning"]["policy"] == "selpres.presentation.pruning.seta.SeTa"
-    assert runs["seta_random"]["pruning"]["groups"] == 1
+        assert res["status"] == "complete" and res["selector"]["class"] == "selpres.presentation.pruning.seta.SeTa"
+    assert runs["seta_random"]["selector"]["groups"] == 1

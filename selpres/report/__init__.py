@@ -44,8 +44,9 @@ difference*, three different things. Nothing here names a study's arms or method
 or reads them from the jobs' results.json.
 
 The last stage of arm -> data -> presentation -> engine -> loop -> results -> report: it reads job folders, never
-trains. May import: ``selpres.run`` (stats, the names of a job folder's files) and the foundation; never a study
-(it is given them); matplotlib only inside the plotting blocks, so the command line starts without it.
+trains. May import: ``selpres.run`` (stats, older results.json read as today's, the names of a job folder's files)
+and the foundation; never a study (it is given them); matplotlib only inside the plotting blocks, so the command
+line starts without it.
 """
 
 from __future__ import annotations

@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass, field
 
 from selpres.report.jobs import Job
+from selpres.run.legacy import selector_and_cost
 from selpres.storage import flatten
 
 SETS = (("test10", "test-10"), ("heldout", "held-out"))  # results.json key, name in the report
@@ -95,31 +96,20 @@ class Group:
 
 def job_cost(res: dict) -> int | float:
     """A job's total cost per replica, in presentations: back-propagated plus charged for choosing, the mean over
-    its replicas as its ledger measured it (``cost.presentations``; results written before it: the schedule's
-    presentations plus selection's, a pruning job's per-replica cost averaged)."""
-    if "cost" in res:
-        return res["cost"]["presentations"]
-    if res.get("pruning"):
-        c = res["pruning"]["cost"]
-        return sum(c) / len(c)
-    return res["schedule"]["presentations"] + (res.get("selection_presentations") or 0)
+    its replicas as its ledger measured it (``cost.presentations``; an older file's as
+    ``selpres.run.legacy.selector_and_cost`` reads it)."""
+    return selector_and_cost(res)[1]["presentations"]
 
 
 def presents_all(res: dict) -> bool:
     """Whether a finished job's results are conventional training: one stage of all of U, each epoch's every pattern
-    presented by the staged selector (a compute-matched run's cut last epoch too). Results written before the
-    selector was recorded: one stage and no pruning policy."""
-    if len(res["schedule"]["sizes"]) != 1:
-        return False
-    sel = res.get("selector")
-    return sel.get("name") == "staged" if isinstance(sel, dict) else not res.get("pruning")
+    presented by the staged selector (a compute-matched run's cut last epoch too)."""
+    return len(res["schedule"]["sizes"]) == 1 and selector_and_cost(res)[0].get("name") == "staged"
 
 
 def replica_costs(res: dict) -> list[float]:
     """Each replica's measured cost in presentations (trained and charged), from a job's results."""
-    if "cost" in res:
-        return res["cost"]["per_replica"]["spent"]
-    return (res.get("pruning") or {}).get("cost") or [res["presentations_done"]] * len(res.get("seeds") or [])
+    return selector_and_cost(res)[1]["per_replica"]["spent"]
 
 
 def _sched_key(s: dict) -> tuple:

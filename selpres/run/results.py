@@ -121,7 +121,6 @@ def build(job: JobSpec, prob, engine: Engine, final: dict, progress, seconds: di
         "schedule": schedule,
         "selector": selector,  # what chose every epoch's patterns: its name, class, parameters
         "cost": cost,  # the ledger: per replica and mean, presentations trained and charged, the cost ratio
-        "pruning": pruning_record(selector, cost) if job.schedule.selector.target is not None else None,
         "topology": job.layers,
         "engine": engine.name,  # what ran
         "optimizer": job.optim.path,  # the class whose rule ran (selpres.engines.optim, or the user's own)
@@ -169,23 +168,3 @@ def epochs_run(schedule, epochs: int) -> list[int]:
         out.append(full)
         epochs -= full + (1 if st.extra and epochs > st.epochs else 0)
     return out
-
-
-def pruning_record(selector: dict, cost: dict) -> dict:
-    """results.json's ``pruning`` (a job configured with ``schedule.pruning``), as it was before the ``selector``
-    and ``cost`` nodes held the same: the policy, its parameters, its per-replica cost."""
-    per = cost["per_replica"]
-    params = {k: v for k, v in selector.items() if k not in ("name", "class", "order_name", "order_class")}
-    params.pop("user_classes", None)
-    return {
-        "kind": selector["name"],
-        "policy": selector["class"],
-        **params,
-        "budget": cost["budget"],
-        "selection_cost": cost["selection_cost"],
-        "cost": per["spent"],
-        "trained_presentations": per["trained"],
-        "charged_presentations": per["charged"],
-        "left_out": per["left_out"],
-        "epochs": per["epochs"],
-    }

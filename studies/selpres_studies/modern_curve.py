@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from selpres.report import Context, Section, median, summarize, table
+from selpres.report import Context, Section, median, presents_all, summarize, table
 from selpres_studies._modern_cells import DESIGN, arm_of, job_work, regime_of
 
 TOLERANCE = 0.10  # "converged": doubling the budget changes the mean final held-out RMS by less than this share
@@ -25,7 +25,7 @@ def budgets(ctx: Context) -> dict[tuple[str, str], dict[int, dict]]:
     out: dict = {}
     for job in ctx.jobs:
         res = job.results
-        if job.status not in ("complete", "diverged") or not res or res.get("pruning"):
+        if job.status not in ("complete", "diverged") or not res or not presents_all(res):
             continue
         epochs = res["schedule"].get("epochs") or []
         if len(epochs) != 1 or res["schedule"].get("name") != DESIGN.reference:
