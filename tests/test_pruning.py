@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import pytest
 import torch
@@ -98,11 +99,12 @@ def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
     # Adam with ReLU: a mini-batch engine, the native kernel's where it builds (tests/test_native_pruning.py: the
     # paper's regime runs on the online native kernel)
     assert res["engine"] in ("minibatch-native", "minibatch")
-    assert (
-        res["engine_fallback"] is None
-        if res["engine"] == "minibatch-native"
-        else "unavailable" in res["engine_fallback"]
-    )
+    if res["engine"] == "minibatch-native":
+        assert res["engine_fallback"] is None
+    else:  # the fallback is recorded with its reason: the kernel switched off, or the compiler's own words
+        assert res["engine_fallback"]
+        if os.environ.get("SELPRES_NO_NATIVE"):
+            assert res["engine_fallback"] == "disabled by SELPRES_NO_NATIVE"
     for cost in pr["spent"]:
         assert 6000 - (1 + 1 / 3) < cost <= 6000 + 1e-9
     assert res["presentations_done"] == pytest.approx(6000, abs=2)
