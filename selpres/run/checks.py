@@ -19,6 +19,7 @@ from selpres.data.paper import heldout_count
 from selpres.data.routes import ROUTES, required_of
 from selpres.data.task import Shape, task_shape
 from selpres.engines.activations import activation
+from selpres.engines.minibatch import check_epoch_clock
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.errors import ConfigError
 from selpres.presentation.orders import make_order
@@ -51,6 +52,7 @@ def validate(cfg: DictConfig) -> tuple[int, ...]:
             raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
     activation(cfg.model.activation)  # ConfigError naming model.activation
     spec = check_optim(cfg)  # ConfigError naming optim.<key>
+    check_epoch_clock(spec.lr_schedule, plain(cfg.schedule))  # cosine_epochs: one stage of U for N epochs
     make_order(cfg.schedule.order)  # a built-in or an importable Order: ConfigError naming schedule.order
     pruning = pruning_spec(cfg.schedule)
     if pruning is not None:

@@ -20,7 +20,7 @@ from selpres.data.task import task_files
 from selpres.engines.activations import ACTIVATIONS
 from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.sampler import shuffle_implementation
-from selpres.run import floor
+from selpres.run import floor, stalls
 from selpres.run.optimizer import optim_spec
 from selpres.run.specs import recorded, task_specs
 from selpres.run.stats import summarize
@@ -154,6 +154,7 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
             stats, task_floor, prob.task.info if prob.task else None, str(cfg.topology.layers)
         ),
         "replica_results": reps,
+        "stalls": stalls.evidence(reps, engine, prob, cfg.model.activation, task_floor),  # stalled? dead units
         "curves": progress.history,
         "config": recorded(cfg),
     }
