@@ -75,7 +75,8 @@ def test_trimmed_is_scipys_trimmed_mean_and_its_standard_error(seed):
     assert t["p"] == pytest.approx(2 * sps.t.sf(abs(t["mean"]) / t["se"], df), rel=1e-9)
     # TOST: the larger of the two one-sided p-values; inside ±m exactly when the 90 % interval is
     lower, upper = sps.t.sf((t["mean"] + 0.5) / t["se"], df), sps.t.sf((0.5 - t["mean"]) / t["se"], df)
-    assert t["p_tost"] == pytest.approx(max(lower, upper), rel=1e-9)
+    assert (t["p_lower"], t["p_upper"]) == (pytest.approx(lower, rel=1e-9), pytest.approx(upper, rel=1e-9))
+    assert t["p_tost"] == max(t["p_lower"], t["p_upper"])
     inside = -0.5 < t["ci90"][0] and t["ci90"][1] < 0.5
     assert inside == (t["p_tost"] < 0.05)
 

@@ -125,7 +125,8 @@ def trimmed(values: Iterable[float | None], trim: float = 0.2, margin: float | N
     """The ``trim`` trimmed mean of the finite values (g = ⌊trim n⌋ cut from each end) with the Tukey–McLaughlin
     test (Wilcox's ``trimci``): standard error s_w / ((1 − 2 trim) √n), s_w the winsorized values' standard
     deviation, Student's t with n − 2g − 1 degrees of freedom. {"n", "trim", "mean", "se", "df", "ci95", "p"
-    (two-sided, mean = 0), and with ``margin`` the two one-sided tests as :func:`tost`: "p_tost", "ci90"}.
+    (two-sided, mean = 0), and with ``margin`` the two one-sided tests as :func:`tost`: "p_lower" (against mean
+    ≤ −margin), "p_upper" (against mean ≥ +margin), "p_tost" (the larger), "ci90"}.
     Robust to a tail of outliers (a run that stalled, half-converged) where the plain mean is not."""
     if not 0 <= trim < 0.5:
         raise ValueError(f"trimmed needs 0 <= trim < 0.5, got {trim!r}")
@@ -148,9 +149,9 @@ def trimmed(values: Iterable[float | None], trim: float = 0.2, margin: float | N
     p = 1.0 if mean == 0 else min(1.0, 2 * _upper_tail(abs(mean), se, df))
     out.update(se=se, df=df, ci95=[mean - half, mean + half], p=p)
     if margin is not None and margin > 0:
-        p_tost = max(_upper_tail(mean + margin, se, df), _upper_tail(margin - mean, se, df))
+        p_lower, p_upper = _upper_tail(mean + margin, se, df), _upper_tail(margin - mean, se, df)
         half90 = t_quantile(1 - alpha, df) * se
-        out.update(p_tost=p_tost, ci90=[mean - half90, mean + half90])
+        out.update(p_lower=p_lower, p_upper=p_upper, p_tost=max(p_lower, p_upper), ci90=[mean - half90, mean + half90])
     return out
 
 

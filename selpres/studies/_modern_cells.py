@@ -1,6 +1,6 @@
-"""The modern study's cells (:mod:`selpres.studies.modern`): its design file (roles, claims, display names), how a
-job's arm, regime and method are read from its results.json, and each (arm, regime, method) cell's seeds, costs,
-wall seconds and held-out curves."""
+"""The modern study's cells (:mod:`selpres.studies.modern`): its design file (roles, claims, the stall rule and the
+statistic, display names), how a job's arm, regime and method are read from its results.json, and each (arm, regime,
+method) cell's seeds, costs, wall seconds, held-out curves, stalls and hidden units."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from omegaconf import OmegaConf
 
 from selpres.report.context import Context
 from selpres.report.groups import optim_target
+from selpres.run.stalls import is_stalled
 
 METRICS = (("rms", "held-out RMS", "Nm"), ("nmse", "held-out nMSE", ""))
 DESIGN_FILE = Path(__file__).with_name("modern.yaml")  # modern.yaml: the study's roles and display names
@@ -28,6 +29,9 @@ class Design:
     order: tuple[str, ...] = ()
     claims: dict = field(default_factory=dict)  # method -> its own published claim: comparable | lossless | speedup
     matched_within: float = 0.1  # a method within this share of the partner's cost is compared with it
+    stall_share: float = 0.2  # stalled: final held-out RMS >= this share of the mean predictor's (selpres.run.stalls)
+    trim: float = 0.2  # the converged error: this trimmed mean of the paired differences of the runs that did not stall
+    remedies: dict = field(default_factory=dict)  # hidden units of a remedy -> the units of the regime it remedies
     arms: dict = field(default_factory=dict)
     optimizers: dict = field(default_factory=dict)
     activations: dict = field(default_factory=dict)
@@ -115,6 +119,10 @@ class Cell:
     lrs: set[float] = field(default_factory=set)
     work: list[float] = field(default_factory=list)  # per job: the method's own wall seconds (job_work)
     curves: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)  # seed -> (cost, s, RMS)
+    stalled: dict[int, bool] = field(default_factory=dict)  # seed -> stalled (design.stall_share of the floor)
+    dead: dict[int, int] = field(default_factory=dict)  # seed -> dead hidden units at the end (results.json stalls)
+    linear: dict[int, int] = field(default_factory=dict)  # seed -> linear ("always on") hidden units at the end
+    hidden: int | None = None  # hidden units per net
 
     @property
     def cost(self) -> float | None:
@@ -126,6 +134,10 @@ class Cell:
 
     def values(self, metric: str) -> dict[int, float]:
         return self.rms if metric == "rms" else self.nmse
+
+    def converged(self, metric: str) -> dict[int, float]:
+        """The seeds that did not stall (and whose stall is known), with their final value of ``metric``."""
+        return {s: v for s, v in self.values(metric).items() if self.stalled.get(s) is False}
 
 
 def job_cost(res: dict) -> float:
@@ -180,7 +192,24 @@ def cells(ctx: Context, design: Design = DESIGN) -> dict[tuple[str, str, str], C
             if v is not None and math.isfinite(v):
                 c.rms[rep["seed"]] = v
         c.nmse.update(heldout_nmse(job))
+        job_stalls(c, res, job.replicas, design.stall_share)
     return out
+
+
+def job_stalls(c: Cell, res: dict, replicas: list[dict], share: float) -> None:
+    """Each seed's stall (its final held-out RMS against ``share`` of the floor: :func:`selpres.run.stalls.is_stalled`)
+    and, where results.json has its ``stalls``, its dead and linear hidden units; into the cell."""
+    floor = ((res.get("floor") or {}).get("heldout") or {}).get("nm", {}).get("overall")
+    for rep in replicas:
+        rms = rep["final"]["heldout"]["nm"]["overall"] if rep["final"] else None
+        flag = is_stalled(rms, floor, share)
+        if flag is not None:
+            c.stalled[rep["seed"]] = flag
+    record = res.get("stalls") or {}
+    for entry in record.get("replicas") or []:
+        if entry.get("dead") is not None:
+            c.dead[entry["seed"]], c.linear[entry["seed"]] = entry["dead"], entry["linear"]
+    c.hidden = record.get("hidden_units", c.hidden)
 
 
 def _order(methods: list[str]):
