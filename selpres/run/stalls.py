@@ -1,9 +1,9 @@
 """Stalls as their own outcome (issue 40): which replicas ended stalled, and the state of their hidden units.
 
 A replica **stalled** when its final held-out RMS (overall, Nm) is at least ``STALL_SHARE`` of the floor's, the
-RMS of predicting the training mean (:mod:`selpres.run.floor`). On the modern study's validation draw the
-converged nets end at 7-15 % of the floor, the stalled ones on plateaus from 23 % (PUMA 560) and 29 % (two-link
-arm) up to the floor itself (docs/studies/modern.md shows the draw the share was read off).
+RMS of predicting the training mean (:mod:`selpres.run.floor`). On the modern study's validation draw the nets
+of Adam + ReLU that converged end at 7-15 % of the floor, the stalled ones on plateaus at 21-23 % (PUMA 560), 29,
+38 and 45-48 % (two-link arm) and up to the floor itself; 20 % lies below every plateau (docs/studies/modern.md).
 
 The cause's evidence is counted at the end on the held-out inputs, per replica, for every hidden layer:
 
