@@ -5,7 +5,7 @@ experiment=modern_curve on the validation draw (data.test_seed=1, seeds 100.. ap
 the study runs (make_modern_designs.ADAM_LR; the paper's regime at its lr 0.15). The study's N is the budget where
 doubling it changes the median final held-out RMS by less than 10 % (or the largest that fits); experiment=modern_lr
 then checks the rate at that N; the two are iterated until neither moves, and written into make_modern_designs.py
-(EPOCHS, ADAM_LR). The regimes, arms and seeds per job are that script's; the remedy (adam_leaky) runs at its Adam
+(EPOCHS, ADAM_LR). The regimes and arms are that script's; the remedy (adam_leaky) runs at its Adam
 regime's rate and budget, so it has no curve of its own.
 """
 
@@ -20,17 +20,19 @@ MODERN = runpy.run_path(str(Path(__file__).with_name("make_modern_designs.py")))
 # (arm, regime) -> the doubling budgets (epochs): from below the study's N to past the doubling that confirms it
 BUDGETS = {
     ("two_link", "paper"): [20 * 2**k for k in range(6)],  # 20 .. 640
-    ("two_link", "adam"): [20 * 2**k for k in range(7)],  # 20 .. 1280
+    ("two_link", "adam"): [20 * 2**k for k in range(6)],  # 20 .. 640
     ("puma560", "paper"): [5 * 2**k for k in range(6)],  # 5 .. 160
     ("puma560", "adam"): [5 * 2**k for k in range(6)],  # 5 .. 160
 }
+# (arm, regime) -> seeds per curve point (100..): the stall rate per budget needs more where stalls are common
+REPLICAS = {("two_link", "paper"): 48, ("two_link", "adam"): 48, ("puma560", "paper"): 12, ("puma560", "adam"): 24}
 
 
 def design(arm: str, regime: str, N: int) -> str:
     n = MODERN["ARMS"][arm][2]
     overrides, reg, what = MODERN["regime_lines"](regime, arm)
     line = f"experiment=modern_curve: conventional training for N = {N} epochs ({n * N:,} presentations)"
-    replicas = MODERN["REPLICAS"][arm]
+    replicas = REPLICAS[(arm, regime)]
     return "\n".join(
         [
             *MODERN["header"](arm, what, line, "make_modern_curve_designs.py"),

@@ -73,11 +73,12 @@ def test_a_doubling_that_still_cures_stalls_is_not_settled():
         p["stalled"] = {s: s in stalled for s in p["rms"]}
         return p
 
-    # 20 -> 40: the median moves 2 %, but 5 of 20 seeds that stalled at 20 did not at 40: not settled; 40 -> 80 is
+    # 20 -> 40: the median moves 2 %, but 6 of 20 seeds that stalled at 20 did not at 40 (McNemar p = 2 / 2^6): not
+    # settled; 40 -> 80 is
     rms = [1.0] * 20
     found = {
         ("arm", "adam", 0.003): {
-            20: pt(*rms, stalled=range(5)),
+            20: pt(*rms, stalled=range(6)),
             40: pt(*[0.98] * 20),
             80: pt(*[0.97] * 20, stalled=(19,)),  # one more stall at 80: a rise is no cure
         }
@@ -85,3 +86,8 @@ def test_a_doubling_that_still_cures_stalls_is_not_settled():
     rows = modern_curve.curve_rows(found)
     assert [r["chosen"] for r in rows] == [False, True, False]
     assert modern_curve.settled(found[("arm", "adam", 0.003)][40], found[("arm", "adam", 0.003)][80])
+    assert (rows[0]["stalled_only_here"], rows[0]["stalled_only_at_2n"]) == (6, 0)
+    assert rows[0]["stall_p_at_2n"] == pytest.approx(2 / 2**6)
+    # five cured of 20: p = 2 / 2^5 > 0.05, not detectable: settled
+    five = {20: pt(*rms, stalled=range(5)), 40: pt(*[0.98] * 20)}
+    assert modern_curve.settled(five[20], five[40])

@@ -1,7 +1,7 @@
 """The learning curves that size the modern study (issues 28, 40, experiment=modern_curve): conventional training of
 each arm and regime at doubling budgets, on the validation draw, and the budget where doubling it changes the median
-final held-out RMS by less than ``TOLERANCE`` and lowers the stall rate by less than ``STALL_TOLERANCE`` (the
-study's N), else the largest run, said plainly; beside it the share of seeds that stalled
+final held-out RMS by less than ``TOLERANCE`` and does not lower the stall rate detectably (McNemar's exact test
+paired by seed: the study's N), else the largest run, said plainly; beside it the share of seeds that stalled
 (:func:`selpres.run.stalls.is_stalled` at the study's ``stall_share``). And the rate check (experiment=modern_lr):
 conventional training of one budget at several rates, the rate with the lowest median.
 
@@ -21,27 +21,30 @@ import math
 from selpres.report.context import Context, Section
 from selpres.report.markdown import table
 from selpres.run.stalls import is_stalled
-from selpres.run.stats import clopper_pearson, median, summarize
+from selpres.run.stats import clopper_pearson, mcnemar_exact, median, summarize
 from selpres.studies._modern_cells import DESIGN, arm_of, job_work, regime_of
 
 TOLERANCE = 0.10  # "converged": doubling the budget changes the median final held-out RMS by less than this share
-STALL_TOLERANCE = 0.05  # ... and lowers the share of seeds that stalled by less than this (issue 40)
-
-
-def _stall_rate(point: dict) -> float | None:
-    stalled = point.get("stalled") or {}
-    return sum(stalled.values()) / len(stalled) if stalled else None
+ALPHA = 0.05  # ... and does not lower the share of seeds that stalled detectably (issue 40): McNemar's exact test
 
 
 def settled(point: dict, doubled: dict) -> bool:
     """Doubling the budget from ``point`` to ``doubled`` moves the median final held-out RMS by less than TOLERANCE
-    and lowers the stall rate by less than STALL_TOLERANCE (a seed that more budget brings out of a stall was still
-    training, not stalled)."""
+    and does not lower the stall rate detectably: the seeds (the same in both runs) that stalled at N but not at
+    2N are not more than chance allows against those that stalled at 2N only (McNemar's exact test, p >= ALPHA).
+    A seed that more budget brings out of a stall was still training, not stalled."""
     a, b = median(point["rms"].values()), median(doubled["rms"].values())
     if a is None or b is None or not abs(b - a) < TOLERANCE * a:
         return False
-    sa, sb = _stall_rate(point), _stall_rate(doubled)
-    return sa is None or sb is None or sa - sb < STALL_TOLERANCE
+    t = stall_test(point, doubled)
+    return t is None or t["a_only"] <= t["b_only"] or t["p"] >= ALPHA
+
+
+def stall_test(point: dict, doubled: dict) -> dict | None:
+    """McNemar's exact test of the stalls at N (a) against 2N (b), paired by seed, or None without stall flags."""
+    sa, sb = point.get("stalled") or {}, doubled.get("stalled") or {}
+    seeds = sorted(set(sa) & set(sb))
+    return mcnemar_exact([sa[s] for s in seeds], [sb[s] for s in seeds]) if seeds else None
 
 
 def budgets(ctx: Context) -> dict[tuple[str, str, float], dict[int, dict]]:
@@ -108,6 +111,7 @@ def curve_rows(found: dict) -> list[dict]:
             m = means[N]
             change = (medians[nxt] - medians[N]) / medians[N] if nxt is not None and medians[N] else None
             stalled = points[N].get("stalled") or {}
+            t = stall_test(points[N], points[nxt]) if nxt == 2 * N else None
             rows.append(
                 {
                     "arm": arm,
@@ -124,6 +128,9 @@ def curve_rows(found: dict) -> list[dict]:
                     "stalls": sum(stalled.values()),
                     "stall_seeds": len(stalled),
                     "change_at_doubling": change,
+                    "stalled_only_here": None if t is None else t["a_only"],
+                    "stalled_only_at_2n": None if t is None else t["b_only"],
+                    "stall_p_at_2n": None if t is None else t["p"],
                     "chosen": N == chosen,
                     "largest": nxt is None and chosen is None,
                 }
@@ -155,12 +162,16 @@ def markdown(rows: list[dict]) -> str:
             f"{r['rms_median']:.3f}",
             _stalled(r),
             "–" if r["change_at_doubling"] is None else f"{r['change_at_doubling'] * 100:+.1f} %",
+            "–"
+            if r.get("stall_p_at_2n") is None
+            else f"{r['stalled_only_here']} / {r['stalled_only_at_2n']} (p = {r['stall_p_at_2n']:.2g})",
             "**chosen**" if r["chosen"] else ("largest run: not converged by this rule" if r["largest"] else ""),
         ]
         for r in rows
     ]
     head = ["arm", "regime", "lr", "epochs N", "presentations", "wall s", "held-out RMS, Nm: mean [95 %]",
-            "median", "stalled [exact 95 %]", "median's change at 2N", "budget"]  # fmt: skip
+            "median", "stalled [exact 95 %]", "median's change at 2N", "seeds stalled only at N / only at 2N",
+            "budget"]  # fmt: skip
     return table(head, body)
 
 
@@ -228,9 +239,10 @@ def section(ctx: Context) -> Section | None:
             f"Conventional training at doubling budgets, each its own run (a cosine rate decays over its own "
             f"budget), final held-out RMS over the paired seeds on this sweep's draw. *Chosen*: the smallest N "
             f"whose doubling changes the median over the seeds by less than {TOLERANCE * 100:g} % (the median: "
-            "a seed that stalls near the mean's error moves the mean whatever the budget) and lowers the stall "
-            f"rate by less than {STALL_TOLERANCE * 100:g} points (a seed more budget brings out of a stall was "
-            "still training); where no doubling does, the largest run is marked instead. *Stalled*: final held-out "
+            "a seed that stalls near the mean's error moves the mean whatever the budget) and does not lower the "
+            "stall rate detectably (McNemar's exact test on the seeds that stalled at one budget only, p ≥ "
+            f"{ALPHA:g}: a seed more budget brings out of a stall was still training); where no doubling does, the "
+            "largest run is marked instead. *Stalled*: final held-out "
             "RMS at least "
             f"{DESIGN.stall_share * 100:g} % of predicting the training mean's (Clopper–Pearson interval). Wall: the "
             "method's own seconds per job (all seeds at once).",
