@@ -218,3 +218,10 @@ def test_cells_read_each_seeds_stall_and_units_from_results(sweep):
     floor = res["floor"]["heldout"]["nm"]["overall"]
     assert c.stalled == {s: v >= modern.DESIGN.stall_share * floor for s, v in rms.items()}
     assert c.dead == {e["seed"]: e["dead"] for e in res["stalls"]["replicas"]} and c.hidden == 13
+
+
+def test_a_method_on_the_epochs_clock_stays_in_its_regime():
+    cfg = {"robot": {"name": "two_link"}, "model": {"activation": "relu"}}
+    on = [modern.regime_of({**cfg, "optim": {"_target_": "adam", "batch_size": 32, "lr": 0.003, "lr_schedule": s}})
+          for s in ("cosine", "cosine_epochs")]  # fmt: skip
+    assert on[0] == on[1] == "Adam (batch 32, cosine lr), ReLU"

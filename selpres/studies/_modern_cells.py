@@ -11,6 +11,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
+from selpres.engines.minibatch import EPOCH_CLOCK
 from selpres.report.context import Context
 from selpres.report.groups import optim_target
 from selpres.run.stalls import is_stalled
@@ -67,8 +68,10 @@ def regime_of(cfg: dict, design: Design = DESIGN) -> str:
     name, b = optim_target(o), o["batch_size"]
     if name == "sgd" and b == 1 and act == "sigmoid" and o.get("lr_schedule", "constant") == "constant":
         return f"paper: sigmoid, online SGD (lr {o['lr']:g}, momentum {o.get('momentum') or 0:g})"
-    # the rate is left out: it is chosen per arm (on a validation draw), and shown in the table's lr column
-    sched = f", {o['lr_schedule']} lr" if o.get("lr_schedule") else ""
+    # the rate is left out: it is chosen per arm (on a validation draw), and shown in the table's lr column; so is its
+    # clock (a method's, as its authors run it: SeTa's cosine on the epochs is the regime's cosine)
+    shape = "cosine" if o.get("lr_schedule") == EPOCH_CLOCK else o.get("lr_schedule")
+    sched = f", {shape} lr" if shape else ""
     return f"{design.optimizers.get(name, name)} (batch {b}{sched}), {design.activations.get(act, act)}"
 
 
