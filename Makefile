@@ -6,12 +6,13 @@ BIN := $(VENV)/bin
 .PHONY: setup test test-fast test-fallback lint format table1 readme compare bench clean
 
 # torch==2.13.0 first: the CPU wheel kept on these machines. An unpinned torch would pull a CUDA build, and
-# Lightning asks for torch: constraints.txt holds the pin while the rest installs.
+# Lightning asks for torch: constraints.txt holds the pin while the rest installs. Two distributions, both editable:
+# the library (.) and, beside it, the studies and benchmarks (studies/: selpres-studies, selpres-bench).
 setup: $(VENV)/.installed
-$(VENV)/.installed: pyproject.toml constraints.txt
+$(VENV)/.installed: pyproject.toml setup.py studies/pyproject.toml constraints.txt
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q torch==2.13.0
-	$(BIN)/pip install -q -c constraints.txt -e '.[test,slurm,search,lightning,robots]'
+	$(BIN)/pip install -q -c constraints.txt -e '.[test,slurm,search,lightning,robots]' -e ./studies
 	touch $@
 
 # the suite on PYTEST_WORKERS processes (pytest-xdist; 0: in this process), a test file per worker at a time, so a

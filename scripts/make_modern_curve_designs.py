@@ -15,7 +15,7 @@ import runpy
 import sys
 from pathlib import Path
 
-OUT = Path(__file__).resolve().parents[1] / "selpres" / "configs" / "design" / "modern_curve"
+OUT = Path(__file__).resolve().parents[1] / "configs" / "design" / "modern_curve"
 MODERN = runpy.run_path(str(Path(__file__).with_name("make_modern_designs.py")))
 # (arm, regime) -> the doubling budgets (epochs): from below the study's N to past the doubling that confirms it
 BUDGETS = {

@@ -19,7 +19,7 @@ import math
 import sys
 from pathlib import Path
 
-OUT = Path(__file__).resolve().parents[1] / "selpres" / "configs" / "design" / "modern"
+OUT = Path(__file__).resolve().parents[1] / "configs" / "design" / "modern"
 PAPER_N, PAPER_SIZES = 1002, (50, 100, 400, 800)
 # arm -> (robot, topology, n)
 ARMS = {"two_link": ("two_link", "6-13-2", 10_000), "puma560": ("puma560", "18-40-6", 100_000)}

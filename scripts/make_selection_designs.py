@@ -1,4 +1,4 @@
-"""Writes selpres/configs/design/selection/: the 25 design points of experiment=selection (3 budgets x (6 orders
+"""Writes configs/design/selection/: the 25 design points of experiment=selection (3 budgets x (6 orders
 + 2 compute-matched partners) + conventional). Run again after changing a value below; every file states its
 cost, worked out here as selpres.presentation.selection charges it (candidates scored at an enlargement x
 schedule.selection_cost 1/3, rounded up per enlargement), and tests/test_design_grids.py checks the files on disk
@@ -11,7 +11,7 @@ import math
 import sys
 from pathlib import Path
 
-OUT = Path(__file__).resolve().parents[1] / "selpres" / "configs" / "design" / "selection"
+OUT = Path(__file__).resolve().parents[1] / "configs" / "design" / "selection"
 N_PAPER, SIZES, CONVENTIONAL = 1002, (50, 100, 400, 800, 1002), 150
 BUDGETS = {"b25": 16, "b47": 30, "b75": 48}  # name -> N_i of each of the paper's five stages
 # order -> (schedule.name, what each A_i is); the loss orders also pay for scoring the candidates

@@ -1,4 +1,4 @@
-"""Writes every design point of experiment=sensitivity into selpres/configs/design/: selective presentation one
+"""Writes every design point of experiment=sensitivity into configs/design/: selective presentation one
 factor at a time around the paper's schedule with its budget-matched partners ({sel,matched}_*.yaml), and the
 rivals' grids ({sgd,qp,dbd,adam,rprop}_*.yaml).
 
@@ -15,7 +15,7 @@ import itertools
 import sys
 from pathlib import Path
 
-OUT = Path(__file__).resolve().parents[1] / "selpres" / "configs" / "design"
+OUT = Path(__file__).resolve().parents[1] / "configs" / "design"
 COSTS = {  # cost -> (schedule, what it is)
     150_300: ("conventional", "At the paper's cost: 150 epochs of all n = 1002 (schedule=conventional)."),
     70_560: ("matched", "At the selective cost: the paper's selective budget (schedule=matched)."),

@@ -1,10 +1,12 @@
 """selpres: selective presentation — train a back-propagation network on a growing training set
 A1 ⊂ A2 ⊂ … ⊂ A_{p+1} = U, and find out honestly whether it pays.
 
-The public API is the names in ``__all__``; everything else is internal and may move. The package's rooms
-follow the data's flow (``docs/architecture.md``)::
+The public API is the names in ``__all__``, and the report's blocks a study is made of (``selpres.report.__all__``);
+everything else is internal and may move. The package's rooms follow the data's flow (``docs/architecture.md``)::
 
-    arms -> data -> presentation -> engines -> run -> report      (bench times them all)
+    arms -> data -> presentation -> engines -> run -> report
+
+The studies and the benchmarks are apart from the library, the repository's ``studies/`` (not in this package).
 
 Names are imported on first use (PEP 562), so ``import selpres`` costs nothing until one is asked for and the
 command line starts without torch where it does not need it (``python train.py --help``).
@@ -30,11 +32,12 @@ _EXPORTS = {
     "make_arm": "selpres.arms.sources",
     "load_urdf": "selpres.arms.urdf",
     "to_urdf": "selpres.arms.urdf",
-    # data: a config's task (exemplar set, test sets, scaler), exported files read back
+    # data: a config's task (exemplar set, test sets, scaler; from specs or a job's recorded nodes), exported files
+    # read back; the scaler is the foundation's (selpres.patterns)
     "load_task": "selpres.data.task",
     "load_exported": "selpres.data.export",
     "load_csv": "selpres.data.export",
-    "Scaler": "selpres.data.paper",
+    "Scaler": "selpres.patterns",
     # the network, to use what a job trained (weights.pt)
     "BPN": "selpres.engines.model",
     "load_into": "selpres.engines.model",

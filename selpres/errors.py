@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 
 class ConfigError(ValueError):
     """A configuration value that cannot work; raised before any training or output."""
@@ -25,3 +27,14 @@ class FileError(ConfigError):
 
     def __reduce__(self):
         return type(self), (self.path, self.where, self.problem)
+
+
+def not_a_file(path) -> str:
+    """What stands at ``path`` where a file was wanted, for a :class:`FileError`'s problem: a directory, something
+    that is not a regular file (a FIFO, socket or device), or nothing."""
+    p = Path(path)
+    if p.is_dir():
+        return "is a directory, not a file"
+    if p.exists():
+        return "is not a regular file (a FIFO, socket or device)"
+    return "not found"

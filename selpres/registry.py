@@ -7,7 +7,11 @@ when it is asked for, so adding a choice is one module and one YAML, and no list
 Modules whose names start with ``_`` are the package's helpers, not choices.
 
 A user's own choice lives outside the package and is named by its import path, as Hydra's ``_target_`` names a
-class (``mylion.Lion``, ``torch.optim.NAdam``): a dotted name is always an import path, a plain one a built-in.
+class (``mylion.Lion``, ``torch.optim.NAdam``): a dotted name is always an import path, a plain one a built-in. The
+shipped config files name built-ins by import path too (``_target_: selpres.engines.optim.adam.Adam``, which
+``hydra.utils.instantiate`` resolves); a built-in's module name is its alias (``optim._target_=adam``), and
+:meth:`Registry.canonical` maps either spelling to that one name, which results.json records and a job's identity
+hashes.
 """
 
 from __future__ import annotations
@@ -40,6 +44,19 @@ class Registry:
 
     def allowed(self) -> str:
         return f"one of {', '.join(self.names)}, or a class by its import path (package.module.Class)"
+
+    def canonical(self, name):
+        """The built-in's name when ``name`` is the import path of a built-in's entry
+        (``selpres.engines.optim.adam.Adam`` -> ``adam``), else ``name`` as it is: one choice, one name, however it
+        was spelt (imports the built-in's module to be sure the path is its entry, not another name of the module)."""
+        if not isinstance(name, str) or not name.startswith(f"{self.package}."):
+            return name
+        module, _, attr = name.rpartition(".")
+        short = module[len(self.package) + 1 :]
+        if short not in self.names:
+            return name
+        mod = importlib.import_module(module)
+        return short if getattr(mod, attr, None) is getattr(mod, self.entry, self) else name
 
     def check(self, name) -> str:
         """``name`` if it is a built-in or looks like an import path, else a ConfigError naming the choices.

@@ -5,6 +5,7 @@ from __future__ import annotations
 import atexit
 import os
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -13,7 +14,12 @@ import torch
 from omegaconf import OmegaConf
 
 REPO = Path(__file__).resolve().parents[1]
-CONFIGS = REPO / "selpres" / "configs"
+CONFIGS = REPO / "configs"
+# the studies and benchmarks (studies/: selpres_studies, selpres_bench), the checkout's own first, in this process and
+# the processes the tests start (`make setup` installs them editable too, with the report's entry point)
+STUDIES = REPO / "studies"
+sys.path.insert(0, str(STUDIES))
+os.environ["PYTHONPATH"] = os.pathsep.join([str(STUDIES), *filter(None, [os.environ.get("PYTHONPATH")])])
 
 # One torch thread in the test processes and the jobs they start (OMP_NUM_THREADS set beforehand wins): the suite's
 # tensors are tiny, and a second intra-op thread only waits for a core: a 6-5-2 backward took 58 ms with 2 threads
@@ -102,3 +108,11 @@ def report_of(sweep, out) -> None:
     """``python -m selpres.report sweep --out out``, which must succeed."""
     done = run_python("-m", "selpres.report", str(sweep), "--out", str(out))
     assert done.returncode == 0, done.stderr[-3000:]
+
+
+def online_engine(requested: str, sizes, params, lr: float, momentum: float, batch_size: int, threads=None):
+    """The online SGD engine ``requested`` (fast, native, torch, reference) as a job builds it
+    (``selpres.engines.factory.build_engine``): the paper's rule at ``lr``, ``momentum``, on ``batch_size``."""
+    from selpres.engines.factory import EngineSpec, build_engine
+
+    return build_engine(EngineSpec.online(requested, sizes, lr, momentum, batch_size, threads), params)

@@ -35,7 +35,9 @@ def test_built_ins_are_the_modules_and_each_derivative_is_autograds():
 
 
 def test_unknown_and_unfit_units_are_refused_naming_the_key():
-    with pytest.raises(ConfigError, match=r"model.activation='gelu' is not allowed: expected one of leaky_relu, relu, sigmoid"):
+    with pytest.raises(
+        ConfigError, match=r"model.activation='gelu' is not allowed: expected one of leaky_relu, relu, sigmoid"
+    ):
         activation("gelu")
     with pytest.raises(ConfigError, match=r"model.activation='collections.OrderedDict'.*forward\(z\) and prime"):
         activation("collections.OrderedDict")

@@ -80,3 +80,34 @@ def test_import_is_lazy():
     code = "import sys, selpres; print('torch' in sys.modules, 'selpres.run.train' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert out == ["False", "False"]
+
+
+def test_load_task_takes_a_jobs_recorded_robot_and_data_nodes():
+    """A study (or any user) rebuilds the task a job trained on from its results.json config: the plain robot and
+    data nodes give the task their specs give."""
+    import json
+
+    import torch
+
+    from selpres.run.specs import recorded, task_specs
+
+    from conftest import compose
+
+    cfg = compose("data.heldout=300")
+    config = json.loads(json.dumps(recorded(cfg)))  # as results.json holds it
+    ours, theirs = selpres.load_task(config["robot"], config["data"]), selpres.load_task(*task_specs(cfg))
+    assert torch.equal(ours.exemplar.X, theirs.exemplar.X) and torch.equal(ours.tests.heldout.Y, theirs.tests.heldout.Y)
+    for field in ("x_min", "x_max", "y_min", "y_max"):
+        assert torch.equal(getattr(ours.scaler, field), getattr(theirs.scaler, field)), field
+
+
+def test_the_reports_blocks_are_its_api_and_load_on_first_use():
+    """``selpres.report.__all__``: what a study of one's own composes; each name resolves, and importing the
+    package loads none of the blocks' modules (the command line starts without them)."""
+    import selpres.report as R
+
+    for name in R.__all__:
+        assert getattr(R, name) is not None, name
+    code = "import sys, selpres.report; print(sorted(m for m in sys.modules if m.startswith('selpres.report.')))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["[]"]

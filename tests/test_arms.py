@@ -63,10 +63,10 @@ def test_two_link_config_is_the_closed_form_and_agrees_with_the_general_code():
     ],
 )
 def test_bad_robot_configs_name_the_key(overrides, key, value):
-    from selpres.run.checks import validate
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError) as ei:
-        validate(cfg_of("data=sampled", *overrides))
+        resolve(cfg_of("data=sampled", *overrides))
     assert ei.value.key == key and value in str(ei.value), str(ei.value)
 
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 import torch
 
 from selpres.engines.model import init_replica_params
-from selpres.engines.online import make_engine
 from selpres.run.checkpoint import Checkpoints, Progress, encode
+
+from conftest import online_engine
 
 SIZES = (6, 3, 2)
 
@@ -18,14 +19,14 @@ def record(epoch: int) -> dict:
 def test_records_appended_after_the_last_checkpoint_are_dropped_on_resume(tmp_path):
     """A kill between a save's history append and its checkpoint rename leaves extra records in history.jsonl;
     the resume must return the history of the checkpoint it read: nothing lost, nothing twice."""
-    engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
+    engine = online_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
     progress = Progress([record(-1), record(0), record(1)], [None, None], epoch=2, presentations=20)
     Checkpoints(tmp_path, "h").save(engine, progress)
     with open(tmp_path / "history.jsonl", "ab") as f:  # the next save's append, its checkpoint never renamed
         f.write(encode(record(e) for e in (2, 3)))
 
     resumed = Checkpoints(tmp_path, "h")
-    back = resumed.resume(make_engine("torch", SIZES, init_replica_params(SIZES, [5, 6]), 0.15, 0.9, 1), 2)
+    back = resumed.resume(online_engine("torch", SIZES, init_replica_params(SIZES, [5, 6]), 0.15, 0.9, 1), 2)
     assert back.history == progress.history and (back.epoch, back.presentations) == (2, 20)
 
     back.history += [record(2), record(3), record(4)]  # training goes on from there: saved once each
@@ -36,9 +37,9 @@ def test_records_appended_after_the_last_checkpoint_are_dropped_on_resume(tmp_pa
 
 
 def test_the_engine_state_comes_back_exactly(tmp_path):
-    engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
+    engine = online_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
     Checkpoints(tmp_path, "h").save(engine, Progress([record(-1)], [None, None], epoch=1))
-    other = make_engine("torch", SIZES, init_replica_params(SIZES, [7, 8]), 0.15, 0.9, 1)
+    other = online_engine("torch", SIZES, init_replica_params(SIZES, [7, 8]), 0.15, 0.9, 1)
     Checkpoints(tmp_path, "h").resume(other, 2)
     assert all(torch.equal(a, b) for a, b in zip(engine.params(), other.params()))
 
@@ -59,7 +60,7 @@ def test_saves_alternate_and_never_rename_over_a_file(tmp_path, monkeypatch):
         real(src, dst)
 
     monkeypatch.setattr(storage.os, "replace", replace)
-    engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
+    engine = online_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
     ckpts, progress = Checkpoints(tmp_path, "h"), Progress([record(-1)], [None, None])
     for epoch in range(1, 5):
         progress.history.append(record(epoch - 1))
@@ -73,7 +74,7 @@ def test_a_kill_while_the_older_checkpoint_is_replaced_resumes_from_the_newer(tm
     """Between freeing the older name and the rename onto it only the newer checkpoint exists: a resume
     takes it, and the history log is cut back to it. The next save goes to the free name, not over the
     checkpoint resumed from."""
-    engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
+    engine = online_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
     ckpts = Checkpoints(tmp_path, "h")
     ckpts.save(engine, Progress([record(-1), record(0)], [None, None], epoch=1))  # -> checkpoint.pt
     ckpts.save(engine, Progress([record(-1), record(0), record(1)], [None, None], epoch=2))  # -> .alt.pt
@@ -93,7 +94,7 @@ def test_a_kill_while_the_older_checkpoint_is_replaced_resumes_from_the_newer(tm
 def test_an_unreadable_partner_is_set_aside_and_ours_resumed(tmp_path):
     """A crash can leave the newer file empty (saves do not fsync): it is moved aside, named in the record,
     and the other checkpoint of this job resumed."""
-    engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
+    engine = online_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
     Checkpoints(tmp_path, "h").save(engine, Progress([record(-1), record(0)], [None, None], epoch=1))
     (tmp_path / "checkpoint.alt.pt").write_bytes(b"")
     back = Checkpoints(tmp_path, "h").resume(engine, 2)
@@ -107,7 +108,7 @@ def test_a_checkpoint_of_another_config_beside_ours_sets_everything_aside(tmp_pa
     """The history log may then be the other job's: neither checkpoint is resumed and nothing is deleted."""
     from selpres.run.checkpoint import dumps
 
-    engine = make_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
+    engine = online_engine("torch", SIZES, init_replica_params(SIZES, [0, 1]), 0.15, 0.9, 1)
     Checkpoints(tmp_path, "h").save(engine, Progress([record(-1)], [None, None], epoch=1))
     (tmp_path / "checkpoint.alt.pt").write_bytes(dumps({"config_hash": "other", "epoch": 9}))
     back = Checkpoints(tmp_path, "h").resume(engine, 2)

@@ -22,7 +22,7 @@ def help_text() -> str:
 
 
 def test_help_names_every_group_and_key(help_text):
-    groups = sorted(p.name for p in (REPO / "selpres" / "configs").iterdir() if p.is_dir() and p.name != "hydra")
+    groups = sorted(p.name for p in (REPO / "configs").iterdir() if p.is_dir() and p.name != "hydra")
     missing = [g for g in groups if f"\n  {g} " not in help_text]
     assert not missing, f"config groups not in --help: {missing}"
     keys = [f.name for f in dataclasses.fields(TrainConfig) if f.name not in groups]
@@ -32,13 +32,13 @@ def test_help_names_every_group_and_key(help_text):
         lines = help_text.splitlines()
         i = next(i for i, ln in enumerate(lines) if ln.startswith(f"  {group} "))
         line = " ".join([lines[i], *[ln for ln in lines[i + 1 : i + 3] if ln.startswith("              ")]])
-        options = sorted(p.stem for p in (REPO / "selpres" / "configs" / group).glob("*.yaml"))
+        options = sorted(p.stem for p in (REPO / "configs" / group).glob("*.yaml"))
         assert [o for o in options if o not in line] == [], group
 
 
 def test_help_is_one_screen_without_design_points(help_text):
     assert len(help_text.splitlines()) <= 60
-    design = sorted(p.stem for p in (REPO / "selpres" / "configs" / "design").glob("*.yaml"))
+    design = sorted(p.stem for p in (REPO / "configs" / "design").glob("*.yaml"))
     assert design and not any(d in help_text for d in design)
 
 

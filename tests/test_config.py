@@ -10,8 +10,8 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from selpres.errors import ConfigError
-from selpres.run.checks import validate
 from selpres.run.config import EngineName, TrainConfig
+from selpres.run.resolve import resolve
 
 from conftest import CONFIGS, compose
 
@@ -45,7 +45,7 @@ def test_defaults_are_the_paper_setup(compose_cfg):
     assert list(cfg.schedule.sizes) == [50, 100, 400, 800, 1002] and list(cfg.schedule.epochs) == [30] * 5
     assert cfg.optim.lr == 0.15 and cfg.optim.momentum == 0.9 and cfg.optim.batch_size == 1
     assert cfg.engine == EngineName.fast and cfg.replicas == 1
-    assert validate(cfg) == (6, 13, 2)
+    assert resolve(cfg).sizes == (6, 13, 2)
 
 
 @pytest.fixture(scope="module")
@@ -89,12 +89,13 @@ _OPTIONS = [pytest.param(g, o, marks=pytest.mark.slow) if (g, o) in _HEAVY else 
 @pytest.mark.parametrize("group, option", _OPTIONS, ids=[f"{g}={o}" for g, o in OPTIONS])
 def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, group, option):
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     extra = companions(group, option, user_files)
     cfg = compose_cfg(*SMALL, f"{group}={option}", *extra)
     assert isinstance(cfg, DictConfig)
-    sizes = validate(cfg)
-    prob = prepare(cfg)
+    job = resolve(cfg)
+    sizes, prob = job.sizes, prepare(job)
     n = prob.X.shape[0]
     assert (
         (sizes[0], sizes[-1])
@@ -107,7 +108,9 @@ def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, g
     assert len(prob.samplers) == len(prob.seeds) == cfg.replicas
     if group == "schedule":
         raw = OmegaConf.load(CONFIGS / "schedule" / f"{option}.yaml")
-        if raw.get("budget") is not None:
+        if raw.get("p") is not None:  # the parametric schedule: p + 1 stages, ΣN_i its total (tests/test_stages.py)
+            assert prob.schedule.p == raw.p and sum(prob.schedule.epochs) == raw.total_epochs
+        elif raw.get("budget") is not None:
             assert prob.schedule.presentations == raw.budget
         else:
             assert prob.schedule.epochs == list(raw.epochs)
@@ -118,7 +121,7 @@ def test_every_option_composes_validates_and_prepares(compose_cfg, user_files, g
 def test_every_engine_name_composes(compose_cfg, engine):
     cfg = compose_cfg(f"engine={engine}")
     assert cfg.engine == EngineName(engine)
-    validate(cfg)
+    resolve(cfg)
 
 
 @pytest.mark.parametrize("option", _options("experiment"))
@@ -138,7 +141,7 @@ def test_experiments_are_multirun_sweeps(compose_cfg, option):
             if (CONFIGS / group).is_dir():  # a group: its options
                 assert v in _options(group), f"experiment {option} sweeps unknown {group}={v}"
             else:  # a key: every value composes and validates (the topology must fit the task)
-                validate(compose_cfg(f"experiment={option}", f"{group}={v}"))
+                resolve(compose_cfg(f"experiment={option}", f"{group}={v}"))
     assert str(cfg.hydra.sweep.dir).startswith("outputs/")  # not Hydra's default multirun/
 
 
@@ -200,11 +203,11 @@ def test_schema_rejects_at_compose(compose_cfg, override, key):
 
 def _config_error(compose_cfg, *ov) -> ConfigError:
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     cfg = compose_cfg(*SMALL, *ov)
     with pytest.raises(ConfigError) as ei:
-        validate(cfg)  # what prepare() checks first (cheap) ...
-        prepare(cfg)  # ... then the checks that need the data
+        prepare(resolve(cfg))  # what resolve checks first (cheap), then the checks that need the data
     return ei.value
 
 
@@ -246,7 +249,7 @@ def _config_error(compose_cfg, *ov) -> ConfigError:
         (["+data.theta.lr=3"], "data.theta.lr", "one of the keys lo, hi, step of data.theta"),
         (["~data.theta.step"], "data.theta.step", "a value: data.kind=grid reads it"),
         (["data.test_patterns=1.5"], "data.test_patterns", "a whole number"),
-        (["+data.thetaa=1"], "data.thetaa", "unset (null) for data.kind=grid"),
+        (["+data.thetaa=1"], "data.thetaa", "unset (null): data.kind=grid (selpres.data.routes.grid.Grid) reads"),
         (["data.kind=zigzag"], "data.kind", "one of file, grid, sampled, or a class by its import path"),
         (["schedule.strata_bins=0"], "schedule.strata_bins", "0"),
         (["schedule.order=zigzag"], "schedule.order", "zigzag"),  # an order is a registry name or import path
@@ -292,8 +295,9 @@ def test_more_test_patterns_from_the_exemplar_set_than_it_holds_is_a_config_erro
 def test_every_test_pattern_drawn_from_the_exemplar_set_works(compose_cfg):
     """test_from_exemplar == test_patterns is inside the documented range [0, test_patterns]."""
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
-    prob = prepare(compose_cfg(*SMALL, "data.test_from_exemplar=10"))
+    prob = prepare(resolve(compose_cfg(*SMALL, "data.test_from_exemplar=10")))
     assert prob.tests["test10"][0].shape[0] == 10
 
 
@@ -301,7 +305,7 @@ def test_huge_grid_is_rejected_before_allocation(compose_cfg):
     """A tiny grid step would allocate a grid of ~10^12 candidates (hang / out of memory): validate must refuse."""
     cfg = compose_cfg("data.tau1.step=1e-6")
     with pytest.raises(ConfigError) as ei:
-        validate(cfg)  # validate only: never build this grid in a test
+        resolve(cfg)  # validate only: never build this grid in a test
     assert ei.value.key.startswith("data.")
 
 
@@ -315,8 +319,9 @@ def test_huge_grid_is_rejected_before_allocation(compose_cfg):
 )
 def test_valid_variants_prepare(compose_cfg, overrides, sizes, presentations):
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
-    prob = prepare(compose_cfg(*SMALL, *overrides))
+    prob = prepare(resolve(compose_cfg(*SMALL, *overrides)))
     assert prob.schedule.sizes == sizes and prob.schedule.presentations == presentations
 
 
@@ -343,7 +348,8 @@ def test_validation_checks_the_optimizer_without_building_one():
         "import sys\n"
         "from selpres.run.config import CONFIG_DIR, compose_train\n"
         "from selpres.run.problem import prepare\n"
-        "prepare(compose_train(CONFIG_DIR, ['replicas=2']))\n"
+        "from selpres.run.resolve import resolve\n"
+        "prepare(resolve(compose_train(CONFIG_DIR, ['replicas=2'])))\n"
         "print('torch._dynamo' in sys.modules)\n"
         "import torch\n"
         "from selpres.engines.optim import make_optimizer\n"

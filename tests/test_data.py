@@ -11,11 +11,12 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
+from selpres import patterns as P
 from selpres.arms.two_link import TwoLinkArm
 from selpres.data import export as E
 from selpres.data import paper as D
 
-CONFIGS = Path(__file__).parents[1] / "selpres" / "configs"
+CONFIGS = Path(__file__).parents[1] / "configs"
 ROBOT_CFG = OmegaConf.load(CONFIGS / "robot/two_link.yaml")
 DATA_CFG = OmegaConf.load(CONFIGS / "data/paper.yaml")
 ARM = TwoLinkArm.from_config(ROBOT_CFG)
@@ -23,12 +24,12 @@ F64 = torch.float64
 
 
 @pytest.fixture(scope="module")
-def exemplar() -> D.ExemplarSet:
+def exemplar() -> P.ExemplarSet:
     return D.build_exemplar_set(ARM, DATA_CFG)
 
 
 @pytest.fixture(scope="module")
-def tests_small(exemplar) -> D.TestSets:
+def tests_small(exemplar) -> P.TestSets:
     cfg = OmegaConf.merge(DATA_CFG, {"heldout": 500})
     return D.make_test_sets(ARM, cfg, exemplar, seed=3)
 
@@ -54,7 +55,7 @@ def test_data_config_has_exactly_the_agreed_keys():
         "test_seed",
         "scaling",
     }
-    assert DATA_CFG.kind == "grid" and ROBOT_CFG._target_ == "two_link"
+    assert DATA_CFG.kind == "grid" and ROBOT_CFG._target_ == "selpres.arms.sources.two_link.TwoLink"
     assert set(DATA_CFG.scaling.keys()) == {"mode", "margin", "lo", "hi"}
     assert set(ROBOT_CFG.keys()) == {"_target_", "m1", "m2", "l1", "l2", "g"}
 
@@ -249,14 +250,15 @@ def test_make_test_sets_rejects_impossible_split(exemplar):
 
 @pytest.mark.parametrize("mode", ["exemplar", "commanded"])
 def test_scaler_is_invertible(exemplar, tests_small, mode):
-    s = D.Scaler.fit(exemplar, _data(scaling={"mode": mode}))
+    cfg = _data(scaling={"mode": mode})
+    s = P.Scaler.fit(exemplar, cfg.scaling, D.grid_bounds(cfg))
     for X, Y in (exemplar, tests_small.heldout):
         torch.testing.assert_close(s.inverse_y(s.transform_y(Y)), Y, rtol=0, atol=1e-12)
         torch.testing.assert_close(s.inverse_x(s.transform_x(X)), X, rtol=0, atol=1e-12)
 
 
 def test_exemplar_scaling_maps_into_sigmoid_range_with_margin(exemplar):
-    s = D.Scaler.fit(exemplar, DATA_CFG)
+    s = P.Scaler.fit(exemplar, DATA_CFG.scaling)
     for v in (s.transform_y(exemplar.Y), s.transform_x(exemplar.X)):
         lo_in = 0.1 + 0.8 * 0.1 / 1.2  # margin 0.1 of the range on each side
         torch.testing.assert_close(v.min(0).values, torch.full((v.shape[1],), lo_in, dtype=F64))
@@ -266,7 +268,8 @@ def test_exemplar_scaling_maps_into_sigmoid_range_with_margin(exemplar):
 
 def test_commanded_scaling_squeezes_targets(exemplar):
     """Why 'exemplar' is the default: with the commanded boxes the exemplar targets use a fraction of (lo, hi)."""
-    s = D.Scaler.fit(exemplar, _data(scaling={"mode": "commanded"}))
+    cfg = _data(scaling={"mode": "commanded"})
+    s = P.Scaler.fit(exemplar, cfg.scaling, D.grid_bounds(cfg))
     ys = s.transform_y(exemplar.Y)
     spread = ys.max(0).values - ys.min(0).values
     assert (spread < 0.4).all()  # exemplar mode gives 0.667 for both
@@ -277,18 +280,20 @@ def test_commanded_scaling_squeezes_targets(exemplar):
 
 def test_scaler_rejects_unknown_mode(exemplar):
     with pytest.raises(ValueError, match="scaling.mode"):
-        D.Scaler.fit(exemplar, _data(scaling={"mode": "minmax"}))
+        P.Scaler.fit(exemplar, _data(scaling={"mode": "minmax"}).scaling)
+    with pytest.raises(ValueError, match="commanded boxes"):  # the boxes are the route's, never guessed here
+        P.Scaler.fit(exemplar, _data(scaling={"mode": "commanded"}).scaling)
 
 
 # -------------------------------------------------------------------------------------------- metric
 
 
 def test_rms_errors_units_and_replica_dim(exemplar, tests_small):
-    s = D.Scaler.fit(exemplar, DATA_CFG)
+    s = P.Scaler.fit(exemplar, DATA_CFG.scaling)
     Y = tests_small.test10.Y
     offset = torch.tensor([[0.0, 0.0], [0.3, 0.0], [0.3, 0.4]], dtype=F64)  # three replicas, Nm
     pred = s.transform_y(Y[None] + offset[:, None, :])  # [3, 10, 2]
-    r = D.rms_errors(pred, Y, s)
+    r = P.rms_errors(pred, Y, s)
     assert set(r) == {f"{k}_{u}" for k in ("tau1", "tau2", "overall") for u in ("Nm", "scaled")}
     assert all(v.shape == (3,) for v in r.values())
     torch.testing.assert_close(r["tau1_Nm"], torch.tensor([0.0, 0.3, 0.3], dtype=F64))
@@ -299,7 +304,7 @@ def test_rms_errors_units_and_replica_dim(exemplar, tests_small):
     gain = (s.hi - s.lo) / (s.y_max - s.y_min)
     torch.testing.assert_close(r["tau1_scaled"], r["tau1_Nm"] * gain[0])
     torch.testing.assert_close(r["tau2_scaled"], r["tau2_Nm"] * gain[1])
-    single = D.rms_errors(pred[2], Y, s)
+    single = P.rms_errors(pred[2], Y, s)
     assert single["overall_Nm"].shape == () and torch.isclose(single["overall_Nm"], r["overall_Nm"][2])
 
 

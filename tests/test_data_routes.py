@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from selpres.data import paper as D
+from selpres.patterns import ExemplarSet, Patterns, TestSets
 from selpres.data.routes import DataRoute
 from selpres.data.task import Shape, Task, check_test_split
 from selpres.errors import ConfigError
@@ -50,12 +50,12 @@ class Line(DataRoute):
 
     def build(self, robot, data):
         x = torch.linspace(0.0, 1.0, data.n, dtype=torch.float64)[:, None]
-        exemplar = D.ExemplarSet(x, data.slope * x, n_candidates=data.n)
+        exemplar = ExemplarSet(x, data.slope * x, n_candidates=data.n)
         n_test, n_ex = check_test_split(data, data.n)
         held = torch.linspace(0.005, 0.995, 99, dtype=torch.float64)[:, None]
         t10 = torch.cat((x[:n_ex], held[: n_test - n_ex]))
-        tests = D.TestSets(D.Patterns(t10, data.slope * t10), torch.arange(n_test) < n_ex,
-                           D.Patterns(held, data.slope * held))
+        tests = TestSets(Patterns(t10, data.slope * t10), torch.arange(n_test) < n_ex,
+                         Patterns(held, data.slope * held))
         task = Task(exemplar, tests, None, ("x",), ("y",), {"kind": "line", "source": "data=line", "n": data.n})
         return replace(task, scaler=task.fit_scaler(data))
 
@@ -82,25 +82,27 @@ def test_a_new_route_is_one_module_and_one_yaml(tmp_path):
     registry lists it, ``data=line`` composes, validates and builds, its keys' types are checked as the schema
     checked the built-ins' (``data.slope=abc`` refused naming the key), its own check runs."""
     shutil.copytree(REPO / "selpres", tmp_path / "selpres", ignore=shutil.ignore_patterns("__pycache__", "*.so"))
+    shutil.copytree(REPO / "configs", tmp_path / "configs")
     (tmp_path / "selpres" / "data" / "routes" / "line.py").write_text(LINE)
-    (tmp_path / "selpres" / "configs" / "data" / "line.yaml").write_text(LINE_YAML)
+    (tmp_path / "configs" / "data" / "line.yaml").write_text(LINE_YAML)
     code = f"""
 import sys; sys.path.insert(0, sys.argv[1])
 import selpres
 assert selpres.__file__.startswith(sys.argv[1]), selpres.__file__
 from selpres.data.routes import ROUTES
 from selpres.errors import ConfigError
-from selpres.run.checks import validate
+from selpres.run.resolve import resolve
 from selpres.run.config import CONFIG_DIR, compose_train
 from selpres.run.problem import prepare
+from selpres.run.resolve import resolve
 print(ROUTES.names)
 cfg = compose_train(CONFIG_DIR, ["data=line", "data.slope=2", *{JOB!r}])
-print(validate(cfg))
-task = prepare(cfg).task
+print(resolve(cfg).sizes)
+task = prepare(resolve(cfg)).task
 print(bool((task.exemplar.Y == 2 * task.exemplar.X).all()), task.n, task.info["route_class"])
 for bad in (["data.slope=abc"], ["data.n=1"], ["data.kind=lines"]):
     try:
-        validate(compose_train(CONFIG_DIR, ["data=line", *{JOB!r}, *bad]))
+        resolve(compose_train(CONFIG_DIR, ["data=line", *{JOB!r}, *bad]))
     except ConfigError as e:
         print(e)
 """
@@ -134,20 +136,20 @@ USERS = ["data=file", "data.kind=my_line.Line", "data.heldout=99"]
 
 
 def test_a_users_route_by_its_import_path(user_route):
-    from selpres.run.checks import validate
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     cfg = compose(*USERS, "+data.n=30", "+data.slope=-0.5", *JOB)
-    assert validate(cfg) == (1, 3, 1)
-    task = prepare(cfg).task
+    assert resolve(cfg).sizes == (1, 3, 1)
+    task = prepare(resolve(cfg)).task
     assert task.n == 30 and (task.exemplar.Y == -0.5 * task.exemplar.X).all()
     assert task.info["route_class"] == "my_line.Line"
     with pytest.raises(ConfigError, match=r"^data.n='many' is not allowed: expected a whole number$"):
-        validate(compose(*USERS, "+data.n=many", *JOB))
+        resolve(compose(*USERS, "+data.n=many", *JOB))
     with pytest.raises(ConfigError, match=r"^data.n=None is not allowed: expected a value: data.kind=my_line.Line"):
-        validate(compose(*USERS, *JOB))
+        resolve(compose(*USERS, *JOB))
     with pytest.raises(ConfigError, match=r"^data.kind='my_line.Nope' is not allowed: .*it has no 'Nope'"):
-        validate(compose(*USERS, "data.kind=my_line.Nope", *JOB))
+        resolve(compose(*USERS, "data.kind=my_line.Nope", *JOB))
 
 
 def test_a_users_route_module_is_part_of_the_stored_tasks_key(user_route, tmp_path, monkeypatch):
@@ -200,3 +202,17 @@ def test_recorded_configs_keep_the_keys_and_hash_of_the_typed_schema():
     # the hashes main gave these configs before the data node was opened (a0ffa29)
     assert job_hash(compose()) == "d8fadaa1d4080fe3"
     assert job_hash(compose("data=sampled")) == "a18ed62083ecded8"
+
+
+def test_a_spec_reads_by_name_as_a_dict_and_a_config_node_do():
+    """The data room's functions read their node by name (``data["theta"]``): a spec, a plain dict and a config node
+    alike, so no room below ``run`` needs a config reader; a key the route does not have is a KeyError naming it."""
+    from selpres.run.specs import data_spec, plain
+
+    node = compose("data=sampled").data
+    spec = data_spec(node)
+    for key in ("kind", "heldout", "scaling", "q", "accel_limit"):  # common keys and the route's own
+        assert spec[key] == plain(node)[key] == plain(node[key]), key
+    assert spec["accel_limit"] == spec.accel_limit
+    with pytest.raises(KeyError, match="theta"):
+        spec["theta"]  # the grid route's key: not one of data.kind=sampled

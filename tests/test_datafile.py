@@ -128,9 +128,10 @@ def test_every_schedule_order_and_optimizer_trains_on_it(sarcos, variant):
 # --------------------------------------------------------------------------------------------- errors
 def _error(path: Path, *overrides: str, **kw) -> ConfigError:
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError) as ei:
-        prepare(file_cfg(path, *overrides, **kw))
+        prepare(resolve(file_cfg(path, *overrides, **kw)))
     assert "\n" not in str(ei.value)
     return ei.value
 
@@ -203,11 +204,11 @@ def test_too_few_rows_for_the_split(tmp_path):
     ],
 )
 def test_config_errors_name_the_key(sarcos, overrides, key):
-    from selpres.run.checks import validate
+    from selpres.run.resolve import resolve
 
     cfg = file_cfg(sarcos, *overrides)
     with pytest.raises(ConfigError) as ei:
-        validate(cfg)
+        resolve(cfg)
         load_task(*task_specs(cfg))
     assert ei.value.key == key, str(ei.value)
 

@@ -13,7 +13,7 @@ def test_divergence_is_reported_not_fatal(monkeypatch):
     """Sigmoid nets saturate rather than overflow, so poison one replica's weights after epoch 3."""
     import selpres.run.problem as T
 
-    real = T.make_engine
+    real = T.build_engine
 
     def poisoned(*args, **kwargs):
         engine = real(*args, **kwargs)
@@ -31,7 +31,7 @@ def test_divergence_is_reported_not_fatal(monkeypatch):
         return engine
 
     clean = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2"))
-    monkeypatch.setattr(T, "make_engine", poisoned)
+    monkeypatch.setattr(T, "build_engine", poisoned)
     res = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2"))
     assert res["status"] == "complete" and res["diverged_replicas"] == 1
     bad, good = res["replica_results"][1], res["replica_results"][0]
@@ -46,7 +46,7 @@ def test_divergence_is_reported_not_fatal(monkeypatch):
 def test_a_job_whose_replicas_all_diverged_stops(monkeypatch):
     import selpres.run.problem as T
 
-    real = T.make_engine
+    real = T.build_engine
 
     def poisoned(*args, **kwargs):
         engine = real(*args, **kwargs)
@@ -55,7 +55,7 @@ def test_a_job_whose_replicas_all_diverged_stops(monkeypatch):
         engine.load_state_dict(state)
         return engine
 
-    monkeypatch.setattr(T, "make_engine", poisoned)
+    monkeypatch.setattr(T, "build_engine", poisoned)
     res = train(cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2"))
     assert res["status"] == "diverged" and res["diverged_replicas"] == 2
     assert len(res["curves"]) == 2 and res["presentations_done"] == 50  # stopped after the first epoch

@@ -9,10 +9,10 @@ import pytest
 import torch
 
 from selpres.engines.model import forward_replicas, init_replica_params
-from selpres.engines.online import make_engine
-from selpres.native import KernelUnavailable, build, library, sgd
+from selpres.errors import ConfigError
+from selpres.native import build, library, sgd
 
-from conftest import requires_native
+from conftest import online_engine, requires_native
 
 LR, MOM = 0.15, 0.9
 NATIVE = pytest.param("native", marks=requires_native)
@@ -63,7 +63,7 @@ def test_reference_matches_manual_backprop(B):
     params = init_replica_params(sizes, [7])
     X, Y = _data(6, sizes)
     order = torch.tensor([[4, 1, 3, 0]])
-    eng = make_engine("reference", sizes, params, LR, MOM, B)
+    eng = online_engine("reference", sizes, params, LR, MOM, B)
     losses = eng.train_epoch(X, Y, order)
 
     p = [t[0].clone() for t in params]
@@ -86,7 +86,7 @@ def test_reference_matches_torch_func_and_returns_pre_update_loss():
     params = init_replica_params(sizes, [3, 4])
     X, Y = _data(10, sizes)
     order = torch.tensor([[0, 5, 2, 9, 7], [3, 3, 8, 1, 6]])
-    eng = make_engine("reference", sizes, params, LR, MOM, 2)
+    eng = online_engine("reference", sizes, params, LR, MOM, 2)
     losses = eng.train_epoch(X, Y, order)
 
     def loss_fn(p, x, t):
@@ -129,11 +129,11 @@ TOL = 1e-12
 @pytest.fixture(scope="module")
 def scaled_exemplar(exemplar):
     """The exemplar set as the network sees it (inputs and targets in [0.1, 0.9])."""
-    from selpres.data.paper import Scaler
+    from selpres.patterns import Scaler
 
     from conftest import load_group
 
-    scaler = Scaler.fit(exemplar, load_group("data", "paper"))
+    scaler = Scaler.fit(exemplar, load_group("data", "paper").scaling)
     return scaler.transform_x(exemplar.X), scaler.transform_y(exemplar.Y)
 
 
@@ -151,7 +151,7 @@ _reference_runs: dict = {}
 def _trained(name, sizes, params, B, X, Y, orders):
     # threads=1: native then runs each chunk of groups in interleaved pairs (R = 8 is one pair); other
     # splits over threads give bitwise the same numbers (test_native_threads_give_identical_results)
-    eng = make_engine(name, sizes, params, LR, MOM, B, threads=1)
+    eng = online_engine(name, sizes, params, LR, MOM, B, threads=1)
     assert eng.name == name
     losses = [eng.train_epoch(X, Y, o) for o in orders]
     return eng.state_dict(), losses
@@ -187,7 +187,7 @@ def _fallback_warnings(caplog):
 @pytest.mark.parametrize("name", ["reference", "torch"])
 def test_engines_name_what_runs(name):
     sizes = (6, 4, 2)
-    eng = make_engine(name, sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    eng = online_engine(name, sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
     assert eng.name == name and eng.fallback_reason is None
 
 
@@ -195,7 +195,7 @@ def test_engines_name_what_runs(name):
 def test_fast_engine_is_native_where_the_kernel_runs(caplog):
     sizes = (6, 4, 2)
     with caplog.at_level(logging.WARNING, logger="selpres"):
-        eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+        eng = online_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
     assert eng.name == "native" and eng.fallback_reason is None and not _fallback_warnings(caplog)
     from selpres.native import cpu_flags
 
@@ -208,12 +208,12 @@ def test_fast_engine_falls_back_to_torch_and_says_why(monkeypatch, caplog):
     monkeypatch.setenv("SELPRES_NO_NATIVE", "1")
     sizes = (6, 4, 2)
     with caplog.at_level(logging.WARNING, logger="selpres"):
-        eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+        eng = online_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
     assert eng.name == "torch" and eng.fallback_reason == "disabled by SELPRES_NO_NATIVE"
     (warning,) = _fallback_warnings(caplog)
     assert "\n" not in warning.getMessage() and warning.getMessage().endswith("disabled by SELPRES_NO_NATIVE")
-    with pytest.raises(KernelUnavailable, match="disabled by SELPRES_NO_NATIVE"):
-        make_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    with pytest.raises(ConfigError, match="disabled by SELPRES_NO_NATIVE"):  # engine=native: no silent fallback
+        online_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
 
 
 def test_fast_engine_reports_the_compilers_message(tmp_path, monkeypatch, caplog):
@@ -231,14 +231,14 @@ def test_fast_engine_reports_the_compilers_message(tmp_path, monkeypatch, caplog
     monkeypatch.setattr(build, "cpu_flags", lambda: frozenset({"avx2", "fma"}))  # reach the compiler
     sizes = (6, 3, 2)
     with caplog.at_level(logging.WARNING, logger="selpres"):
-        eng = make_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+        eng = online_engine("fast", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
     assert eng.name == "torch"
     assert "exited with 3" in eng.fallback_reason
     assert "sgd.c:1: error: boom\nsecond line" in eng.fallback_reason
     (warning,) = _fallback_warnings(caplog)
     assert "\n" not in warning.getMessage() and "sgd.c:1: error: boom second line" in warning.getMessage()
-    with pytest.raises(KernelUnavailable, match="boom"):
-        make_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    with pytest.raises(ConfigError, match="boom"):
+        online_engine("native", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
 
 
 def test_does_not_modify_callers_params():
@@ -247,7 +247,7 @@ def test_does_not_modify_callers_params():
     before = [t.clone() for t in params]
     X, Y = _data(50, sizes)
     for name in ["reference", "torch", "fast"]:  # "fast" is native wherever the kernel runs
-        make_engine(name, sizes, params, LR, MOM, 1).train_epoch(X, Y, _orders(2, 50, [50])[0])
+        online_engine(name, sizes, params, LR, MOM, 1).train_epoch(X, Y, _orders(2, 50, [50])[0])
         assert all(torch.equal(a, b) for a, b in zip(params, before))
 
 
@@ -258,17 +258,17 @@ def test_state_dict_round_trip_is_exact(name):
     X, Y = _data(n, sizes)
     params = init_replica_params(sizes, [1, 2, 3])
     orders = _orders(R, n, [n, n, n])
-    straight = make_engine(name, sizes, params, LR, MOM, 3)
+    straight = online_engine(name, sizes, params, LR, MOM, 3)
     for o in orders:
         straight.train_epoch(X, Y, o)
 
-    first = make_engine(name, sizes, params, LR, MOM, 3)
+    first = online_engine(name, sizes, params, LR, MOM, 3)
     for o in orders[:2]:
         first.train_epoch(X, Y, o)
     state = first.state_dict()
     assert [t.shape for t in state["momentum"]] == [t.shape for t in params]
     assert any(t.abs().max() > 0 for t in state["momentum"])
-    fresh = make_engine(name, sizes, init_replica_params(sizes, [9, 9, 9]), LR, MOM, 3)
+    fresh = online_engine(name, sizes, init_replica_params(sizes, [9, 9, 9]), LR, MOM, 3)
     fresh.load_state_dict(state)
     fresh.train_epoch(X, Y, orders[2])
     for a, b in zip(
@@ -284,9 +284,9 @@ def test_state_dicts_are_interchangeable_between_engines():
     X, Y = _data(n, sizes)
     params = init_replica_params(sizes, [1, 2])
     orders = _orders(2, n, [n, n])
-    ref = make_engine("reference", sizes, params, LR, MOM, 1)
+    ref = online_engine("reference", sizes, params, LR, MOM, 1)
     ref.train_epoch(X, Y, orders[0])
-    nat = make_engine("native", sizes, params, LR, MOM, 1)
+    nat = online_engine("native", sizes, params, LR, MOM, 1)
     nat.load_state_dict(ref.state_dict())
     ref.train_epoch(X, Y, orders[1])
     nat.train_epoch(X, Y, orders[1])
@@ -303,8 +303,8 @@ def test_nan_replica_leaves_others_untouched(name):
     poisoned[0][1, 0, 0] = float("nan")
     poisoned[2][4, 1, 1] = float("inf")
     orders = _orders(R, n, [n, n])
-    clean = make_engine(name, sizes, params, LR, MOM, 2)
-    dirty = make_engine(name, sizes, poisoned, LR, MOM, 2)
+    clean = online_engine(name, sizes, params, LR, MOM, 2)
+    dirty = online_engine(name, sizes, poisoned, LR, MOM, 2)
     for o in orders:
         clean_loss, dirty_loss = clean.train_epoch(X, Y, o), dirty.train_epoch(X, Y, o)
     keep = [0, 2, 3, 5]
@@ -323,7 +323,7 @@ def test_native_threads_give_identical_results():
     orders = _orders(R, n, [n])
     outs = []
     for threads in (1, 2, 3):
-        eng = make_engine("native", sizes, params, LR, MOM, 1, threads=threads)
+        eng = online_engine("native", sizes, params, LR, MOM, 1, threads=threads)
         eng.train_epoch(X, Y, orders[0])
         outs.append(eng.params())
     for other in outs[1:]:
@@ -332,14 +332,14 @@ def test_native_threads_give_identical_results():
 
 def test_bad_inputs_are_rejected():
     sizes = (6, 4, 2)
-    eng = make_engine("torch", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    eng = online_engine("torch", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
     X, Y = _data(10, sizes)
     with pytest.raises(IndexError):
         eng.train_epoch(X, Y, torch.tensor([[0, 10]]))
     with pytest.raises(ValueError):
         eng.train_epoch(X, Y, torch.tensor([[0, 1], [2, 3]]))
-    with pytest.raises(ValueError):
-        make_engine("nope", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
+    with pytest.raises(ConfigError, match="engine='nope' .*one of fast, native, torch, reference"):
+        online_engine("nope", sizes, init_replica_params(sizes, [0]), LR, MOM, 1)
 
 
 # ---------------------------------------------------------------- evaluation: predict
@@ -360,7 +360,7 @@ def test_predict_matches_reference_forward(scaled_exemplar, name, sizes, R):
     params[0][0, 0, 0] = 7.0  # a saturated unit somewhere
     expected = _bpn_outputs(sizes, params, X)
     for threads in (1, 3):  # native: groups over threads, or patterns over threads when G < 3
-        got = make_engine(name, sizes, params, LR, MOM, 1, threads=threads).predict(X)
+        got = online_engine(name, sizes, params, LR, MOM, 1, threads=threads).predict(X)
         assert got.shape == (R, 37, sizes[-1]) and got.dtype == torch.float64
         assert (got - expected).abs().max().item() <= TOL
 
@@ -369,7 +369,7 @@ def test_predict_matches_reference_forward(scaled_exemplar, name, sizes, R):
 def test_predict_uses_the_trained_weights(name):
     sizes, R, n = (6, 8, 2), 6, 40
     X, Y = _data(n, sizes)
-    eng = make_engine(name, sizes, init_replica_params(sizes, list(range(R))), LR, MOM, 1)
+    eng = online_engine(name, sizes, init_replica_params(sizes, list(range(R))), LR, MOM, 1)
     eng.train_epoch(X, Y, _orders(R, n, [n])[0])
     assert (eng.predict(X) - _bpn_outputs(sizes, eng.params(), X)).abs().max().item() <= TOL
     with pytest.raises(ValueError, match=r"X must be \[N, 6\], got \(40, 5\)"):
@@ -385,8 +385,8 @@ def test_native_evaluation_keeps_a_nan_replica_to_itself(method):
     poisoned = [t.clone() for t in params]
     poisoned[0][1, 0, 0] = float("nan")  # replica 1 shares its vector with replicas 0, 2, 3
     args = (X,) if method == "predict" else (X, Y)
-    clean = getattr(make_engine("native", sizes, params, LR, MOM, 1), method)(*args)
-    dirty = getattr(make_engine("native", sizes, poisoned, LR, MOM, 1), method)(*args)
+    clean = getattr(online_engine("native", sizes, params, LR, MOM, 1), method)(*args)
+    dirty = getattr(online_engine("native", sizes, poisoned, LR, MOM, 1), method)(*args)
     keep = [0, 2, 3, 4, 5]
     assert torch.equal(clean[keep], dirty[keep]) and torch.isnan(dirty[1]).all()
 
@@ -402,7 +402,7 @@ def _engine(name, sizes, params, threads=1):
     return (
         _batch_engine(sizes, params)
         if name == "batch"
-        else make_engine(name, sizes, params, LR, MOM, 1, threads=threads)
+        else online_engine(name, sizes, params, LR, MOM, 1, threads=threads)
     )
 
 
@@ -452,7 +452,7 @@ def test_native_squared_errors_do_not_depend_on_threads_or_pool(monkeypatch):
         outs = []
         for threads, min_work in ((1, 1 << 60), (2, 1), (3, 1)):
             monkeypatch.setattr(library, "MIN_THREAD_WORK", min_work)
-            eng = make_engine("native", sizes, params, LR, MOM, 1, threads=threads)
+            eng = online_engine("native", sizes, params, LR, MOM, 1, threads=threads)
             outs.append(eng.squared_errors(X, Y))
         assert all(torch.equal(outs[0], o) for o in outs[1:])
 
@@ -515,7 +515,9 @@ def test_finite_sees_weights_that_diverge_in_training(name):
     params[-1][3] = 1000.0
     params[0][1, 0, 0] = 1e308
     params[0][1, 1] *= 1e300  # a sum of these would overflow: a finiteness test by summing would be wrong
-    eng = make_engine(name, sizes, params, LR, 10.0, 1)
+    from selpres.engines.factory import ENGINES
+
+    eng = ENGINES[("online", name)](sizes, params, LR, 10.0, 1)  # the class itself: no config check of momentum
     assert eng.finite().tolist() == [True] * R
     for o in _orders(R, n, [n] * 10):
         eng.train_epoch(X, Y, o)
@@ -529,13 +531,14 @@ def test_padded_lanes_stay_out_of_subnormal_numbers():
     """Padding lanes of zeros presented pattern 0 only settled on subnormal momentum buffers, which slowed
     their whole group ~13x (found in experiment=large); they now shadow replica 0 and stay normal."""
     from selpres.engines.model import init_replica_params
-    from selpres.engines.online import make_engine
+
+    from conftest import online_engine
 
     sizes, R, n = (6, 13, 2), 10, 200  # 10 replicas: 3 groups of 4, the last with 2 padded lanes
     gen = torch.Generator().manual_seed(0)
     X = torch.rand(n, 6, dtype=torch.float64, generator=gen)
     Y = 0.1 + 0.8 * torch.rand(n, 2, dtype=torch.float64, generator=gen)
-    eng = make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
+    eng = online_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
     for _ in range(50):  # 10,000 presentations: a padded lane's buffer decays by 0.9 a step once it fits
         eng.train_epoch(X, Y, torch.stack([torch.randperm(n, generator=gen) for _ in range(R)]))
     tiny = torch.finfo(torch.float64).tiny

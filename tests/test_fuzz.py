@@ -15,6 +15,7 @@ from selpres.data.task import Shape
 from selpres.errors import ConfigError
 from selpres.run.checks import check_topology
 from selpres.run.problem import prepare
+from selpres.run.resolve import resolve
 from selpres.run.train import train
 
 from conftest import compose
@@ -84,7 +85,7 @@ def test_every_config_trains_or_is_refused_cleanly(topology, schedule, batch):
         event("refused by Hydra/omegaconf")
         return
     try:
-        prob = prepare(cfg)
+        prob = prepare(resolve(cfg))
     except ConfigError:
         event("refused: ConfigError")
         return
@@ -108,5 +109,5 @@ def test_every_config_trains_or_is_refused_cleanly(topology, schedule, batch):
 @pytest.mark.parametrize("bad", ["6-x-2", "6-0-2", "5-8-2", "6-8-3", "6", "6--2", "-6-2"])
 def test_named_bad_topologies_are_config_errors(bad):
     with pytest.raises(ConfigError) as ei:
-        prepare(compose(f"topology.layers='{bad}'"))
+        prepare(resolve(compose(f"topology.layers='{bad}'")))
     assert ei.value.key == "topology.layers" and bad in str(ei.value)

@@ -12,12 +12,12 @@ import pickle
 
 import pytest
 import torch
+from test_resume import newest_checkpoint
 
 from selpres.engines.model import init_replica_params
-from selpres.engines.online import make_engine
 from selpres.run.checkpoint import Checkpoints, Progress, dumps, encode, read
 
-from conftest import cfg_of, numbers, run_python
+from conftest import cfg_of, numbers, online_engine, run_python
 
 SIZES = (6, 3, 2)
 JOB = ["schedule.epochs=[2,2,2,2,2]", "checkpoint.every=1", "data.heldout=300", "eval.heldout_curve=300"]
@@ -38,7 +38,7 @@ def record(epoch: int) -> dict:
 
 
 def engine_of(seeds=(0, 1)):
-    return make_engine("torch", SIZES, init_replica_params(SIZES, list(seeds)), 0.15, 0.9, 1)
+    return online_engine("torch", SIZES, init_replica_params(SIZES, list(seeds)), 0.15, 0.9, 1)
 
 
 def make_legacy(folder, records, epoch: int, engine, extra: bytes = b"") -> None:
@@ -152,14 +152,14 @@ def straight(tmp_path_factory):
 
 def killed_job(folder, monkeypatch):
     """A job folder as a kill after its last checkpoint leaves it (checkpoints and history, no results)."""
-    from selpres.run import cli
+    from selpres.run import job
 
     with monkeypatch.context() as m:
         m.setattr(Checkpoints, "discard", lambda self: None)
-        cli._run_locked(cfg_of(*JOB), folder, multirun=False)
+        job.run(cfg_of(*JOB), folder)
     for name in ("results.json", "weights.pt"):
         (folder / name).unlink()
-    return read(folder / "checkpoint.alt.pt")  # the newer of the two: 9 epochs done of 10
+    return read(newest_checkpoint(folder)[0])  # the newer of the two, whichever name holds it: 9 epochs done of 10
 
 
 def as_legacy(folder, ck, extra: bytes = b"") -> None:
@@ -209,7 +209,7 @@ def test_a_checkpoint_of_this_hash_whose_engine_state_does_not_fit_is_set_aside(
     load_state_dict; now one warning, the files aside, a fresh start on the engine's own initial weights."""
     Checkpoints(tmp_path, "h").save(engine_of(), Progress([record(-1), record(0)], [None, None], epoch=1))
     sizes = (6, 4, 2)
-    other = make_engine("torch", sizes, init_replica_params(sizes, [0, 1]), 0.15, 0.9, 1)
+    other = online_engine("torch", sizes, init_replica_params(sizes, [0, 1]), 0.15, 0.9, 1)
     initial = [p.clone() for p in other.params()]
     with caplog.at_level("WARNING", logger="selpres"):
         back = Checkpoints(tmp_path, "h").resume(other, 2)
@@ -221,14 +221,14 @@ def test_a_checkpoint_of_this_hash_whose_engine_state_does_not_fit_is_set_aside(
 
 
 def test_a_finished_results_json_that_lacks_its_summary_is_redone_not_a_crash(tmp_path, caplog):
-    from selpres.run import cli
+    from selpres.run import job
 
     cfg, out = cfg_of("schedule.epochs=[1,1,1,1,1]"), tmp_path / "job"
-    cli._run_locked(cfg, out, multirun=False)
+    job.run(cfg, out)
     good = json.loads((out / "results.json").read_text())
     cut = {k: v for k, v in good.items() if k != "summary"}
     (out / "results.json").write_text(json.dumps(cut))
     with caplog.at_level("WARNING", logger="selpres"):
-        cli._run_locked(cfg, out, multirun=False)  # was KeyError: 'summary' on every re-run
+        job.run(cfg, out)  # was KeyError: 'summary' on every re-run
     assert "lacks what a finished job holds (KeyError: 'summary')" in caplog.text
     assert numbers(json.loads((out / "results.json").read_text())) == numbers(good)

@@ -143,7 +143,7 @@ def test_wide_layer_does_not_overflow_the_stack(tmp_path):
     so a crash fails this test instead of killing pytest."""
     code = textwrap.dedent("""
         import torch
-        from selpres.engines.online import make_engine
+        from selpres.engines.factory import EngineSpec, build_engine
         from selpres.engines.model import init_replica_params
         sizes = (6, 40000, 2)
         g = torch.Generator().manual_seed(0)
@@ -153,7 +153,7 @@ def test_wide_layer_does_not_overflow_the_stack(tmp_path):
         order = torch.tensor([[3, 1, 4, 0, 2]])
         out = []
         for name in ("native", "reference"):
-            eng = make_engine(name, sizes, params, 0.15, 0.9, 1, threads=1)
+            eng = build_engine(EngineSpec.online(name, sizes, 0.15, 0.9, 1, threads=1), params)
             out.append((eng.train_epoch(X, Y, order), eng.params()))
         (la, pa), (lb, pb) = out
         assert (la - lb).abs().max() <= 1e-12, (la, lb)
@@ -188,7 +188,8 @@ def test_small_calls_never_touch_the_pool_and_large_ones_do(monkeypatch):
     import torch
 
     from selpres.engines.model import init_replica_params
-    from selpres.engines.online import make_engine
+
+    from conftest import online_engine
 
     sizes = (6, 13, 2)
     g = torch.Generator().manual_seed(0)
@@ -202,7 +203,7 @@ def test_small_calls_never_touch_the_pool_and_large_ones_do(monkeypatch):
     for min_work in (library.MIN_THREAD_WORK, 1):
         monkeypatch.setattr(library, "MIN_THREAD_WORK", min_work)
         one, five = (
-            make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1, threads=2)
+            online_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1, threads=2)
             for R in (1, 5)
         )
         small = [one.predict(X[:10]), one.squared_errors(X[:10], Y[:10]), five.train_epoch(X, Y, order)]

@@ -14,9 +14,10 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf
 
+from selpres.arms.sources import SOURCES
 from selpres.report.groups import label_methods
 from selpres.report.jobs import Job
-from selpres.run.checks import validate
+from selpres.run.resolve import resolve
 from selpres.run.specs import plain as to_container
 
 from conftest import compose, load_group
@@ -39,7 +40,7 @@ def swept_jobs(*command: str) -> list[list[str]]:
 
 
 def arm_of(cfg) -> str:
-    return cfg.robot.get("name") or cfg.robot._target_  # the two-link file sets no name
+    return cfg.robot.get("name") or SOURCES.canonical(cfg.robot._target_)  # the two-link file sets no name
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +53,7 @@ def test_one_command_runs_both_arms_each_with_its_network_every_n_and_schedule(j
     want = sorted((a, t, n, s) for (a, t), n, s in itertools.product(ARMS.items(), NS, SCHEDULES))
     assert got == want  # 18 jobs; a product of robot x topology would give 36, half of them refused
     for _, c in jobs:
-        sizes = validate(c)  # the network fits the arm's task: 3N inputs, N outputs
+        sizes = resolve(c).sizes  # the network fits the arm's task: 3N inputs, N outputs
         dof = {"two_link": 2, "puma560": 6}[arm_of(c)]
         assert (sizes[0], sizes[-1]) == (3 * dof, dof)
         assert c.data.kind == "sampled" and c.data.heldout == 10_000
@@ -112,6 +113,7 @@ def test_each_folder_is_named_by_its_overrides_inside_one_folder_per_n(jobs):
 def job(name: str, topology: str, robot: str, n: int, **robot_changes) -> Job:
     """A finished job as the report reads it: only the config matters for its label."""
     arm = {**to_container(load_group("robot", robot)), **robot_changes}
+    arm["_target_"] = SOURCES.canonical(arm["_target_"])  # results.json records a built-in source by its alias
     config = {"schedule": {"name": name}, "topology": {"layers": topology}, "robot": arm, "data": {"n": n}}
     return Job(Path(f"{robot}-{topology}-{name}-{n}"), "complete", name, topology, results={"config": config})
 

@@ -1,7 +1,9 @@
-"""The package's rooms follow the flow arm -> data -> presentation -> engines -> run -> report -> studies -> bench: a
-module imports only its own room, rooms before it and the foundation (errors, seeding, storage, native) — lazy
-imports inside functions included. Also: every room says what it owns and may import, no module outgrows ~450
-lines, and the library works without the studies (nothing imports them; the report finds them by a registry)."""
+"""The package's rooms follow the flow arm -> data -> presentation -> engines -> run -> report: a module imports only
+its own room, rooms before it and the foundation (errors, registry, seeding, storage, native, and patterns, the data
+types every room shares) — lazy imports inside functions included. Also: every room says what it owns and may
+import, no module outgrows ~450 lines, and the library stands apart from its studies and benchmarks (the sibling
+packages of studies/): nothing in it imports or names them (the report is given its study plug-ins), and the
+studies use only the public API, ``selpres`` and the report's blocks ``selpres.report``, as a user's study would."""
 
 from __future__ import annotations
 
@@ -15,8 +17,16 @@ import yaml
 
 from conftest import REPO
 
-FOUNDATION = ("selpres.errors", "selpres.registry", "selpres.seeding", "selpres.storage", "selpres.native")
-ROOMS = ("arms", "data", "presentation", "engines", "run", "report", "studies", "bench")
+FOUNDATION = (
+    "selpres.errors",
+    "selpres.registry",
+    "selpres.seeding",
+    "selpres.storage",
+    "selpres.native",
+    "selpres.patterns",
+)
+ROOMS = ("arms", "data", "presentation", "engines", "run", "report")
+SIBLINGS = ("selpres_studies", "selpres_bench")  # studies/: apart from the library, not in its wheel
 MAX_LINES = 450
 # Rooms that get specs, not configs (issue 25): only selpres.run reads the composed config, so these import neither
 # omegaconf nor hydra (nor a selpres.run enum: the flow check above refuses any import of run).
@@ -34,21 +44,21 @@ def room_rank(module: str) -> int:
     return len(ROOMS) + 1  # selpres itself (the public API), hydra_plugins
 
 
-def imported_modules(source: str, package: str) -> list[tuple[int, str]]:
-    """(line, module) for every selpres import in ``source`` (``from selpres import x`` -> selpres.x when x is a
-    room or module of the package, else selpres itself: the public API)."""
+def imported_modules(source: str, package: str, roots: tuple[str, ...] = ("selpres",)) -> list[tuple[int, str]]:
+    """(line, module) for every import in ``source`` of the packages ``roots`` (``from selpres import x`` ->
+    selpres.x when x is a room or module of the package, else selpres itself: the public API)."""
     names = {p.stem for p in (REPO / "selpres").iterdir() if p.suffix == ".py" or p.is_dir()}
     out = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
-            out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "selpres"]
+            out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] in roots]
         elif isinstance(node, ast.ImportFrom) and node.module:
             mod = node.module
             if node.level:  # relative: resolve against the importing package
                 mod = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + [mod])
-            if mod == "selpres":
+            if mod == "selpres" and "selpres" in roots:
                 out += [(node.lineno, f"selpres.{a.name}" if a.name in names else "selpres") for a in node.names]
-            elif mod.split(".")[0] == "selpres":
+            elif mod.split(".")[0] in roots:
                 out.append((node.lineno, mod))
     return out
 
@@ -94,43 +104,97 @@ def test_every_room_says_what_it_owns_and_may_import():
 
 
 def test_no_module_over_450_lines():
-    long = {str(p.relative_to(REPO)): n for p, _ in modules() if (n := len(p.read_text().splitlines())) > MAX_LINES}
+    paths = [p for p, _ in (*modules(), *sibling_modules())]
+    long = {str(p.relative_to(REPO)): n for p in paths if (n := len(p.read_text().splitlines())) > MAX_LINES}
     assert long == {}
 
 
-def test_nothing_in_the_library_imports_the_studies():
-    """The studies sit after the report, and no module outside them names them (bench included): the report
-    reaches a study's section only through the registry report.build.STUDIES, by name."""
+def sibling_modules():
+    for path in sorted((REPO / "studies").rglob("*.py")):
+        rel = path.relative_to(REPO / "studies").with_suffix("")
+        parts = list(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        if parts and parts[0] in SIBLINGS:
+            yield path, ".".join(parts)
+
+
+def test_nothing_in_the_library_imports_or_names_the_studies():
+    """No run-time loop: no module of the library imports the studies or the benchmarks, nor holds their names in
+    its code (so it cannot load them by name either); the report is given its study plug-ins."""
+    names = set(SIBLINGS)
     found = [
         f"{path.relative_to(REPO)}:{line} imports {target}"
         for path, module in modules()
-        if not module.startswith("selpres.studies")
-        for line, target in imported_modules(path.read_text(), module)
-        if target.startswith("selpres.studies")
+        for line, target in imported_modules(path.read_text(), module, roots=SIBLINGS)
+    ]
+    found += [
+        f"{path.relative_to(REPO)}:{line} names {name}"
+        for path, _ in modules()
+        for line, name in named_in_code(path.read_text(), names)
     ]
     assert found == []
-    # and the check sees one
-    assert imported_modules("from selpres.studies import modern\n", "selpres.report") == [(1, "selpres.studies")]
+    # and the checks see them
+    assert imported_modules("from selpres_studies import modern\n", "selpres.report", SIBLINGS) == [
+        (1, "selpres_studies")
+    ]
+    assert named_in_code('STUDIES = "selpres_studies"\n', names) == [(1, "selpres_studies")]
+
+
+def public_api_violations(path: Path, module: str, source: str) -> list[str]:
+    """The imports of selpres in ``source`` that are not its public API: ``selpres``'s and ``selpres.report``'s
+    ``__all__``."""
+    import selpres
+    import selpres.report
+
+    api = {"selpres": set(selpres.__all__), "selpres.report": set(selpres.report.__all__)}
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "selpres"]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "selpres":
+            if node.module in api:
+                out += [(node.lineno, f"{node.module}.{a.name}") for a in node.names if a.name not in api[node.module]]
+            else:
+                out.append((node.lineno, node.module))
+    return [f"{path.relative_to(REPO)}:{line} imports {what} (not the public API)" for line, what in out]
+
+
+def test_the_studies_use_only_the_public_api():
+    """A study is written as a user writes one: from ``selpres`` and the report's blocks (``selpres.report``) only.
+    The benchmarks time the library's insides, as the tests do, and are not held to this."""
+    found = [
+        v
+        for path, module in sibling_modules()
+        if module.startswith("selpres_studies")
+        for v in public_api_violations(path, module, path.read_text())
+    ]
+    assert found == []
+    # and the check sees an internal module, a name outside the API, and a plain import of a room
+    where = REPO / "studies/selpres_studies/x.py"
+    src = "from selpres.report.groups import Group\nfrom selpres.report import table, jobs\nimport selpres.run\n"
+    assert public_api_violations(where, "selpres_studies.x", src) == [
+        "studies/selpres_studies/x.py:1 imports selpres.report.groups (not the public API)",
+        "studies/selpres_studies/x.py:2 imports selpres.report.jobs (not the public API)",
+        "studies/selpres_studies/x.py:3 imports selpres.run (not the public API)",
+    ]
+    assert public_api_violations(where, "selpres_studies.x", "from selpres.report import Group, table\n") == []
 
 
 def test_the_core_and_the_report_import_without_the_studies():
-    """import selpres, the core's rooms and the report's blocks load no study module."""
+    """import selpres, the core's rooms and the report's blocks load no study or benchmark module."""
     code = (
         "import sys, selpres, selpres.arms, selpres.data, selpres.presentation, selpres.engines, selpres.run.train, "
-        "selpres.report, selpres.report.build, selpres.report.__main__; "
-        "print(sorted(m for m in sys.modules if m.startswith('selpres.studies'))); "
-        "from selpres.report.build import STUDIES; assert 'modern' in STUDIES.names; "  # lists, imports no study
-        "print(sorted(m for m in sys.modules if m.startswith('selpres.studies.')))"
+        "selpres.report, selpres.report.build, selpres.report.__main__, selpres.report.plugins; "
+        "print(sorted(m for m in sys.modules if m.startswith(('selpres_studies', 'selpres_bench'))))"
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True)
-    assert out.stdout.split() == ["[]", "[]"]
+    assert out.stdout.split() == ["[]"]
 
 
 def design_names() -> set[str]:
-    """The methods and arms the studies' designs name (``selpres/studies/*.yaml``: roles, rows' order, the methods
-    a paper lacks, arms' display names)."""
+    """The methods and arms the studies' designs name (``studies/selpres_studies/*.yaml``: roles, rows' order, the
+    methods a paper lacks, arms' display names)."""
     names: set[str] = set()
-    for path in (REPO / "selpres" / "studies").glob("*.yaml"):
+    for path in (REPO / "studies" / "selpres_studies").glob("*.yaml"):
         d = yaml.safe_load(path.read_text())
         names |= {d[k] for k in ("reference", "baseline", "partner") if isinstance(d.get(k), str)}
         names |= {*(d.get("order") or []), *(d.get("not_in_paper") or {}), *(d.get("arms") or {})}
@@ -161,7 +225,7 @@ def named_in_code(source: str, names: set[str]) -> list[tuple[int, str]]:
 
 def test_the_shared_report_code_names_no_method_or_arm():
     """Issue 25, point 6: which method is a verdict's reference, which runs are targets and the order of rows are a
-    study's (its design, selpres/studies/<name>.yaml), so the report's code holds none of the names the designs
+    study's (its design, studies/selpres_studies/<name>.yaml), so the report's code holds none of the names the designs
     use; a block takes them as arguments."""
     names = design_names()
     assert {"conventional", "selective", "matched", "random_growth", "infobatch", "two_link"} <= names

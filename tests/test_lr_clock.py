@@ -13,7 +13,7 @@ from selpres.engines.minibatch import MiniBatchEngine
 from selpres.engines.model import BPN, init_replica_params, load_into
 from selpres.engines.native_minibatch import NativeMiniBatchEngine
 from selpres.errors import ConfigError
-from selpres.run.checks import validate
+from selpres.run.resolve import resolve
 from selpres.run.train import train
 
 from conftest import cfg_of, numbers, requires_native
@@ -104,8 +104,8 @@ def test_a_pruned_job_runs_on_the_epochs_clock_and_its_numbers_differ(tmp_path):
     assert runs["cosine_epochs"]["config"]["optim"]["lr_schedule"] == "cosine_epochs"
     assert all(c < 4 * 1002 for c in runs["cosine_epochs"]["pruning"]["cost"])  # it pruned
     assert numbers(runs["cosine"])["replica_results"] != numbers(runs["cosine_epochs"])["replica_results"]
-    cfg = cfg_of(*base, "optim.lr_schedule=cosine_epochs")
-    eng = job_engine(cfg, prepare(cfg))
+    job = resolve(cfg_of(*base, "optim.lr_schedule=cosine_epochs"))
+    eng = job_engine(job, prepare(job))
     assert eng.lr_schedule == "cosine_epochs" and eng.horizon == 4 * 1002  # the horizon: N full epochs of n
 
 
@@ -120,7 +120,7 @@ def test_a_pruned_job_runs_on_the_epochs_clock_and_its_numbers_differ(tmp_path):
 def test_the_epochs_clock_refuses_what_it_cannot_position(overrides):
     cfg = cfg_of(*overrides, "optim=adam_minibatch", "model.activation=relu", "optim.lr_schedule=cosine_epochs")
     with pytest.raises(ConfigError) as e:
-        validate(cfg)
+        resolve(cfg)
     assert e.value.key == "optim.lr_schedule" and "schedule.epochs=[N]" in str(e.value)
 
 

@@ -1,10 +1,10 @@
-"""The learning curves that size the modern study (selpres.studies.modern_curve): the budget is read off by hand."""
+"""The learning curves that size the modern study (selpres_studies.modern_curve): the budget is read off by hand."""
 
 from __future__ import annotations
 
 import pytest
 
-from selpres.studies import modern_curve
+from selpres_studies import modern_curve
 
 
 def point(*rms):

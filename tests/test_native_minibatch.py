@@ -13,7 +13,7 @@ import torch
 
 from selpres.engines.minibatch import MiniBatchEngine
 from selpres.engines.model import BPN, init_replica_params, load_into
-from selpres.engines.native_minibatch import NativeMiniBatchEngine, make_minibatch_engine, native_reason
+from selpres.engines.native_minibatch import NativeMiniBatchEngine, native_reason
 
 from conftest import cfg_of, requires_native
 
@@ -206,18 +206,23 @@ def test_what_the_kernel_cannot_run_is_named():
 
 
 def test_fast_falls_back_to_the_torch_engine_and_says_why(monkeypatch, caplog):
-    from selpres.native import KernelUnavailable
+    from selpres.engines.factory import EngineSpec, build_engine
+    from selpres.errors import ConfigError
 
     monkeypatch.setenv("SELPRES_NO_NATIVE", "1")
     params = init_replica_params(SIZES, [0])
-    args = (SIZES, params, "adam", {"lr": 0.01}, B, "relu", "cosine", 100.0)
+    spec = EngineSpec("fast", "minibatch", SIZES, "adam", {"lr": 0.01}, B, "relu", "cosine", 100.0)
     with caplog.at_level(logging.WARNING, logger="selpres"):
-        eng = make_minibatch_engine("fast", *args)
-    assert eng.name == "minibatch" and eng.fallback_reason.endswith("disabled by SELPRES_NO_NATIVE")
-    assert any("disabled by SELPRES_NO_NATIVE" in r.getMessage() for r in caplog.records if r.name == "selpres")
-    with pytest.raises(KernelUnavailable):
-        make_minibatch_engine("native", *args)
-    assert make_minibatch_engine("torch", *args).fallback_reason is None
+        eng = build_engine(spec, params)
+    assert eng.name == "minibatch" and eng.fallback_reason == "disabled by SELPRES_NO_NATIVE"
+    (line,) = [r.getMessage() for r in caplog.records if r.name == "selpres" and r.levelno == logging.WARNING]
+    assert line == (
+        "engine 'fast' runs the minibatch engine: the native minibatch kernel cannot run this job: "
+        "disabled by SELPRES_NO_NATIVE"
+    )
+    with pytest.raises(ConfigError, match="engine='native'.*fast or torch.*disabled by SELPRES_NO_NATIVE"):
+        build_engine(spec.replace(requested="native"), params)
+    assert build_engine(spec.replace(requested="torch"), params).fallback_reason is None
 
 
 JOB = ["optim=adam_minibatch", "model.activation=relu", "replicas=3", "schedule.epochs=[2,2,2,2,2]"]
@@ -245,35 +250,39 @@ def test_a_job_records_the_engine_that_ran_and_both_agree(tmp_path, monkeypatch)
 
 def test_engine_native_is_accepted_for_mini_batch_jobs_and_reference_is_not():
     from selpres.errors import ConfigError
-    from selpres.run.checks import validate
+    from selpres.run.resolve import resolve
 
-    validate(cfg_of(*JOB, "engine=native"))
-    validate(cfg_of(*JOB, "engine=torch"))
-    with pytest.raises(ConfigError, match="fast, native or torch"):
-        validate(cfg_of(*JOB, "engine=reference"))
+    resolve(cfg_of(*JOB, "engine=native"))
+    resolve(cfg_of(*JOB, "engine=torch"))
+    with pytest.raises(ConfigError, match="engine='reference'.*fast, native or torch: .*model.activation=relu"):
+        resolve(cfg_of(*JOB, "engine=reference"))
 
 
 def test_engine_native_where_the_kernel_cannot_run_is_a_config_error(monkeypatch):
     from selpres.errors import ConfigError
     from selpres.run.problem import job_engine, prepare
+    from selpres.run.resolve import resolve
 
     monkeypatch.setenv("SELPRES_NO_NATIVE", "1")
     cfg = cfg_of(*JOB, "engine=native")
     with pytest.raises(ConfigError, match="disabled by SELPRES_NO_NATIVE"):
-        job_engine(cfg, prepare(cfg))
+        job = resolve(cfg)
+        job_engine(job, prepare(job))
 
 
 @requires_native
 def test_a_key_left_unset_gets_the_registrys_default_on_both_engines():
     """``optim.weight_decay=null`` with AdamW: the registry's default (0.01) on both engines, so they still agree."""
     from selpres.run.problem import job_engine, prepare
+    from selpres.run.resolve import resolve
 
     engines = []
     order = torch.randint(0, 300, (3, 64), generator=torch.Generator().manual_seed(0))
     for engine in ("native", "torch"):
         cfg = cfg_of(*JOB, "optim._target_=adamw", "optim.weight_decay=null", f"engine={engine}")
-        prob = prepare(cfg)
-        eng = job_engine(cfg, prob)
+        job = resolve(cfg)
+        prob = prepare(job)
+        eng = job_engine(job, prob)
         eng.train_epoch(prob.X, prob.Y, order)
         engines.append(eng)
     assert [e.name for e in engines] == ["minibatch-native", "minibatch"]

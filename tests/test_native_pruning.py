@@ -9,9 +9,8 @@ import torch
 
 from selpres.engines.minibatch import MiniBatchEngine
 from selpres.engines.model import init_replica_params
-from selpres.engines.online import make_engine
 
-from conftest import cfg_of, requires_native
+from conftest import cfg_of, online_engine, requires_native
 
 LR, MOM, TOL = 0.15, 0.9, 1e-12  # TOL: the engine-agreement tolerance of tests/test_engine.py
 NATIVE = pytest.param("native", marks=requires_native)
@@ -42,7 +41,7 @@ def _engine(name, B, lr=LR, mom=MOM):
     params = init_replica_params(SIZES, list(range(10, 10 + R)))
     if name == "minibatch":  # sgd, sigmoid, constant rate, mean reduction: the online engines' update
         return MiniBatchEngine(SIZES, params, "sgd", {"lr": lr, "momentum": mom}, B, reduction="mean")
-    return make_engine(name, SIZES, params, lr, mom, B, threads=1)
+    return online_engine(name, SIZES, params, lr, mom, B, threads=1)
 
 
 def _run(name, B, weighted=True, **kw):
@@ -145,7 +144,7 @@ def test_pruned_epochs_do_not_depend_on_threads(monkeypatch):
     X, Y = _data()
     states = []
     for threads in (1, 2):
-        eng = make_engine("native", SIZES, init_replica_params(SIZES, list(range(10, 10 + R))), LR, MOM, 1, threads)
+        eng = online_engine("native", SIZES, init_replica_params(SIZES, list(range(10, 10 + R))), LR, MOM, 1, threads)
         for order, w in _epochs():
             loss = eng.train_epoch(X, Y, order, weights=w, counts=COUNTS)
         st = eng.state_dict()

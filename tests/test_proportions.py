@@ -35,19 +35,21 @@ def test_budget_scales_with_n():
 
 def test_prepare_applies_and_logs_it(caplog):
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     with caplog.at_level(logging.INFO, logger="selpres"):
-        prob = prepare(cfg_of(*SAMPLED))
+        prob = prepare(resolve(cfg_of(*SAMPLED)))
     assert prob.schedule.sizes == [499, 998, 3992, 7984, 10_000] and prob.schedule.epochs == [30] * 5
     assert prob.schedule.presentations == 30 * (499 + 998 + 3992 + 7984 + 10_000) == 704_190
     assert prob.schedule_note in caplog.text
-    matched = prepare(cfg_of(*SAMPLED, "schedule=matched"))
+    matched = prepare(resolve(cfg_of(*SAMPLED, "schedule=matched")))
     assert matched.schedule.presentations == 704_192  # within 2 presentations of the selective cost
 
 
 def test_other_counts_are_refused_with_the_fraction_form():
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError) as ei:
-        prepare(cfg_of(*SAMPLED, "schedule.sizes=[100,200,5000]", "schedule.epochs=[1,1,1]"))
+        prepare(resolve(cfg_of(*SAMPLED, "schedule.sizes=[100,200,5000]", "schedule.epochs=[1,1,1]")))
     assert ei.value.key == "schedule.sizes" and "schedule.sizes=[0.02,0.04,1.0]" in str(ei.value), str(ei.value)

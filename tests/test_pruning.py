@@ -117,15 +117,15 @@ def test_a_finished_job_of_another_update_is_run_again(tmp_path, caplog, monkeyp
     finished job must hold are tests/test_history.py's and test_refusals.py's: here only the engine is read.)"""
     import json
 
-    from selpres.run import cli
-    from selpres.run.cli import _finished
+    from selpres.run import cli, folder
+    from selpres.run.folder import finished as _finished
     from selpres.run.results import job_hash
 
     paper = cfg_of("schedule=infobatch", "schedule.epochs=[2]")
     adam = cfg_of("schedule=infobatch", "schedule.epochs=[2]", "optim=adam_minibatch", "model.activation=relu")
 
     monkeypatch.setattr(cli, "summary_table", lambda res: "")
-    monkeypatch.setattr(cli, "_objective", lambda res: 0.0)
+    monkeypatch.setattr(folder, "objective", lambda res: 0.0)
 
     def finished(cfg, engine):
         (tmp_path / "results.json").write_text(
@@ -172,10 +172,10 @@ def test_a_finished_job_of_another_update_is_run_again(tmp_path, caplog, monkeyp
 )
 def test_a_policy_checks_its_own_parameters_naming_the_key(overrides, key, allowed):
     from selpres.errors import ConfigError
-    from selpres.run.checks import validate
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError, match=allowed) as e:
-        validate(cfg_of(*overrides))
+        resolve(cfg_of(*overrides))
     assert e.value.key == key
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import resource
 import signal
 import subprocess
@@ -17,6 +18,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_outcomes import says
+
+from selpres.run import outcomes
+from selpres.run.checkpoint import Checkpoints
 
 from conftest import REPO, cfg_of, compose, numbers
 
@@ -62,8 +67,8 @@ def test_lock_is_held_by_the_os_named_by_pid_and_freed_by_a_kill(tmp_path):
 
     folder = tmp_path / "job"
     holder = subprocess.Popen(
-        [sys.executable, "-c", f"from selpres.run.lock import hold; hold({str(folder)!r}); print('held', flush=True); "
-         "import time; time.sleep(600)"],
+        [sys.executable, "-c", f"from selpres.run.lock import FolderLock; FolderLock.take({str(folder)!r}); "
+         "print('held', flush=True); import time; time.sleep(600)"],
         cwd=REPO, env=_env(), stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
@@ -91,7 +96,7 @@ def test_two_processes_on_one_folder_history_once_each(tmp_path, kill):
     first = _train(*args)
     time.sleep(0.3)
     second = _train(*args)
-    _wait_for(lambda: (out / "checkpoint.pt").exists() or first.poll() is not None, what="a checkpoint")
+    _wait_for(lambda: Checkpoints.present(out) or first.poll() is not None, what="a checkpoint")
     if kill:
         first.send_signal(signal.SIGKILL)
         second.send_signal(signal.SIGKILL)
@@ -125,16 +130,16 @@ def test_a_busy_job_in_a_sweep_is_skipped_and_the_others_run(tmp_path):
     for name, data in record.items():
         (busy / ".hydra" / name).write_bytes(data)
     (busy / "train.log").write_text("the holder's log\n")
-    lock.remember(record)  # as a holder does once Hydra has written its record
     try:
         p = _train("-m", f"hydra.sweep.dir={sweep}", *TINY, "schedule.epochs=[1,1,1,1,1]", "seed=0,1")
         _, err = p.communicate(timeout=600)
     finally:
         lock.release()
     assert p.returncode == 1 and "Traceback" not in err, err
-    assert f"skipped (busy): {busy} is in use by process {os.getpid()}" in err
+    line = f"{busy} is in use by process {os.getpid()} (one writer per job folder); nothing was touched"
+    assert line in err.splitlines(), err
     assert not (busy / "results.json").exists()
-    assert {p.name: p.read_bytes() for p in (busy / ".hydra").iterdir()} == record  # Hydra's rewrite undone
+    assert {p.name: p.read_bytes() for p in (busy / ".hydra").iterdir()} == record  # the record is written once held
     assert sorted(p.name for p in busy.iterdir()) == [".hydra", "train.log"]  # (the lock file went with the lock)
     assert (busy / "train.log").read_text() == "the holder's log\n"  # the skipped job wrote nothing into it
     (done,) = [d for d in sweep.iterdir() if d.name.endswith("seed=0")]
@@ -171,7 +176,7 @@ def test_sweep_workers_stop_when_the_sweep_is_killed_and_the_rerun_matches(tmp_p
     ]
     cmd = ["-m", "hydra/launcher=local2", f"hydra.sweep.dir={sweep}", *job, "seed=0,1"]
     parent = _train(*cmd)
-    _wait_for(lambda: len(list(sweep.glob("*/checkpoint.pt"))) == 2, what="both jobs' checkpoints")
+    _wait_for(lambda: sum(map(Checkpoints.present, sweep.glob("*/"))) == 2, what="both jobs' checkpoints")
     workers = _children(parent.pid)
     assert len(workers) >= 2  # two loky workers (and resource trackers)
     parent.send_signal(signal.SIGKILL)
@@ -181,6 +186,8 @@ def test_sweep_workers_stop_when_the_sweep_is_killed_and_the_rerun_matches(tmp_p
     assert len(kept) >= 2 and not list(sweep.glob("*/results.json"))
     logs = " ".join(p.read_text() for p in sweep.glob("*/train.log"))
     assert logs.count("the sweep that launched this job is gone") == 2
+    said = re.findall(r"\] (the sweep that launched this job is gone .*)", logs)
+    assert len(said) == 2 and all(says(outcomes.ORPHANED, line) for line in said), said  # the table's row
     again = _train(*cmd)
     _, err = again.communicate(timeout=900)
     assert again.returncode == 0, err
@@ -221,30 +228,32 @@ def table():
 def test_a_range_float64_cannot_scale_is_refused_naming_file_column_and_line(tmp_path, table):
     from selpres.data.file import DataFileError
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     X, Y = table
     X1 = X.copy()
     X1[5, 0], X1[7, 0] = 1e308, -1e308  # rows 5 and 7: lines 7 and 9 (line 1 is the header)
     with pytest.raises(DataFileError, match=r"inputs\.csv: column 'a', line (7|9): .*cannot be scaled in float64"):
-        prepare(_file_cfg(_csv(tmp_path / "inputs.csv", X1, Y)))
+        prepare(resolve(_file_cfg(_csv(tmp_path / "inputs.csv", X1, Y))))
     Y2 = Y.copy()
     Y2[9] = 1e308  # a target: its squared errors in its own unit would overflow
     with pytest.raises(DataFileError, match=r"target\.csv: column 'y', line 11: 1e\+308: .*target column"):
-        prepare(_file_cfg(_csv(tmp_path / "target.csv", X, Y2)))
+        prepare(resolve(_file_cfg(_csv(tmp_path / "target.csv", X, Y2))))
 
 
 def test_a_column_collapsed_by_an_outlier_is_named_and_recorded(tmp_path, table, caplog):
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     X, Y = table
     X3 = X.copy()
     X3[11, 1] = 1e6
     with caplog.at_level("WARNING", logger="selpres"):
-        prob = prepare(_file_cfg(_csv(tmp_path / "outlier.csv", X3, Y)))
+        prob = prepare(resolve(_file_cfg(_csv(tmp_path / "outlier.csv", X3, Y))))
     (warning,) = prob.task.info["warnings"]
     assert "column 'b'" in warning and "line 13" in warning and "1000000.0" in warning
     assert warning in caplog.text
-    assert prepare(_file_cfg(_csv(tmp_path / "ok.csv", X, Y))).task.info["warnings"] == []
+    assert prepare(resolve(_file_cfg(_csv(tmp_path / "ok.csv", X, Y)))).task.info["warnings"] == []
 
 
 @pytest.mark.parametrize(
@@ -277,10 +286,11 @@ def test_a_file_that_is_not_utf8_text_is_one_short_line(tmp_path, content, where
 def test_work_that_cannot_fit_is_refused_from_the_estimate(overrides, key, monkeypatch):
     from selpres.errors import ConfigError
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     monkeypatch.setenv("SELPRES_MEMORY_LIMIT", "4e9")
     with pytest.raises(ConfigError) as e:
-        prepare(compose(*overrides))
+        prepare(resolve(compose(*overrides)))
     assert e.value.key == key
     assert "needs an estimated" in str(e.value) and "4.0 GB available (SELPRES_MEMORY_LIMIT)" in str(e.value)
 
@@ -360,19 +370,19 @@ def test_a_bad_results_json_is_listed_unreadable(tmp_path, content, why):
 def test_a_kill_during_the_final_writes_is_cleaned_up_by_the_rerun(tmp_path, monkeypatch):
     """results.json is written before the checkpoint is removed: a kill between them leaves the checkpoint
     of a finished job, and a kill inside an atomic write leaves its temp file; the re-run removes both."""
-    from selpres.run import cli
+    from selpres.run import job
     from selpres.run.checkpoint import Checkpoints
 
     out = tmp_path / "job"
     cfg = cfg_of("schedule.epochs=[2,2,2,2,2]", "checkpoint.every=1")
     monkeypatch.setattr(Checkpoints, "discard", lambda self: None)  # killed before the checkpoint went
-    cli._run_locked(cfg, out, multirun=False)
+    job.run(cfg, out)
     monkeypatch.undo()
     (out / ".results.json.x1y2.tmp").write_bytes(b"half")
     (out / "notes.txt").write_text("the user's")
-    assert (out / "checkpoint.pt").exists() and (out / "history.jsonl").exists()
+    assert Checkpoints.present(out) and (out / "history.jsonl").exists()  # either name of the pair holds one
     before = (out / "results.json").read_bytes()
-    cli._run_locked(cfg, out, multirun=False)
+    job.run(cfg, out)  # found done: skipped
     names = sorted(p.name for p in out.iterdir())
     assert [n for n in names if not n.startswith("events.out.tfevents.")] == ["notes.txt", "results.json", "weights.pt"]
     assert len(names) == 4  # and the job's one TensorBoard event file
@@ -396,9 +406,10 @@ def test_a_write_the_kernel_refuses_is_one_line_and_the_rerun_resumes(tmp_path):
     _, err = p.communicate(timeout=600)
     assert p.returncode == 2, err
     (line,) = err.strip().splitlines()
+    assert says(outcomes.WRITE_FAILED, line)  # the table's row
     assert line.startswith(f"error: cannot write {out}/results.json: File too large (errno 27)")
     assert "the last checkpoint is kept" in line and "Traceback" not in err
-    assert (out / "checkpoint.pt").exists() and not list(out.glob(".*.tmp"))
+    assert Checkpoints.present(out) and not list(out.glob(".*.tmp"))  # either name of the pair: the re-run resumes
     again = _train(*args)
     _, err = again.communicate(timeout=600)
     assert again.returncode == 0, err
@@ -407,20 +418,42 @@ def test_a_write_the_kernel_refuses_is_one_line_and_the_rerun_resumes(tmp_path):
     _epochs_once_each(res)
 
 
+def resumable(folder: Path, line: str, *overrides: str) -> bool:
+    """What the command named in ``line`` resumes from: the newest checkpoint in ``folder`` reads, is this
+    config's, is of the epoch the line names (when it names one), and its history holds the records it counts."""
+    from selpres.run.checkpoint import read
+    from selpres.run.results import job_hash
+
+    ckpts = [read(p) for p in folder.glob("checkpoint*.pt") if ".stale-" not in p.name]
+    if not ckpts:
+        return False
+    newest = max(ckpts, key=lambda c: c["epoch"])
+    named = re.search(r"after epoch (\d+)", line)
+    return (
+        newest["config_hash"] == job_hash(compose(*overrides))
+        and (named is None or newest["epoch"] == int(named.group(1)))
+        and (folder / "history.jsonl").stat().st_size >= newest["history_bytes"]
+    )
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("delay", [0.5, 3.0])
 def test_ctrl_c_during_set_up_leaves_a_folder_that_existed_as_it_was(tmp_path, delay):
-    """The job is long (9000 epochs a stage: a minute or more) so it is still running when the Ctrl-C comes: a
-    SIGINT that reached a job already exiting would find Python's finalisation, which restores SIG_DFL (exit -2)."""
+    """The job is long (9000 epochs a stage: a minute or more) so it is still running when the Ctrl-C comes. The
+    property, whatever the moment: exit 130 and one line; the user's file as it was; and either nothing of this run
+    is left, or the folder resumes (a checkpoint of this config, under whichever of its two names a checkpoint
+    being rewritten has at that moment: selpres.run.checkpoint's pair)."""
     out = tmp_path / "D"
     out.mkdir()
     (out / "mine.txt").write_text("keep")
-    p = _train(*TINY, "replicas=20", "schedule.epochs=[9000,9000,9000,9000,9000]", f"hydra.run.dir={out}",
-               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # fmt: skip
+    args = [*TINY, "replicas=20", "schedule.epochs=[9000,9000,9000,9000,9000]"]
+    p = _train(*args, f"hydra.run.dir={out}", preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(delay)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 130 and "Traceback" not in err, err
-    assert err.strip().splitlines()[-1].startswith("interrupted")
+    (line,) = err.strip().splitlines()
+    assert line.startswith("stopped by SIGINT "), line
+    assert (out / "mine.txt").read_text() == "keep"
     left = sorted(q.name for q in out.iterdir())
-    assert left == ["mine.txt"] or "checkpoint.pt" in left  # nothing of this run, unless it is resumable
+    assert left == ["mine.txt"] or ("resume: " in line and resumable(out, line, *args)), (left, line)

@@ -16,8 +16,8 @@ from selpres.report.compare import Margin, Options, reading, verdict_rows
 from selpres.report.context import Context
 from selpres.report.jobs import job_folders
 from selpres.run.stats import t_quantile
-from selpres.studies._paper import paper_setting
-from selpres.studies.table1 import ORDER, table1_rows, time_to_target_rows
+from selpres_studies._paper import paper_setting
+from selpres_studies.table1 import ORDER, table1_rows, time_to_target_rows
 
 SCHED = {
     "conventional": ([1002], [150]),

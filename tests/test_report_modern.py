@@ -16,7 +16,7 @@ from selpres.report.context import Context
 from selpres.run.specs import data_spec, robot_spec
 from selpres.run.stats import holm, t_test, tost
 from selpres.run.train import train
-from selpres.studies import modern
+from selpres_studies import modern
 
 from conftest import cfg_of
 

@@ -11,8 +11,8 @@ from scipy import stats
 from test_report import CON, SEL, results, write_job
 
 from selpres.report import aggregate, load_jobs
-from selpres.studies._table1_plots import PAPER, draw_table1_cost, draw_table1_curves, paper_ratio_rows
-from selpres.studies.table1 import ORDER
+from selpres_studies._table1_plots import PAPER, draw_table1_cost, draw_table1_curves, paper_ratio_rows
+from selpres_studies.table1 import ORDER
 
 
 @pytest.fixture

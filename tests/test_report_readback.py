@@ -78,7 +78,7 @@ def test_the_report_lists_what_a_job_wrote_wrong_and_builds_the_rest(tmp_path, c
 
 def test_a_section_that_still_fails_is_named_and_the_rest_written(tmp_path, capsys, monkeypatch):
     """The net under the checks: a section that raises is replaced by one line naming it; report.md is written."""
-    from selpres.studies import table1
+    from selpres_studies import table1
 
     def broken(ctx):
         raise TypeError("'<=' not supported between instances of 'NoneType' and 'float'")

@@ -13,8 +13,8 @@ from selpres.report import aggregate, load_jobs
 from selpres.report.build import Report
 from selpres.report.compare import Margin, Options
 from selpres.run.stats import t_test
-from selpres.studies._families import matched_partner
-from selpres.studies.selection import headline, selection_rows, shown
+from selpres_studies._families import matched_partner
+from selpres_studies.selection import headline, selection_rows, shown
 
 T = "6-4-2"
 M1 = [0.20, 0.21, 0.19, 0.20, 0.20]  # compute-matched conventional at 31,560 t (1002 × 31 + 498)

@@ -10,10 +10,10 @@ from test_report import PAPER_SGD, results, write_job, write_setting
 
 from selpres.report import aggregate, load_jobs
 from selpres.report.build import Report
-from selpres.studies._error_cost import grid, plane_rows
-from selpres.studies._families import families, family_name, paper_conventional
-from selpres.studies._sensitivity import sensitivity_rows
-from selpres.studies.sensitivity import verdict_text
+from selpres_studies._error_cost import grid, plane_rows
+from selpres_studies._families import families, family_name, paper_conventional
+from selpres_studies._sensitivity import sensitivity_rows
+from selpres_studies.sensitivity import verdict_text
 
 T = "6-4-2"
 # selective presentation, three stage-size lists (n_1 = 50, 100, 200; N_i = 30): 31,560 / 33,060 / 36,060 t

@@ -1,5 +1,5 @@
-"""The studies apart from the report: a study's section is found by the registry (a new study is a module, no
-list), the study the sweep ran leads, and the modern section takes what the jobs recorded — a pruning policy or
+"""The studies apart from the report: a study is a plug-in the report is given (a package of them is a module each,
+no list), the study the sweep ran leads, and the modern section takes what the jobs recorded — a pruning policy or
 an arm no code knows gets its rows, and the compute-matched partner is the one the study's design names."""
 
 from __future__ import annotations
@@ -11,14 +11,13 @@ import sys
 
 import pytest
 
-from selpres.registry import Registry
-from selpres.report import build
+from selpres.report import build, plugins
 from selpres.report.build import Report
 from selpres.report.compare import Options
 from selpres.report.context import Context, Section, experiment_of
 from selpres.run.stats import holm, t_test
 from selpres.run.train import train
-from selpres.studies import modern
+from selpres_studies import modern
 
 from conftest import cfg_of
 
@@ -128,9 +127,8 @@ def test_the_experiment_a_sweep_ran_is_read_from_its_multirun_yaml(tmp_path):
     assert experiment_of(tmp_path) is None
 
 
-def test_a_new_study_is_one_module_found_by_the_registry_and_the_sweeps_own_leads(tmp_path, monkeypatch):
-    """Studies in a package of our own: each module's SECTION, no list; the study the sweep ran first, the others
-    by name; one that does not apply (None) left out; one may give several sections."""
+def _mystudies(tmp_path, monkeypatch) -> None:
+    """A package of studies of our own on the path: each module's SECTION; one gives None, one two sections."""
     pkg = tmp_path / "mystudies"
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
@@ -140,12 +138,78 @@ def test_a_new_study_is_one_module_found_by_the_registry_and_the_sweeps_own_lead
         "gamma": "None",
         "_helper": "Section('helper', [])",
     }.items():
-        (pkg / f"{name}.py").write_text(f"from selpres.report.context import Section\n\nSECTION = lambda ctx: {body}\n")
+        (pkg / f"{name}.py").write_text(f"from selpres.report import Section\n\nSECTION = lambda ctx: {body}\n")
     monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setattr(build, "STUDIES", Registry("report.study", "mystudies", "SECTION"))
+
+
+def test_a_study_is_a_plug_in_given_by_import_path_and_the_sweeps_own_leads(tmp_path, monkeypatch):
+    """A package of studies: each public module's SECTION, no list; the study the sweep ran first, the others in the
+    order given (a package's by name); one that does not apply (None) left out; one may give several sections; a
+    module is a plug-in of its own; one that cannot be imported is one line, the rest kept."""
+    _mystudies(tmp_path, monkeypatch)
+    found = plugins.studies(["mystudies"])
+    assert [(s.name, s.path) for s in found] == [(n, f"mystudies.{n}") for n in ("alpha", "beta", "gamma")]
     ctx = Context(tmp_path, [], {}, [], [], experiment=None)
-    assert [s.title for s in build.study_sections(ctx)] == ["alpha", "beta", "beta plane"]
+    assert [s.title for s in build.study_sections(ctx, found)] == ["alpha", "beta", "beta plane"]
     ctx.experiment = "beta"
-    assert [s.title for s in build.study_sections(ctx)] == ["beta", "beta plane", "alpha"]
-    assert isinstance(build.study_sections(ctx)[0], Section)
-    sys.modules.pop("mystudies", None)
+    assert [s.title for s in build.study_sections(ctx, found)] == ["beta", "beta plane", "alpha"]
+    assert isinstance(build.study_sections(ctx, found)[0], Section)
+    # modules given one by one, in the order given; one that is not there is named, the rest written
+    found = plugins.studies(["mystudies.gamma", "mystudies.nowhere", "mystudies.beta", "mystudies.alpha"])
+    ctx.experiment = None
+    made = build.study_sections(ctx, found)
+    assert [s.title for s in made] == ["nowhere (not built)", "beta", "beta plane", "alpha"]
+    (line,) = made[0].blocks
+    assert "mystudies.nowhere" in line and "could not be imported" in line and "\n" not in line
+    for name in list(sys.modules):
+        if name.startswith("mystudies"):
+            sys.modules.pop(name)
+
+
+def test_the_report_takes_its_plug_ins_from_the_command_line_the_sweep_or_the_installation(tmp_path, monkeypatch):
+    """--sections first, then the sweep's record (multirun.yaml's hydra.callbacks.report.sections, which the
+    experiment configs set), then the entry points installed; and the library names none itself."""
+    _mystudies(tmp_path, monkeypatch)
+    sweep = tmp_path / "sweep"
+    sweep.mkdir()
+    monkeypatch.setattr(plugins, "installed", lambda: ["mystudies.alpha"])
+    assert plugins.given(sweep) == ["mystudies.alpha"]  # a sweep that names none: the installed ones
+    (sweep / "multirun.yaml").write_text(
+        "hydra:\n  callbacks:\n    report:\n      _target_: selpres.report.callback.ReportSections\n"
+        "      sections: [mystudies.beta]\n  runtime:\n    choices:\n      experiment: beta\n"
+    )
+    assert plugins.recorded(sweep) == ["mystudies.beta"] and plugins.given(sweep) == ["mystudies.beta"]
+    assert plugins.given(sweep, ["mystudies.gamma"]) == ["mystudies.gamma"]
+    for name in list(sys.modules):
+        if name.startswith("mystudies"):
+            sys.modules.pop(name)
+
+
+def test_every_experiment_names_the_studies_for_its_report_and_leaves_the_job_alone(compose_cfg):
+    """Each experiment config gives its sweep's report the repository's studies (recorded by Hydra in multirun.yaml);
+    the node is Hydra's, so the jobs' configs and identities do not see it."""
+    from selpres.run.results import job_hash
+
+    from conftest import CONFIGS
+
+    for path in sorted((CONFIGS / "experiment").glob("*.yaml")):
+        cfg = compose_cfg(f"experiment={path.stem}", hydra=True)
+        node = cfg.hydra.callbacks.report
+        assert node._target_ == "selpres.report.callback.ReportSections", path.stem
+        assert list(node.sections) == ["selpres_studies"], path.stem
+        assert "report" not in compose_cfg(f"experiment={path.stem}")
+    # what the callback says at a sweep's start when a plug-in is not installed here: one line each, nothing raised
+    assert plugins.unavailable(["selpres_studies"]) == []
+    (line,) = plugins.unavailable(["no_such_studies"])
+    assert "no_such_studies" in line and "\n" not in line
+    assert job_hash(compose_cfg("experiment=table1", "schedule=selective", "topology=6-13-2")) == job_hash(
+        compose_cfg("schedule=selective", "topology=6-13-2", "replicas=30", "threads=1", "eval.every=5", "name=table1")
+    )
+
+
+def test_the_callback_says_at_the_sweeps_start_which_plug_ins_are_missing(capsys):
+    from selpres.report.callback import ReportSections
+
+    ReportSections(["selpres_studies", "no_such_studies"]).on_multirun_start(config=None)
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("warning: the report plug-in no_such_studies is not installed here")

@@ -15,11 +15,11 @@ from test_report import write_setting
 from selpres.report import aggregate, load_jobs
 from selpres.report.__main__ import main
 from selpres.report.build import Report
-from selpres.studies._error_cost import plane_rows
-from selpres.studies._families import families, paper_conventional
-from selpres.studies._sensitivity import sensitivity_rows
-from selpres.studies.sensitivity import verdict_text
-from selpres.studies.table1 import time_to_target_rows
+from selpres_studies._error_cost import plane_rows
+from selpres_studies._families import families, paper_conventional
+from selpres_studies._sensitivity import sensitivity_rows
+from selpres_studies.sensitivity import verdict_text
+from selpres_studies.table1 import time_to_target_rows
 
 T = "6-4-2"
 # what configs/optim/*.yaml leave unset for an optimizer that does not use the key
@@ -203,7 +203,7 @@ def test_spread_level_and_the_papers_total_by_hand(study):
 
 
 def test_each_selective_setting_beside_its_budget_matched_partner(study):
-    from selpres.studies._sensitivity import versus_matched_rows
+    from selpres_studies._sensitivity import versus_matched_rows
 
     groups, tops, _ = grouped(study)
     rows = {r["sizes"] + "/" + r["epochs"]: r for r in versus_matched_rows(groups, tops)}
@@ -222,7 +222,7 @@ def test_each_selective_setting_beside_its_budget_matched_partner(study):
 
 
 def test_verdict_separates_spread_from_level_and_answers_with_numbers(study):
-    from selpres.studies._sensitivity import versus_matched_rows
+    from selpres_studies._sensitivity import versus_matched_rows
 
     groups, tops, _ = grouped(study)
     rows = sensitivity_rows(groups, tops)
@@ -282,7 +282,7 @@ def test_a_studys_report_leads_with_its_sections_and_stays_short(study, tmp_path
 
 
 def test_error_cost_plane_one_entry_per_family_legend_outside_frontier_drawn(study):
-    from selpres.studies._error_cost import draw_plane
+    from selpres_studies._error_cost import draw_plane
 
     groups, tops, _ = grouped(study)
     fams = families(groups, tops)
@@ -342,7 +342,7 @@ def test_a_family_with_no_finished_setting_has_an_infinite_level(study):
 def test_a_one_factor_at_a_time_design_gets_no_heat_map(study, tmp_path):
     """Selective presentation's 5 settings over 3 size lists × 5 epoch lists fill 5 of 15 cells: no map; SGD's
     full 2 × 2 grid gets one."""
-    from selpres.studies._error_cost import grid
+    from selpres_studies._error_cost import grid
 
     groups, tops, _ = grouped(study)
     fams = {f.name: f for f in families(groups, tops)}

@@ -142,6 +142,4 @@ def test_from_config_accepts_dictconfig_and_dict():
     cfg = OmegaConf.create({"m1": 0.42, "m2": 3, "l1": 0.2, "l2": 0.26, "g": 9.81})
     assert TwoLinkArm.from_config(cfg) == ARM
     assert TwoLinkArm.from_config(dict(cfg)) == ARM
-    assert (
-        TwoLinkArm.from_config(OmegaConf.load(Path(__file__).parents[1] / "selpres/configs/robot/two_link.yaml")) == ARM
-    )
+    assert TwoLinkArm.from_config(OmegaConf.load(Path(__file__).parents[1] / "configs/robot/two_link.yaml")) == ARM

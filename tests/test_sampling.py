@@ -203,28 +203,29 @@ def test_commanded_scaling_uses_the_boxes():
 )
 def test_bad_sampled_configs_name_the_key(overrides, key, value):
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError) as ei:
-        prepare(cfg_of("data=sampled", "data.n=500", *overrides))
+        prepare(resolve(cfg_of("data=sampled", "data.n=500", *overrides)))
     msg = str(ei.value)
     assert ei.value.key.startswith(key) and value in msg and "\n" not in msg, msg
 
 
 def test_the_paper_grid_refuses_other_arms_and_says_what_to_use():
-    from selpres.run.checks import validate
+    from selpres.run.resolve import resolve
 
     # an arm's file picks data=sampled for it; asking for the paper's grid explicitly is refused
     assert cfg_of("robot=puma560", "topology.layers=18-40-6").data.kind == "sampled"
     with pytest.raises(ConfigError) as ei:
-        validate(cfg_of("robot=puma560", "data=paper", "topology.layers=18-40-6"))
+        resolve(cfg_of("robot=puma560", "data=paper", "topology.layers=18-40-6"))
     assert ei.value.key == "data.kind" and "data=sampled" in str(ei.value) and "puma560" in str(ei.value)
 
 
 def test_topology_that_does_not_fit_names_both():
-    from selpres.run.checks import validate
+    from selpres.run.resolve import resolve
 
     with pytest.raises(ConfigError) as ei:
-        validate(cfg_of("robot=puma560", "data=sampled"))
+        resolve(cfg_of("robot=puma560", "data=sampled"))
     assert str(ei.value) == (
         "topology.layers='6-13-2' is not allowed: expected a network that fits robot=puma560 (6 joints): "
         "18 inputs (q1..q6, dq1..dq6, ddq1..ddq6) and 6 outputs (tau1..tau6), e.g. 18-13-6"

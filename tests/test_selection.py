@@ -17,7 +17,7 @@ from selpres.presentation.orders._loss import enlarge_by_loss
 from selpres.presentation.orders.reselect import reselected_orders
 from selpres.presentation.partition import strata
 from selpres.presentation.selection import pattern_errors
-from selpres.run.checks import validate
+from selpres.run.resolve import resolve
 from selpres.run.specs import task_specs
 from selpres.run.train import Clock, run_epoch, start, train
 from selpres.seeding import generator
@@ -96,7 +96,7 @@ def test_each_enlargement_adds_the_candidates_the_current_network_errs_most_or_l
     hard = kind == "loss_high"
     cfg = cfg_of(f"schedule.order={kind}", "replicas=3", "schedule.epochs=[2,1,1,1,1]", "engine=torch", "seed=7")
     clock = Clock()
-    job = start(cfg, None, clock)
+    job = start(resolve(cfg), None, clock)
     prob = job.prob
     strat = [priority_order(_raw_X(cfg), "stratified", generator(s, "subset"), 2) for s in prob.seeds]
     rank = [{int(i): j for j, i in enumerate(o)} for o in strat]
@@ -136,7 +136,7 @@ def test_hard_and_easy_first_choose_differently_and_differ_from_stratified():
     for kind in ("loss_high", "loss_low", "stratified"):
         cfg = cfg_of(f"schedule.order={kind}", "replicas=2", "schedule.epochs=[3,1,1,1,1]", "engine=torch")
         clock = Clock()
-        job = start(cfg, None, clock)
+        job = start(resolve(cfg), None, clock)
         for ep in job.prob.plan[:4]:
             run_epoch(job, ep, clock)
         subsets[kind] = [set(s.order[50:100].tolist()) for s in job.prob.samplers]
@@ -177,7 +177,7 @@ def test_reselected_subsets_overlap_as_independent_draws(k):
 def test_reselect_in_the_loop_draws_each_stage_afresh_and_ends_with_U():
     cfg = cfg_of("schedule.order=reselect", "replicas=3", "schedule.epochs=[1,1,1,1,1]", "engine=torch")
     clock = Clock()
-    job = start(cfg, None, clock)
+    job = start(resolve(cfg), None, clock)
     X, seeds = _raw_X(cfg), job.prob.seeds
     for ep in job.prob.plan:
         run_epoch(job, ep, clock)
@@ -245,4 +245,4 @@ def test_charge_rounds_up_to_whole_presentations_without_float_noise():
 @pytest.mark.parametrize("bad", [-0.1, 1.5])
 def test_selection_cost_out_of_range_is_refused(bad):
     with pytest.raises(ConfigError, match=r"schedule\.selection_cost.*\[0, 1\]"):
-        validate(cfg_of(f"schedule.selection_cost={bad}"))
+        resolve(cfg_of(f"schedule.selection_cost={bad}"))

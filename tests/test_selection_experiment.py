@@ -15,8 +15,8 @@ from hydra.core.override_parser.types import Glob
 from omegaconf import OmegaConf
 
 from selpres.presentation.orders import planned_charge
-from selpres.run.checks import validate
 from selpres.run.problem import prepare
+from selpres.run.resolve import resolve
 from selpres.storage import flatten
 
 from conftest import CONFIGS, cfg_of, compose, report_of, run_python
@@ -102,8 +102,7 @@ def expected_cost(point: str) -> int:
 @pytest.mark.parametrize("point", POINTS)
 def test_each_point_validates_and_costs_what_its_file_says(point):
     cfg = composed(point)
-    validate(cfg)
-    prob = prepare(cfg)  # the checks against the exemplar set, the orders, the stage-wise selection
+    prob = prepare(resolve(cfg))  # the checks against the exemplar set, the orders, the stage-wise selection
     sch = prob.schedule
     order = cfg.schedule.order
     cost = sch.presentations + planned_charge(order, sch.sizes, cfg.schedule.selection_cost)

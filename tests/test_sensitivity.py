@@ -15,8 +15,9 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.core.override_parser.types import Glob
 from omegaconf import OmegaConf
 
-from selpres.run.checks import validate
+from selpres.engines.optim import OPTIMIZERS
 from selpres.run.problem import prepare
+from selpres.run.resolve import resolve
 from selpres.run.results import job_hash
 from selpres.run.specs import plain as to_container
 
@@ -144,7 +145,7 @@ def test_costs_worked_by_hand():
         "qp_c70560_eps0.001_mu1.75": 70_560,  # a budget: 70 epochs of 1002 (70,140) + 420 of the 71st
     }
     for name, cost in by_hand.items():
-        assert prepare(composed(name)).schedule.presentations == cost
+        assert prepare(resolve(composed(name))).schedule.presentations == cost
 
 
 @pytest.mark.parametrize(
@@ -152,8 +153,7 @@ def test_costs_worked_by_hand():
 )
 def test_each_design_point_validates_and_costs_what_its_file_says(name):
     cfg = composed(name)
-    validate(cfg)
-    sch = prepare(cfg).schedule
+    sch = prepare(resolve(cfg)).schedule
     assert sch.presentations == stated_cost(name) == presentations(point(name)["schedule"])
 
 
@@ -184,7 +184,7 @@ def test_every_rival_runs_its_whole_grid_at_the_papers_cost_and_at_the_selective
         grid: dict[int, set] = {PAPER_COST: set(), SELECTIVE_COST: set()}
         for name in (p for p in POINTS if family(p) == prefix):
             c = point(name)
-            assert c["optim"]["_target_"] == optim and len(c["schedule"]["sizes"]) == 1, name
+            assert OPTIMIZERS.canonical(c["optim"]["_target_"]) == optim and len(c["schedule"]["sizes"]) == 1, name
             assert c["schedule"]["name"] == ("conventional" if stated_cost(name) == PAPER_COST else "matched")
             grid[stated_cost(name)].add(tuple(c["optim"][k] for k in SWEPT[optim]))
         assert grid[PAPER_COST] == grid[SELECTIVE_COST] and len(grid[PAPER_COST]) >= 5, prefix
@@ -230,6 +230,6 @@ def test_a_tiny_sweep_runs_end_to_end_and_reports(tmp_path):
         res = jobs[name]
         assert res["status"] == "complete" and res["seeds"] == [0, 1]
         assert res["presentations_done"] == res["schedule"]["presentations"] == stated_cost(name)
-        assert res["config"]["optim"]["_target_"] == point(name)["optim"]["_target_"]
+        assert res["config"]["optim"]["_target_"] == OPTIMIZERS.canonical(point(name)["optim"]["_target_"])
     report_of(sweep, tmp_path / "r")
     assert (tmp_path / "r" / "report.md").is_file()

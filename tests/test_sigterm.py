@@ -1,16 +1,24 @@
 """Issue 26: SIGTERM and SIGUSR1 (SLURM's preemption, requeue and --signal) write a checkpoint at once and stop
-with one line and status 143; the re-run resumes from THAT checkpoint, mid-stage, and ends bit-identical to an
-uninterrupted run. Real signals to a real ``python train.py``."""
+with one line and status 143 (issue 39: the line names the folder, the epoch and the command that resumes); that
+command resumes from THAT checkpoint, mid-stage, and ends bit-identical to an uninterrupted run. Real signals to a
+real ``python train.py``."""
 
 from __future__ import annotations
 
 import json
+import os
+import shlex
 import signal
+import subprocess
+import sys
 import time
 
 import pytest
 import torch
-from test_resume import newest_checkpoint, run
+from test_outcomes import says
+from test_resume import COMMON, ROOT, newest_checkpoint, run
+
+from selpres.run import outcomes
 
 from conftest import numbers
 
@@ -19,6 +27,7 @@ pytestmark = pytest.mark.slow  # subprocesses
 # reference engine (machine and load), so a signal 0.6 s into it finds no periodic checkpoint newer than epoch 4
 ARGS = ["engine=reference", "schedule.epochs=[1,1,2,40,3]", "replicas=1", "checkpoint.every=1000"]
 STAGE_ENDS = {1, 2, 4, 44}  # epochs done at the end of stages 1-4 (where periodic checkpoints are written)
+ENV = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
 
 
 @pytest.fixture(scope="module")
@@ -41,14 +50,18 @@ def test_a_signal_mid_stage_checkpoints_there_and_the_rerun_resumes_it_exactly(t
     assert p.returncode == 143, output
     ckpt, epoch = newest_checkpoint(out)
     assert epoch not in STAGE_ENDS and 4 < epoch < 44, (epoch, output)  # written at the signal, not periodic
-    line = (
-        f"error: {out}: stopped by {sig.name} after epoch {epoch} (checkpoint written); run the same command to resume"
-    )
+    command = shlex.join(["python", "train.py", *COMMON, *ARGS, f"hydra.run.dir={out}"])
+    line = f"stopped by {sig.name} after epoch {epoch}: checkpoint written in {out}; resume: {command}"
     assert line in output.splitlines() and "Traceback" not in output, output
-    assert not (out / "results.json").exists()
+    assert says(outcomes.TERMINATED, line) and not (out / "results.json").exists()  # the table's row
 
-    resumed = run(out, ARGS)
-    assert f"resuming from {ckpt} at epoch {epoch}" in resumed.stdout.read()
+    resumed = subprocess.run(  # the command the line names, as a user would paste it
+        [sys.executable, *shlex.split(line.partition("; resume: ")[2])[1:]],
+        cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert resumed.returncode == 0, resumed.stdout + resumed.stderr
+    assert f"resuming from {ckpt} at epoch {epoch}" in resumed.stdout
+    assert resumed.stdout.strip().splitlines()[-1] == f"results: {out / 'results.json'} (resumed from epoch {epoch})"
     a = json.loads((out / "results.json").read_text())
     b = json.loads((straight / "results.json").read_text())
     assert a["resumed_from_epoch"] == epoch
@@ -73,6 +86,9 @@ def test_a_signal_during_set_up_removes_what_the_run_created(tmp_path, delay):
     p.send_signal(signal.SIGTERM)
     output, _ = p.communicate(timeout=120)
     assert p.returncode == 143, output
-    (line,) = [x for x in output.splitlines() if x.startswith("error:")]  # before or inside the job's set-up
-    assert "stopped by SIGTERM" in line and "nothing" in line and "was kept" in line, output
+    (line,) = [x for x in output.splitlines() if x.startswith("stopped by SIGTERM")]  # before or inside the set-up
+    assert line in (
+        "stopped by SIGTERM before the job started: nothing was written",
+        f"stopped by SIGTERM during set-up: nothing of this run was kept ({out} as it was)",
+    ), output
     assert sorted(x.name for x in out.iterdir()) == ["mine.txt"]

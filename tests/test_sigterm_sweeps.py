@@ -1,4 +1,4 @@
-"""Issue 26 in a sweep: a SIGTERM to a job's own process (a launcher's worker, where ``train.py``'s guard never
+"""Issue 26 in a sweep: a SIGTERM to a job's own process (a launcher's worker, where ``train.py``'s handlers never
 ran; SLURM's preemption and ``scontrol requeue`` signal the job's processes) checkpoints at the end of the epoch
 under way and the job ends in one line; the same sweep command resumes it from THAT checkpoint and ends
 bit-identical to an uninterrupted run. Real sweeps, real launchers (submitit's local executor, joblib/loky), a
@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -61,7 +62,8 @@ def test_a_sigterm_to_a_sweep_job_checkpoints_and_the_same_sweep_resumes_it_exac
     assert p.returncode == 1, output  # the sweep reports the stopped job (Hydra's one line), no traceback
     ckpt, epoch = newest_checkpoint(job)
     assert epoch not in STAGE_ENDS and 4 < epoch < 44, (epoch, output)  # written at the signal, not periodic
-    line = f"{job}: stopped by SIGTERM after epoch {epoch} (checkpoint written); run the same command to resume"
+    command = shlex.join(["python", "train.py", *p.args[2:]])  # the sweep's own command resumes the job
+    line = f"stopped by SIGTERM after epoch {epoch}: checkpoint written in {job}; resume: {command}"
     assert line in output.splitlines() and "Traceback" not in output, output
     assert line in (job / "train.log").read_text()
     assert not (job / "results.json").exists() and not (job / LOCK).exists()

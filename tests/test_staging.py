@@ -7,10 +7,9 @@ import pytest
 import torch
 
 from selpres.engines.model import init_replica_params
-from selpres.engines.online import make_engine
 from selpres.native import staging
 
-from conftest import requires_native
+from conftest import online_engine, requires_native
 
 pytestmark = requires_native
 
@@ -23,7 +22,7 @@ def _set(sizes, n, seed=0):
 
 
 def _train(name, sizes, R, X, Y, orders, batch_size=1, threads=2):
-    eng = make_engine(name, sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, batch_size, threads=threads)
+    eng = online_engine(name, sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, batch_size, threads=threads)
     losses = [eng.train_epoch(X, Y, o) for o in orders]
     return eng, losses, eng.params()
 
@@ -67,10 +66,10 @@ def test_a_changed_set_is_staged_again(monkeypatch):
     sets.append((X3, Y))
     sets.append((torch.rand(500, 6, dtype=torch.float64, generator=g), Y))  # epoch 3: another set
     monkeypatch.setattr(staging, "STAGE_BYTES", 1 << 62)
-    want = make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
+    want = online_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
     want_losses = [want.train_epoch(x, y, o) for (x, y), o in zip(sets, orders)]
     monkeypatch.setattr(staging, "STAGE_BYTES", 0)
-    eng = make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
+    eng = online_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
     Xlive = X.clone()
     seen = []
     for k, o in enumerate(orders):
@@ -103,13 +102,13 @@ def test_a_float32_set_is_staged_once_and_trains_as_its_float64_copy(monkeypatch
     X32, Y32 = X.float(), Y.float()
     orders = [torch.randint(2000, (R, 500), generator=g) for _ in range(2)]
     monkeypatch.setattr(staging, "STAGE_BYTES", 0)
-    eng = make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
+    eng = online_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
     first = eng.train_epoch(X32, Y32, orders[0])
     staged = eng._staged
     second = eng.train_epoch(X32, Y32, orders[1])
     assert eng._staged is staged  # not copied again
     monkeypatch.setattr(staging, "STAGE_BYTES", 1 << 62)
-    want = make_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
+    want = online_engine("native", sizes, init_replica_params(sizes, list(range(R))), 0.15, 0.9, 1)
     w1, w2 = (want.train_epoch(X32.double(), Y32.double(), o) for o in orders)
     assert torch.equal(first, w1) and torch.equal(second, w2)
     assert all(torch.equal(a, b) for a, b in zip(eng.params(), want.params()))

@@ -111,8 +111,9 @@ def test_a_job_records_each_replicas_stall_and_units(tmp_path):
     # the counts are those of the trained weights on the held-out inputs
     weights = torch.load(tmp_path / "weights.pt", weights_only=False)
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
-    X = prepare(cfg).scored["heldout"][0]
+    X = prepare(resolve(cfg)).scored["heldout"][0]
     dead, linear = unit_states(weights["params"], X, "relu")[0]
     assert [s["dead"] for s in st["replicas"]] == dead.sum(1).tolist()
     assert [s["linear"] for s in st["replicas"]] == linear.sum(1).tolist()

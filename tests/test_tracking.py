@@ -41,13 +41,36 @@ def test_curves_by_epoch_and_by_presentations(tmp_path):
     assert {"schedule", "topology", "seed", "lr", "momentum", "sizes", "epochs"} <= set(start.hparams)
     assert start.hparams["topology"].string_value == "6-13-2"
     assert start.hparams["sizes"].string_value == "[50, 100, 400, 800, 1002]"  # lists flattened to strings
-    experiment = plugin_data_pb2.HParamsPluginData.FromString(content["_hparams_/experiment"]).experiment
-    curves = [f"{m}/mean/by_epoch" for m in ("train_mse", "test10_rms_nm", "heldout_rms_nm")]
-    assert sorted(m.name.tag for m in experiment.metric_infos) == sorted(curves)  # HParams: each one's last value
+    assert "_hparams_/experiment" not in content  # the sweep's, once at its root (test_the_sweeps_hparams_experiment)
+    # the schedule in the parametric schedule's words, numbers as numbers (parallel coordinates place them)
+    assert start.hparams["p"].number_value == 4 and start.hparams["n1"].number_value == 50
+    assert start.hparams["sum N_i"].number_value == 6 and start.hparams["growth"].string_value == "paper"
+    cost = 50 + 100 + 400 + 800 + 2 * 1002  # by hand: one epoch of each set, two of the last
+    assert start.hparams["cost (presentations)"].number_value == res["presentations_done"] == cost
 
-    # final metrics are single values: a Markdown table in the Text tab, never a one-point scalar chart
-    assert not [t for t in tags if t.startswith("final")]
-    assert all(len(acc.Scalars(t)) > 1 for t in tags), [t for t in tags if len(acc.Scalars(t)) == 1]
+    # each final metric is one scalar at the job's cost: the mean over replicas of all held-out patterns, not the
+    # last point of the 300-pattern curve
+    for tag, key in (
+        ("final/heldout_rms_nm", "heldout_rms_nm_overall"),
+        ("final/heldout_nmse", "heldout_rms_nmse_overall"),
+    ):
+        (point,) = acc.Scalars(tag)
+        assert point.step == cost and math.isclose(point.value, res["summary"][key]["mean"], rel_tol=1e-6)
+    curves = [t for t in tags if not t.startswith("final/")]
+    assert all(len(acc.Scalars(t)) > 1 for t in curves), [t for t in curves if len(acc.Scalars(t)) == 1]
+
+    # Custom Scalars: one Margin chart per quantity (mean with its min-max band), against presentations and epochs
+    from tensorboard.plugins.custom_scalar import layout_pb2
+
+    (config,) = acc.Tensors("custom_scalars__config__")
+    layout = layout_pb2.Layout.FromString(config.tensor_proto.string_val[0])
+    margins = [c.margin.series[0] for cat in layout.category for c in cat.chart if c.HasField("margin")]
+    assert {(m.value, m.lower, m.upper) for m in margins} == {
+        (f"{q}/mean/by_{a}", f"{q}/min/by_{a}", f"{q}/max/by_{a}")
+        for q in ("heldout_rms_nm", "test10_rms_nm", "train_mse")
+        for a in ("presentations", "epoch")
+    }
+    assert all({m.value, m.lower, m.upper} <= tags for m in margins)  # every chart's tags are written
     assert acc.PluginTagToContent("text") == {"final": b""}
     (table,) = acc.Tensors("final")
     rows = dict(
@@ -156,3 +179,38 @@ def test_hand_encoded_events_are_what_protobuf_serialises():
             summary = summary_pb2.Summary(value=[summary_pb2.Summary.Value(tag=t, simple_value=v) for t, v in scalars])
             want = event_pb2.Event(wall_time=wall, step=step, summary=summary).SerializeToString()
             assert enc.encode(scalars, step, wall) == want, (step, n, wall)
+
+
+def test_the_sweeps_hparams_experiment(tmp_path):
+    """After a sweep, one experiment at its root: every job's hyperparameters (numbers as numbers, text with its
+    values), the sweep's own columns marked as differing (TensorBoard shows those first), the final metrics declared;
+    TensorBoard's own reader lists every job as a session with its values."""
+    from tensorboard.backend.event_processing.plugin_event_multiplexer import EventMultiplexer
+    from tensorboard.plugins.hparams import api_pb2
+
+    from selpres.run.hparams import write_sweep_experiment
+
+    for p in (1, 2):
+        job = tmp_path / f"schedule.p={p}"
+        train(cfg_of("schedule=stages", f"schedule.p={p}", "schedule.total_epochs=4"), job)
+        (job / ".hydra").mkdir()
+        (job / ".hydra" / "overrides.yaml").write_text(f"- schedule=stages\n- schedule.p={p}\n")
+    write_sweep_experiment(tmp_path)
+    mux = EventMultiplexer().AddRunsFromDirectory(str(tmp_path))
+    mux.Reload()
+    content = mux.PluginRunToTagToContent("hparams")
+    assert [run for run, tags in content.items() if "_hparams_/experiment" in tags] == ["."]
+    experiment = plugin_data_pb2.HParamsPluginData.FromString(content["."]["_hparams_/experiment"]).experiment
+    finals = ["final/heldout_rms_nm", "final/heldout_nmse", "final/test10_rms_nm"]
+    assert [m.name.tag for m in experiment.metric_infos] == finals  # the final numbers, not a curve's last point
+    info = {h.name: h for h in experiment.hparam_infos}
+    number = api_pb2.DataType.Value("DATA_TYPE_FLOAT64")
+    assert info["p"].type == info["schedule.p"].type == info["cost (presentations)"].type == number
+    assert {k for k, h in info.items() if h.differs} == {"p", "schedule.p", "cost (presentations)"}  # the sweep
+    assert [v.string_value for v in info["growth"].domain_discrete.values] == ["geometric"]
+    sessions = {
+        run: plugin_data_pb2.HParamsPluginData.FromString(tags["_hparams_/session_start_info"]).session_start_info
+        for run, tags in content.items()
+        if "_hparams_/session_start_info" in tags
+    }
+    assert {run: s.hparams["p"].number_value for run, s in sessions.items()} == {"schedule.p=1": 1, "schedule.p=2": 2}

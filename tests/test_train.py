@@ -90,15 +90,16 @@ def test_compute_matched_schedule_spends_the_budget():
 
 def test_saved_weights_and_scaler_reproduce_the_reported_error(tmp_path):
     """weights.pt is enough to use a trained net: BPN + saved scaler give results.json's held-out RMS."""
-    from selpres.data.paper import Scaler, rms_errors
     from selpres.engines.model import BPN, load_into
+    from selpres.patterns import Scaler, rms_errors
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
     cfg = cfg_of("schedule.epochs=[1,1,1,1,2]", "replicas=2")
     res = train(cfg, tmp_path)
     saved = torch.load(tmp_path / "weights.pt")
     scaler = Scaler(**saved["scaler"])
-    X_scaled, Y_nm = prepare(cfg).tests["heldout"]
+    X_scaled, Y_nm = prepare(resolve(cfg)).tests["heldout"]
     for r in range(2):
         net = load_into(BPN(saved["topology"]), saved["params"], r)
         with torch.no_grad():

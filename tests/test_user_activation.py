@@ -53,8 +53,9 @@ def by_hand() -> tuple[list[torch.Tensor], list[torch.Tensor]]:
     ``prepare``), then per replica an autograd net of 1.7159 tanh(2z/3) units and a linear output, three full-batch
     steps of torch.optim.SGD (lr 0.15, momentum 0.9) on mse_loss. Returns (trained, initial) weights."""
     from selpres.run.problem import prepare
+    from selpres.run.resolve import resolve
 
-    prob = prepare(compose(*JOB))
+    prob = prepare(resolve(compose(*JOB)))
     X, Y = prob.X.to(torch.float64), prob.Y.to(torch.float64)
     out = [torch.empty_like(p) for p in prob.init_params]
     for r in range(2):

@@ -34,20 +34,48 @@ def train(tmp_path, *overrides: str):
     return done, res
 
 
+LION = ["optim._target_=mylion.Lion", "optim.lr=3e-4", "optim.batch_size=32", "model.activation=relu"]
+
+
 def test_lion_by_its_import_path_runs_and_is_recorded(tmp_path):
-    done, res = train(
-        tmp_path, "optim._target_=mylion.Lion", "optim.lr=3e-4", "optim.batch_size=32", "model.activation=relu"
-    )
+    done, res = train(tmp_path, *LION, "~optim.momentum")  # optim=paper's momentum is not Lion's: dropped by hand
     assert done.returncode == 0, done.stderr[-3000:]
     assert res["optimizer"] == "mylion.Lion" and res["engine"] == "minibatch" and res["status"] == "complete"
-    # optim=paper's momentum is not Lion's: left out, said in the log and in results.json
-    assert res["optimizer_dropped"] == {"momentum": 0.9} and "optim.momentum=0.9 left out" in done.stdout + done.stderr
-    assert res["config"]["optim"]["_target_"] == "mylion.Lion"
+    assert res["config"]["optim"]["_target_"] == "mylion.Lion" and "momentum" not in res["config"]["optim"]
+
+
+def test_a_key_of_another_optimizers_file_is_refused_naming_the_key_the_class_and_the_file(tmp_path):
+    """``optim._target_`` over the default ``optim=paper``: paper.yaml's momentum is a key Lion does not take, so the
+    job is refused, as Hydra's instantiate refuses it, saying where the key came from and how to drop it."""
+    done, res = train(tmp_path, *LION)
+    assert done.returncode == 2 and res is None and "Traceback" not in done.stderr
+    line = done.stderr.strip().splitlines()[-1]
+    assert line == (
+        "error: optim.momentum=0.9 is not allowed: expected no value: mylion.Lion does not take it (its keys: lr, "
+        "beta1, beta2, weight_decay); optim=paper's file sets it: drop it with '~optim.momentum', or pick a group "
+        "file for this class"
+    )
+
+
+def test_a_value_another_optimizers_file_hands_the_class_is_said(tmp_path):
+    """``optim=adam optim._target_=mylion.Lion``: adam.yaml's beta2 0.999 is a key Lion takes (its own default 0.99):
+    it runs with it, but never in silence."""
+    done, res = train(tmp_path, "optim=adam", "optim._target_=mylion.Lion", "~optim.eps", "optim.batch_size=32")
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "optim=adam's file hands mylion.Lion lr=0.001 (its default: 0.0001), beta2=0.999 (its default: 0.99)" in (
+        done.stdout + done.stderr
+    )
+    assert res["config"]["optim"]["beta2"] == 0.999
 
 
 def test_torchs_nadam_by_its_import_path(tmp_path):
     done, res = train(
-        tmp_path, "optim._target_=torch.optim.NAdam", "optim.lr=0.003", "optim.batch_size=32", "model.activation=relu"
+        tmp_path,
+        "optim._target_=torch.optim.NAdam",
+        "~optim.momentum",
+        "optim.lr=0.003",
+        "optim.batch_size=32",
+        "model.activation=relu",
     )
     assert done.returncode == 0, done.stderr[-3000:]
     assert res["optimizer"] == "torch.optim.nadam.NAdam" and res["engine"] == "minibatch"
@@ -56,8 +84,8 @@ def test_torchs_nadam_by_its_import_path(tmp_path):
 @pytest.mark.parametrize(
     "overrides, message",
     [
-        (["optim._target_=mylion.Lion", "+optim.gamma=1"], "optim.gamma=1 is not allowed"),
-        (["optim._target_=mylion.Lion", "optim.lr=-1"], "Invalid learning rate"),
+        (["optim._target_=mylion.Lion", "~optim.momentum", "+optim.gamma=1"], "optim.gamma=1 is not allowed"),
+        (["optim._target_=mylion.Lion", "~optim.momentum", "optim.lr=-1"], "Invalid learning rate"),
         (["optim._target_=mylion.Nope"], "it has no 'Nope'"),
         (["optim._target_=torch.optim.LBFGS"], "expected an elementwise rule"),
         (["optim._target_=mylion.Lion", "optim.batch_size=0", "optim.momentum=null"], None),  # batch mode runs

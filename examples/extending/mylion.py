@@ -3,12 +3,13 @@ Algorithms", NeurIPS; Algorithm 2), as a ``torch.optim.Optimizer`` subclass.
 
 Run it by its import path, no file of selpres edited::
 
-    PYTHONPATH=examples/extending python train.py optim._target_=mylion.Lion optim.lr=3e-4 \\
+    PYTHONPATH=examples/extending python train.py optim._target_=mylion.Lion '~optim.momentum' optim.lr=3e-4 \\
         optim.batch_size=32 model.activation=relu
 
 The config's ``optim`` keys other than ``_target_`` and the engines' own (``batch_size``, ``reduction``,
 ``lr_schedule``, ``sigmoid_prime_offset``) are this class's keyword arguments; selpres checks them against its
-signature (``optim.gamma=1`` is refused, naming it) and records ``mylion.Lion`` in results.json. The rule is
+signature (``+optim.gamma=1`` is refused, naming it and the class; so is the default ``optim=paper`` file's
+``momentum``, which ``~optim.momentum`` drops) and records ``mylion.Lion`` in results.json. The rule is
 elementwise (every weight moves by its own gradient and state), so selpres may step it on all replicas'
 stacked weights at once: that is R separate optimizers.
 

@@ -54,6 +54,11 @@ def _inertia(value: Any, key: str) -> Mat3:
     raise ConfigError(key, value, "{ixx, iyy, izz[, ixy, ixz, iyz]} or a 3x3 list (kg m^2, about the com)")
 
 
+# the serial source's alias and import path (what a robot file's _target_ names; tests/test_plugin_contracts.py keeps
+# this in step with selpres.arms.sources, which this module may not import: the sources build arms from it)
+SERIAL = ("serial", "selpres.arms.sources.serial.Serial")
+
+
 def parse_spec(node: Any, prefix: str, cls: type) -> Any:
     """The ``SerialArm`` (``cls``) a spec describes; ConfigError naming ``prefix.<key>``."""
     top = _keys(
@@ -63,7 +68,7 @@ def parse_spec(node: Any, prefix: str, cls: type) -> Any:
         ("gravity", "links"),
     )
     for k in ("_target_", "kind"):  # a robot node (configs/robot/*.yaml) or an arm's description (to_config)
-        if top.get(k, "serial") != "serial":
+        if top.get(k, "serial") not in SERIAL:
             raise ConfigError(f"{prefix}.{k}", top[k], "'serial' for selpres.arms.serial.SerialArm")
     convention = top.get("convention", "urdf")
     if convention not in ("urdf", "dh"):

@@ -13,7 +13,6 @@ its path), which data hashes use, and ``as_serial()``, which ``selpres-export --
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,11 +21,6 @@ import torch
 from selpres.arms.serial import SerialArm
 
 ROBOT_KEYS = ("m1", "m2", "l1", "l2", "g")
-
-
-def cfg_get(cfg: Any, key: str) -> Any:
-    """Read ``key`` from a dict-like or attribute-style config (DictConfig supports both)."""
-    return cfg[key] if isinstance(cfg, Mapping) else getattr(cfg, key)
 
 
 @dataclass(frozen=True)
@@ -41,8 +35,8 @@ class TwoLinkArm:
 
     @classmethod
     def from_config(cls, cfg: Any) -> TwoLinkArm:
-        """Build from any mapping/attribute object holding m1, m2, l1, l2, g (e.g. an OmegaConf node)."""
-        return cls(**{k: float(cfg_get(cfg, k)) for k in ROBOT_KEYS})
+        """Build from any mapping holding m1, m2, l1, l2, g (a dict, an OmegaConf node)."""
+        return cls(**{k: float(cfg[k]) for k in ROBOT_KEYS})
 
     def to_config(self) -> dict[str, Any]:
         """The canonical description (what ``selpres.arms.sources.make_arm`` reads back)."""

@@ -22,7 +22,7 @@ from selpres.arms.kinematics import (
     check_link,
     rpy_matrix,
 )
-from selpres.errors import ConfigError, FileError
+from selpres.errors import ConfigError, FileError, not_a_file
 
 MODELLED = ("revolute", "continuous")
 ONE_DOF = ("revolute", "continuous", "prismatic")
@@ -112,8 +112,12 @@ class _Reader:
     def __init__(self, path: Path):
         self.path = path
         if not path.is_file():
-            raise UrdfError(path, "file", "not found (robot.path must name a URDF file)")
-        size = path.stat().st_size
+            raise UrdfError(path, "file", f"{not_a_file(path)} (robot.path must name a URDF file)")
+        try:
+            size = path.stat().st_size
+            data = path.read_bytes() if size <= MAX_BYTES else b""
+        except OSError as e:  # removed or made unreadable since it was checked
+            raise UrdfError(path, "file", f"cannot be read ({e.strerror or e})") from None
         if size > MAX_BYTES:
             raise UrdfError(
                 path,
@@ -121,7 +125,6 @@ class _Reader:
                 f"{size / 2**20:.0f} MiB, more than the {MAX_BYTES >> 20} MiB a robot description may have here "
                 "(real ones are under 1 MB; meshes live in their own files): is this the URDF?",
             )
-        data = path.read_bytes()
         if b"<!ENTITY" in data:
             raise UrdfError(path, "<!ENTITY>", "entity declarations are refused (URDF uses none; XML bomb guard)")
         try:

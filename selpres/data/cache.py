@@ -10,11 +10,13 @@ cost.
 
 Where: ``$SELPRES_DATA_CACHE`` if set (``off`` turns the cache off), else ``$XDG_CACHE_HOME/selpres/tasks``, else
 ``~/.cache/selpres/tasks``. What a job did is recorded in results.json ``data.cache`` (``hit``, ``stored``,
-``off``, or why it was not stored). Each entry also holds what its key was made of (the two configs and the
-source digest) and is checked against them on load: a copied, synced or colliding entry of other configs is a
-miss with one warning naming what differs, never another task's numbers. Entries are written atomically (a racing
-job writes the same bytes) and only entries of this cache are ever replaced or removed (the oldest beyond
-:data:`KEEP`).
+``off``, ``not stored (<why>)``, or ``not written: <file>: <cause> (errno N)`` when the disk refused the entry:
+full, over quota or a file-size limit, read-only, the folder gone; the job then runs on without the cache, with
+one warning in its log). An entry that cannot be read is built again with one warning saying why. Each entry
+also holds what its key was made of (the two configs and the source digest) and is checked against them on load:
+a copied, synced or colliding entry of other configs is a miss with one warning naming what differs, never another
+task's numbers. Entries are written atomically (a racing job writes the same bytes) and only entries of this cache
+are ever replaced or removed (the oldest beyond :data:`KEEP`).
 """
 
 from __future__ import annotations
@@ -34,8 +36,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from selpres.data.paper import ExemplarSet, Patterns, Scaler, TestSets
-from selpres.storage import atomic_write, flatten
+from selpres.patterns import ExemplarSet, Patterns, Scaler, TestSets
+from selpres.storage import atomic_write, flatten, why_unreadable
 
 log = logging.getLogger("selpres")
 
@@ -156,7 +158,7 @@ def cached(robot_json: str, data_json: str, build: Callable[[], Any], make: Call
             if why is None:
                 task = _unpack(entry, make)
         except Exception as e:  # a cut or foreign file, or one removed meanwhile: build afresh and replace it
-            log.warning("data cache: %s cannot be read (%s); building the task again", path, e)
+            log.warning("data cache: %s %s; building the task again", path, why_unreadable(path, e))
         else:
             if why is not None:  # copied, synced or colliding: another task's numbers must never be used
                 log.warning("data cache: %s is not this job's entry (%s); building the task again", path, why)
@@ -178,11 +180,15 @@ def _store(path: Path, task, made_of: dict) -> str:
     if size > MAX_BYTES:
         return f"not stored ({size / 2**20:.0f} MB > {MAX_BYTES / 2**20:.0f} MB)"
     try:
-        atomic_write(path, lambda f: torch.save(packed, f))
-    except OSError as e:
-        log.warning("data cache: cannot store the task in %s (%s); the job goes on without it", path.parent, e)
-        return f"not stored ({e.strerror or e})"
-    _evict(path.parent)
+        atomic_write(path, lambda f: torch.save(packed, f))  # a failed torch.save arrives as OSError (storage)
+    except OSError as e:  # full, over quota or a file-size limit, read-only, vanished: the job needs no cache
+        why = f"{e.filename or path}: {e.strerror or e} (errno {e.errno})"
+        log.warning("data cache: cannot write %s; the job goes on without the cache", why)
+        return f"not written: {why}"
+    try:
+        _evict(path.parent)
+    except OSError as e:  # the entry is stored; old ones stay until a later job can remove them
+        log.warning("data cache: cannot remove old entries from %s (%s)", path.parent, e.strerror or e)
     return f"stored ({path})"
 
 

@@ -17,10 +17,10 @@ import numpy as np
 import torch
 
 from selpres.arms.sources import as_choice, make_arm
-from selpres.arms.two_link import cfg_get
 from selpres.data.file import file_digest
-from selpres.data.paper import INPUT_NAMES, TARGET_NAMES, ExemplarSet, Patterns, TestSets
+from selpres.data.paper import INPUT_NAMES, TARGET_NAMES
 from selpres.data.spec import DataSpec
+from selpres.patterns import ExemplarSet, Patterns, TestSets
 from selpres.registry import Choice
 from selpres.storage import atomic_write, stable_hash
 
@@ -53,7 +53,7 @@ def _plain(cfg: Any, fold: bool = True) -> Any:
 def data_kind(data_cfg: Any) -> str:
     """grid, sampled or file (a data config without ``kind`` is the paper's grid)."""
     try:
-        kind = cfg_get(data_cfg, "kind")
+        kind = data_cfg["kind"]
     except (KeyError, AttributeError):
         return "grid"
     return str(getattr(kind, "value", kind))
@@ -73,7 +73,7 @@ def config_hash(robot_cfg: Any, data_cfg: Any) -> str:
     floats, so a composed config, its YAML and ``m2: 3`` vs ``3.0`` hash alike."""
     data = _set_keys(_plain(data_cfg))
     if data_kind(data_cfg) == "file":
-        data["path"] = file_digest(cfg_get(data_cfg, "path"))
+        data["path"] = file_digest(data_cfg["path"])
         robot = None
     else:
         spec = robot_cfg if isinstance(robot_cfg, Choice) else as_choice(_plain(robot_cfg, fold=False))

@@ -24,12 +24,15 @@ import io
 import math
 import zipfile
 import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from selpres.errors import ConfigError, FileError
+from selpres.errors import ConfigError, FileError, not_a_file
+from selpres.storage import one_line
 
 NPZ_TABLE, NPZ_COLUMNS = "table", "columns"
 
@@ -43,8 +46,18 @@ def _path(path: str | Path | None) -> Path:
         raise ConfigError("data.path", path, "the CSV or .npz file to train on (data=file data.path=my.csv)")
     p = Path(path).expanduser()
     if not p.is_file():
-        raise DataFileError(p, "file", "not found (data.path must name a CSV or .npz file)")
+        raise DataFileError(p, "file", f"{not_a_file(p)} (data.path must name a CSV or .npz file)")
     return p
+
+
+@contextmanager
+def _reading(path: Path) -> Iterator[None]:
+    """An OSError while reading the data file (removed or made unreadable since it was checked) as a DataFileError
+    naming it: a read failure, said as one, never as a failed write."""
+    try:
+        yield
+    except OSError as e:
+        raise DataFileError(path, "file", f"cannot be read ({e.strerror or e})") from None
 
 
 def file_digest(path: str | Path) -> str:
@@ -58,7 +71,7 @@ def file_digest(path: str | Path) -> str:
 @functools.lru_cache(maxsize=16)
 def _digest(path: str, mtime_ns: int, size: int) -> str:
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with _reading(Path(path)), open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
@@ -81,7 +94,8 @@ BOM = b"\xef\xbb\xbf"  # the UTF-8 byte-order mark spreadsheets write first: not
 
 def _csv_text(path: Path) -> str:
     """The whole file as text (newlines kept as they are); DataFileError if it is not UTF-8 or holds NUL bytes."""
-    data = path.read_bytes().removeprefix(BOM)
+    with _reading(path):
+        data = path.read_bytes().removeprefix(BOM)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -94,7 +108,7 @@ def _csv_text(path: Path) -> str:
 
 def _csv_header(path: Path) -> tuple[int, list[str]]:
     """(1-based line number of the header, its names); reads the file only up to the header."""
-    with open(path, "rb") as f:
+    with _reading(path), open(path, "rb") as f:
         for number, raw in enumerate(f, 1):
             try:
                 line = (raw.removeprefix(BOM) if number == 1 else raw).decode("utf-8")
@@ -108,11 +122,36 @@ def _csv_header(path: Path) -> tuple[int, list[str]]:
 
 
 def _npz_columns(path: Path) -> dict[str, np.ndarray]:
+    with _reading(path), open(path, "rb") as f:
+        head = f.read(6)
+    if not head.startswith(b"PK"):  # every zip, a .npz too, starts so; numpy would take other bytes for a pickle
+        what = (
+            "is empty (0 bytes)"
+            if not head
+            else "is a .npy array (np.save), not a .npz"
+            if head == b"\x93NUMPY"
+            else "is not a .npz: its first bytes are not a zip archive's"
+        )
+        raise DataFileError(path, "file", f"{what} (np.savez writes a .npz: one named array per column)")
+    arrays = {}
     try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:  # cut, flipped, not a zip
-        raise DataFileError(path, "file", f"not a readable .npz ({type(e).__name__}: {e})") from None
+        with _reading(path), np.load(path, allow_pickle=False) as z:
+            for k in z.files:
+                try:
+                    arrays[k] = z[k]
+                except ValueError as e:
+                    if "allow_pickle" not in str(e):
+                        raise
+                    raise DataFileError(
+                        path, f"array {k!r}", "holds Python objects (dtype object): a column holds numbers"
+                    ) from None
+    except (ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:  # cut, flipped, not a zip
+        if isinstance(e, DataFileError):
+            raise
+        raise DataFileError(path, "file", f"not a readable .npz ({type(e).__name__}: {one_line(str(e))})") from None
+    for k, v in arrays.items():
+        if not isinstance(v, np.ndarray):  # a zip member that is not a .npy file: numpy hands back its bytes
+            raise DataFileError(path, f"member {k!r}", "is not a .npy array (np.savez writes one per column)")
     if NPZ_TABLE in arrays:
         table, names = arrays[NPZ_TABLE], arrays.get(NPZ_COLUMNS)
         if names is None or names.ndim != 1 or table.ndim != 2 or len(names) != table.shape[1]:

@@ -1,69 +1,31 @@
-"""Exemplar set, test sets and sigmoid-range scaling (paper section 5.1).
+"""The paper's grid route (section 5.1): the exemplar set, the test sets and the commanded boxes of the two-link arm.
 
-The paper's grid route: network input (θ1, θ̇1, θ̈1, θ2, θ̇2, θ̈2) and target (τ1, τ2), patterns that the
-forward simulator (eq. 5) generated on a grid. Other arms and sizes are drawn by ``selpres.data.sampled``,
-users' tables read by ``selpres.data.file``; scaling and the RMS metric here serve all of them (export:
-``selpres.data.export``)
-(any number of inputs and outputs). All functions are pure in their arguments; randomness comes only from
-an explicit ``torch.Generator`` or seed.
+Network input (θ1, θ̇1, θ̈1, θ2, θ̇2, θ̈2) and target (τ1, τ2): patterns that the forward simulator (eq. 5) generated on
+a grid, kept where both |θ̈| <= accel_limit. Other arms and sizes are drawn by ``selpres.data.sampled``, users' tables
+read by ``selpres.data.file``; the sets' types, the scaler and the RMS criterion every route shares are
+``selpres.patterns``'. All functions are pure in their arguments; randomness comes only from an explicit
+``torch.Generator`` or seed.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import torch
 
-from selpres.arms.two_link import TwoLinkArm, cfg_get
+from selpres.arms.two_link import TwoLinkArm
 from selpres.errors import ConfigError
+from selpres.patterns import DTYPE, ExemplarSet, Patterns, TestSets
 
 INPUT_NAMES = ("theta1", "dtheta1", "ddtheta1", "theta2", "dtheta2", "ddtheta2")
 TARGET_NAMES = ("tau1", "tau2")
 COLUMN_NAMES = INPUT_NAMES + TARGET_NAMES
-DTYPE = torch.float64
 
 
 def _range(data_cfg: Any, key: str) -> tuple[float, float]:
-    node = cfg_get(data_cfg, key)
-    return float(cfg_get(node, "lo")), float(cfg_get(node, "hi"))
-
-
-# ----------------------------------------------------------------------------------------- patterns
-
-
-@dataclass(frozen=True)
-class Patterns:
-    """Input rows ``X [n, inputs]`` and targets ``Y [n, outputs]`` (Nm for an arm), float64; the grid
-    route's columns are INPUT_NAMES and TARGET_NAMES."""
-
-    X: torch.Tensor
-    Y: torch.Tensor
-
-    def __iter__(self):  # allows ``X, Y = patterns``
-        return iter((self.X, self.Y))
-
-    def __len__(self) -> int:
-        return int(self.X.shape[0])
-
-
-@dataclass(frozen=True)
-class ExemplarSet(Patterns):
-    """The exemplar set U (the paper's 1002 patterns with the default robot) and how many candidates (grid
-    points, draws or file rows) it came from."""
-
-    n_candidates: int = 0
-
-
-@dataclass(frozen=True)
-class TestSets:
-    """``test10``: the paper's 10 random test patterns (``test10_from_exemplar`` marks the rows taken from
-    the exemplar set); ``heldout``: many outside patterns, for a metric that is not dominated by noise."""
-
-    test10: Patterns
-    test10_from_exemplar: torch.Tensor
-    heldout: Patterns
+    node = data_cfg[key]
+    return float(node["lo"]), float(node["hi"])
 
 
 def heldout_count(value: Any, total: int, what: str) -> int:
@@ -108,8 +70,8 @@ def grid_axis(lo: float, hi: float, step: float, name: str = "grid") -> torch.Te
 
 
 def _axis(data_cfg: Any, key: str) -> torch.Tensor:
-    node = cfg_get(data_cfg, key)
-    return grid_axis(cfg_get(node, "lo"), cfg_get(node, "hi"), cfg_get(node, "step"), name=key)
+    node = data_cfg[key]
+    return grid_axis(node["lo"], node["hi"], node["step"], name=key)
 
 
 def accel_filter(qdd: torch.Tensor, limit: float) -> torch.Tensor:
@@ -137,7 +99,7 @@ def build_exemplar_set(arm: TwoLinkArm, data_cfg: Any) -> ExemplarSet:
     Rows come out in lexicographic order (θ1, θ̇1, θ2, θ̇2, τ1, τ2), θ1 slowest, so the set is deterministic.
     """
     states, t1, t2, qdd = grid_accelerations(arm, data_cfg)
-    s, i, j = accel_filter(qdd, cfg_get(data_cfg, "accel_limit")).nonzero(as_tuple=True)
+    s, i, j = accel_filter(qdd, data_cfg["accel_limit"]).nonzero(as_tuple=True)
     tau_kept = torch.stack((t1[i], t2[j]), -1)
     p = _rows(states[s][:, [0, 2]], states[s][:, [1, 3]], qdd[s, i, j], tau_kept)
     return ExemplarSet(p.X, p.Y, n_candidates=int(qdd.shape[:-1].numel()))
@@ -180,7 +142,7 @@ def sample_outside(
     w_lo, w_hi = _range(data_cfg, "dtheta")
     t1_lo, t1_hi = _range(data_cfg, "tau1")
     t2_lo, t2_hi = _range(data_cfg, "tau2")
-    a = float(cfg_get(data_cfg, "accel_limit"))
+    a = float(data_cfg["accel_limit"])
     det_max = _max_det_mass_matrix(arm, th_lo, th_hi)
     tau_lo = torch.tensor([t1_lo, t2_lo], dtype=DTYPE)
     tau_hi = torch.tensor([t1_hi, t2_hi], dtype=DTYPE)
@@ -216,14 +178,14 @@ def sample_outside(
 def make_test_sets(arm: TwoLinkArm, data_cfg: Any, exemplar: ExemplarSet, seed: int) -> TestSets:
     """The paper's 10 random test patterns ("some from the exemplar set and some outside") + a held-out set."""
     gen = torch.Generator().manual_seed(int(seed))
-    n_test, n_ex = int(cfg_get(data_cfg, "test_patterns")), int(cfg_get(data_cfg, "test_from_exemplar"))
+    n_test, n_ex = int(data_cfg["test_patterns"]), int(data_cfg["test_from_exemplar"])
     if not 0 <= n_ex <= min(n_test, len(exemplar)):
         raise ValueError(f"test_from_exemplar: {n_ex} not in [0, min(test_patterns={n_test}, {len(exemplar)})]")
     idx = torch.randperm(len(exemplar), generator=gen)[:n_ex]
     out = sample_outside(arm, data_cfg, n_test - n_ex, gen)
     test10 = Patterns(torch.cat((exemplar.X[idx], out.X)), torch.cat((exemplar.Y[idx], out.Y)))
     from_ex = torch.arange(n_test) < n_ex
-    heldout = sample_outside(arm, data_cfg, int(cfg_get(data_cfg, "heldout")), gen)
+    heldout = sample_outside(arm, data_cfg, int(data_cfg["heldout"]), gen)
     return TestSets(test10, from_ex, heldout)
 
 
@@ -233,100 +195,8 @@ def make_test_sets(arm: TwoLinkArm, data_cfg: Any, exemplar: ExemplarSet, seed: 
 def grid_bounds(data_cfg: Any) -> tuple[torch.Tensor, ...]:
     """(x lo, x hi, τ lo, τ hi) the grid route commands: its θ, θ̇ ranges, ±accel_limit and τ boxes."""
     th, w = _range(data_cfg, "theta"), _range(data_cfg, "dtheta")
-    a = float(cfg_get(data_cfg, "accel_limit"))
+    a = float(data_cfg["accel_limit"])
     x0 = torch.tensor([th[0], w[0], -a, th[0], w[0], -a], dtype=DTYPE)
     x1 = torch.tensor([th[1], w[1], a, th[1], w[1], a], dtype=DTYPE)
     t1, t2 = _range(data_cfg, "tau1"), _range(data_cfg, "tau2")
     return x0, x1, torch.tensor([t1[0], t2[0]], dtype=DTYPE), torch.tensor([t1[1], t2[1]], dtype=DTYPE)
-
-
-@dataclass(frozen=True)
-class Scaler:
-    """Per-column affine map of [min − margin·range, max + margin·range] onto [lo, hi] ⊂ (0, 1).
-
-    The BPN's output units are sigmoids, so targets must lie inside (0, 1) and away from its flat ends.
-    Default mode ``exemplar`` uses the exemplar set's own min/max. Measured with the default robot: the exemplar
-    τ1 spans only 14.0–15.4 Nm of the commanded 14–18 Nm box and τ2 only 6.9–8.0 of 4–8, so with margin 0.1
-    mode ``commanded`` maps τ1 into [0.167, 0.400] and τ2 into [0.650, 0.833], where ``exemplar`` uses
-    [0.167, 0.833] for both: ``commanded`` wastes most of the sigmoid's range (τ2 sits near its upper end)
-    and shrinks the targets' spread by 2–3.5×. scripts/export_data.py prints both.
-    """
-
-    x_min: torch.Tensor  # data-side bounds (margin already applied), [inputs]
-    x_max: torch.Tensor
-    y_min: torch.Tensor  # [outputs]
-    y_max: torch.Tensor
-    lo: float = 0.1
-    hi: float = 0.9
-
-    @classmethod
-    def fit(cls, exemplar: Patterns, data_cfg: Any, commanded: tuple[torch.Tensor, ...] | None = None) -> Scaler:
-        """Bounds from the exemplar set (mode exemplar) or the commanded boxes: ``commanded`` = (x lo, x hi,
-        y lo, y hi) when given, else the grid route's θ, θ̇, ±accel_limit and τ boxes."""
-        sc = cfg_get(data_cfg, "scaling")
-        mode = str(getattr(cfg_get(sc, "mode"), "value", cfg_get(sc, "mode")))  # a typed config holds an enum
-        margin = float(cfg_get(sc, "margin"))
-        if mode == "exemplar":
-            x0, x1 = exemplar.X.min(0).values, exemplar.X.max(0).values
-            y0, y1 = exemplar.Y.min(0).values, exemplar.Y.max(0).values
-        elif mode == "commanded":
-            x0, x1, y0, y1 = grid_bounds(data_cfg) if commanded is None else commanded
-        else:
-            raise ValueError(f"scaling.mode: expected 'exemplar' or 'commanded', got {mode!r}")
-
-        def widen(v0: torch.Tensor, v1: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-            span = v1 - v0
-            span = torch.where(span > 0, span, torch.ones_like(span))  # constant column: any invertible map
-            return (v0 - margin * span).to(DTYPE), (v1 + margin * span).to(DTYPE)
-
-        lo, hi = float(cfg_get(sc, "lo")), float(cfg_get(sc, "hi"))
-        if not lo < hi:
-            raise ValueError(f"scaling: lo ({lo}) must be < hi ({hi})")
-        return cls(*widen(x0, x1), *widen(y0, y1), lo=lo, hi=hi)
-
-    def _fwd(self, v: torch.Tensor, v0: torch.Tensor, v1: torch.Tensor) -> torch.Tensor:
-        v0, v1 = v0.to(v), v1.to(v)
-        return self.lo + (v - v0) * ((self.hi - self.lo) / (v1 - v0))
-
-    def _inv(self, s: torch.Tensor, v0: torch.Tensor, v1: torch.Tensor) -> torch.Tensor:
-        v0, v1 = v0.to(s), v1.to(s)
-        return v0 + (s - self.lo) * ((v1 - v0) / (self.hi - self.lo))
-
-    def transform_x(self, X: torch.Tensor) -> torch.Tensor:
-        return self._fwd(X, self.x_min, self.x_max)
-
-    def inverse_x(self, Xs: torch.Tensor) -> torch.Tensor:
-        return self._inv(Xs, self.x_min, self.x_max)
-
-    def transform_y(self, Y: torch.Tensor) -> torch.Tensor:
-        return self._fwd(Y, self.y_min, self.y_max)
-
-    def inverse_y(self, Ys: torch.Tensor) -> torch.Tensor:
-        return self._inv(Ys, self.y_min, self.y_max)
-
-
-def metric_names(n_outputs: int) -> tuple[str, ...]:
-    """``overall, tau1..tauK``: the per-output keys of ``rms_errors`` (output k is "tau<k>" whatever its
-    column is called, so results.json reads alike for every arm and data file)."""
-    return ("overall", *(f"tau{k}" for k in range(1, n_outputs + 1)))
-
-
-def rms_errors(pred_scaled: torch.Tensor, Y_true_Nm: torch.Tensor, scaler: Scaler) -> dict[str, torch.Tensor]:
-    """The paper's criterion, RMS of (network output − actual output), in Nm and in scaled units.
-
-    ``pred_scaled`` is ``[..., N, K]`` (e.g. a leading replica dim R); every value has the leading shape
-    ``[...]``. Keys ``<name>_Nm`` and ``<name>_scaled`` for every name of ``metric_names(K)`` (tau1_Nm, …,
-    overall_Nm, …); overall = sqrt of the mean squared error over all outputs and all patterns.
-    """
-    Y_true_Nm = Y_true_Nm.to(pred_scaled)
-    out: dict[str, torch.Tensor] = {}
-    for unit, err in (
-        ("Nm", scaler.inverse_y(pred_scaled) - Y_true_Nm),
-        ("scaled", pred_scaled - scaler.transform_y(Y_true_Nm)),
-    ):
-        sq = err.square()
-        per_joint = sq.mean(-2).sqrt()  # [..., K]
-        for k, name in enumerate(metric_names(per_joint.shape[-1])[1:]):
-            out[f"{name}_{unit}"] = per_joint[..., k]
-        out[f"overall_{unit}"] = sq.mean((-2, -1)).sqrt()
-    return out

@@ -37,7 +37,7 @@ from typing import Any
 import torch
 from torch.quasirandom import SobolEngine
 
-from selpres.arms.two_link import Arm, TwoLinkArm, cfg_get
+from selpres.arms.two_link import Arm, TwoLinkArm
 from selpres.errors import ConfigError
 from selpres.seeding import derive_seed
 
@@ -102,22 +102,22 @@ def _box(value: Any, key: str, dof: int) -> torch.Tensor:
 def boxes(arm: Arm, data_cfg: Any) -> Boxes:
     """The boxes of a sampled data spec (``selpres.data.spec.DataSpec`` or a plain dict) for ``arm``; ConfigError
     naming ``data.<key>``."""
-    dof, route = arm.dof, _value(cfg_get(data_cfg, "route"))
-    q = cfg_get(data_cfg, "q")
+    dof, route = arm.dof, _value(data_cfg["route"])
+    q = data_cfg["q"]
     if q is None:
         qbox = default_q_box(arm)
     else:
         qbox = _box(list(q), "data.q", dof)
-    dq = cfg_get(data_cfg, "dq")
+    dq = data_cfg["dq"]
     if dq is None:
         rate = arm.rate_limits("velocity")
         dqbox = torch.stack((-rate, rate), 1).mul(DQ_FRACTION).nan_to_num(posinf=1.0, neginf=-1.0)
     else:
         dqbox = _box(list(dq), "data.dq", dof)
-    accel = cfg_get(data_cfg, "accel_limit")
+    accel = data_cfg["accel_limit"]
     if isinstance(accel, bool) or not isinstance(accel, (int, float)) or not (math.isfinite(accel) and accel > 0):
         raise ConfigError("data.accel_limit", accel, "a positive acceleration bound in rad/s²")
-    tau = cfg_get(data_cfg, "tau")
+    tau = data_cfg["tau"]
     effort = arm.rate_limits("effort")
     if tau is None and route == "forward" and bool(torch.isfinite(effort).all()):
         tau = torch.stack((-effort, effort), 1).tolist()  # the file's effort limits
@@ -128,7 +128,7 @@ def boxes(arm: Arm, data_cfg: Any) -> Boxes:
             "the torque box [lo, hi] (Nm) to draw τ from, for every joint or one "
             "pair per joint: route=forward simulates q̈ from drawn torques",
         )
-    wrench = cfg_get(data_cfg, "wrench")
+    wrench = data_cfg["wrench"]
     k = None
     if wrench is not None:
         if len(wrench) != 6 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in wrench):
@@ -271,8 +271,8 @@ def _check_feasible(route: str, have: int, drawn: int, count: int) -> None:
 def stream(data_cfg: Any, dof: int, purpose: str) -> Points:
     """Points of 3N coordinates for ``purpose``: "exemplar" draws from ``derive_seed(data.seed,
     "exemplar")``, "tests" from ``derive_seed(data.test_seed, "tests")``."""
-    seed = cfg_get(data_cfg, {"exemplar": "seed", "tests": "test_seed"}[purpose])
-    return Points(_value(cfg_get(data_cfg, "draw")), 3 * dof, derive_seed(int(seed), purpose))
+    seed = data_cfg[{"exemplar": "seed", "tests": "test_seed"}[purpose]]
+    return Points(_value(data_cfg["draw"]), 3 * dof, derive_seed(int(seed), purpose))
 
 
 def commanded_bounds(box: Boxes) -> tuple[torch.Tensor, ...] | None:

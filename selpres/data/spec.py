@@ -3,10 +3,10 @@
 A ``data`` node is open: ``kind`` names its route (a built-in of ``selpres.data.routes`` or a route class by its
 import path), the keys below (:class:`CommonKeys`) are every route's, and the rest are the route's own, declared
 by its ``Keys`` dataclass. ``DataSpec`` holds the common keys as fields and the route's keys in ``params``, as
-plain values (strings for enums, dicts for nested nodes, lists for boxes); the route's keys read by attribute as
-well (``data.n``, ``data.theta``), so the functions of this room read a spec as they read a plain dict
-(``cfg_get``). The dataclasses here say the types; ``selpres.run.specs`` checks a composed node against them
-(this room imports no omegaconf), so a new route's keys edit no schema.
+plain values (strings for enums, dicts for nested nodes, lists for boxes); every key reads by name
+(``data["theta"]``), so the functions of this room read a spec as they read a plain dict or a config node, and the
+route's keys by attribute as well (``data.n``). The dataclasses here say the types; ``selpres.run.specs`` checks a
+composed node against them (this room imports no omegaconf), so a new route's keys edit no schema.
 """
 
 from __future__ import annotations
@@ -67,6 +67,13 @@ class DataSpec:
             return params[name]
         raise AttributeError(f"data.{name}: not a key of data.kind={self.__dict__.get('kind')}")
 
+    def __getitem__(self, key: str) -> Any:
+        """Any key by name, a common one or the route's (``data["theta"]``), as a plain dict reads it."""
+        try:
+            return getattr(self, key)
+        except AttributeError as e:
+            raise KeyError(key) from e
+
     @classmethod
     def of(cls, node: Mapping[str, Any]) -> DataSpec:
         """From a plain data node: ``kind`` checked by the registry, the common keys required; a key neither common
@@ -79,7 +86,8 @@ class DataSpec:
         keys = keys_of(route)
         for k, v in node.items():
             if k not in COMMON and k not in keys and v is not None:
-                raise ConfigError(f"data.{k}", v, f"unset (null) for data.kind={kind}, which reads {list(keys)}")
+                where = f"{route.__module__}.{route.__qualname__}"
+                raise ConfigError(f"data.{k}", v, f"unset (null): data.kind={kind} ({where}) reads {list(keys)}")
         for k in COMMON:
             if node.get(k) is None:
                 raise ConfigError(f"data.{k}", None, f"a value: data.kind={kind} reads it")

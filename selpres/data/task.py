@@ -25,19 +25,21 @@ import hashlib
 import inspect
 import json
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
 
-from selpres.arms.sources import files_read, source_of
-from selpres.arms.two_link import cfg_get
+from selpres.arms.sources import as_choice, files_read, source_of
 from selpres.data import export as E
 from selpres.data import paper as D
 from selpres.data.cache import cached
 from selpres.data.routes import ROUTES, keys_of
 from selpres.data.spec import DataSpec
 from selpres.errors import ConfigError
+from selpres.patterns import ExemplarSet, Scaler, TestSets
 from selpres.registry import Choice
 
 log = logging.getLogger("selpres")
@@ -73,9 +75,9 @@ class Task:
     """Exemplar inputs/targets (raw units), the 10 test patterns and the held-out set, the scaler, the
     names of the columns, and ``info``: what was made and how (for the log and results.json)."""
 
-    exemplar: D.ExemplarSet
-    tests: D.TestSets
-    scaler: D.Scaler
+    exemplar: ExemplarSet
+    tests: TestSets
+    scaler: Scaler
     input_names: tuple[str, ...] = D.INPUT_NAMES
     output_names: tuple[str, ...] = D.TARGET_NAMES
     info: dict = field(default_factory=dict)
@@ -87,10 +89,10 @@ class Task:
     def n(self) -> int:
         return len(self.exemplar)
 
-    def fit_scaler(self, data_cfg) -> D.Scaler:
+    def fit_scaler(self, data_cfg) -> Scaler:
         """The scaler ``data_cfg.scaling`` asks for on this exemplar set; ConfigError if it asks for the
         commanded boxes and the task has none (a data file, a sampled set without a torque box)."""
-        mode = str(cfg_get(cfg_get(data_cfg, "scaling"), "mode"))
+        mode = str(data_cfg["scaling"]["mode"])
         if mode == "commanded" and self.commanded is None:
             why = (
                 "a file has no commanded ranges"
@@ -98,7 +100,7 @@ class Task:
                 else "with data.tau=null there is no commanded torque box to scale the targets by"
             )
             raise ConfigError("data.scaling.mode", "commanded", f"exemplar: {why}")
-        return D.Scaler.fit(self.exemplar, data_cfg, self.commanded)
+        return Scaler.fit(self.exemplar, data_cfg["scaling"], self.commanded)
 
     def scaled_tests(self) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
         """name -> (inputs scaled, targets in Nm): what the network is scored on."""
@@ -133,8 +135,12 @@ def _own_code(cls: type | None) -> str:
         return ""
 
 
-def load_task(robot: Choice, data: DataSpec) -> Task:
-    """The task of a robot/data spec (cached); raises ConfigError, writes nothing."""
+def load_task(robot: Choice | Mapping[str, Any], data: DataSpec | Mapping[str, Any]) -> Task:
+    """The task of a robot and a data spec (what ``selpres.run`` hands this room), or of a job's recorded robot and
+    data nodes (results.json's ``config["robot"]``, ``config["data"]``: plain mappings); cached; raises ConfigError,
+    writes nothing."""
+    robot = robot if isinstance(robot, Choice) else as_choice(robot)
+    data = data if isinstance(data, DataSpec) else DataSpec.of(data)
     stamp = [(str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in task_files(robot, data) if p.is_file()]
     robot_json = json.dumps({"_target_": robot.target, **robot.params}, sort_keys=True)
     route = ROUTES.get(data.kind)

@@ -20,7 +20,8 @@ The epoch's error per replica (``reduction``):
   :mod:`selpres.engines.online`: batch SGD here equals ``TorchEngine`` with ``batch_size = m`` (tested), and a
   step size means the same in stages of every size. ``grad_mean = grad_sum * 2 / (m * n_out)``.
 
-Same interface as the engines of :mod:`selpres.engines.online`; online SGD stays there.
+The ``batch`` mode of :mod:`selpres.engines.factory` (its one implementation: torch); online SGD is
+:mod:`selpres.engines.online`.
 """
 
 from __future__ import annotations
@@ -63,6 +64,13 @@ class BatchEngine(ScoredByPredict):
     name = "batch"
     fallback_reason = None
 
+    @classmethod
+    def from_spec(cls, spec, params):
+        """An engine of ``spec`` (:class:`selpres.engines.factory.EngineSpec`): its optimizer and keys as given,
+        the sigmoid-prime offset and the reduction."""
+        offset, reduction = spec.sigmoid_prime_offset, spec.reduction
+        return cls(spec.sizes, params, spec.optimizer, spec.hparams, sigmoid_prime_offset=offset, reduction=reduction)
+
     def __init__(
         self,
         sizes,
@@ -83,6 +91,7 @@ class BatchEngine(ScoredByPredict):
         self.R = params[0].shape[0]
         self.p = [t.detach().to(torch.float64).clone().contiguous().requires_grad_(True) for t in params]
         self.opt = make_optimizer(optimizer, self.p, hparams)
+        self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)  # never a pruned epoch: always empty
 
     def train_epoch(self, X, Y, order, weights=None, counts=None, spent=None):
         """One step per replica on the gradient of its error over ``order[r]``; returns the [R] mean

@@ -22,7 +22,7 @@ they cannot, replica-batched in eager torch with a hand-written backward (checke
   ``counts[r]`` entries of ``order[r]`` and a mini-batch's loss is the mean of ``weights · loss`` over its
   patterns (InfoBatch's rescaled loss); a replica with nothing left in a mini-batch does not step. (The
   online engines do the same for the paper's network, so pruning jobs with sigmoid units and SGD at a
-  constant rate run there, on the native kernel: ``selpres.run.optimizer.minibatch_reason``.)
+  constant rate run there, on the native kernel: ``selpres.engines.factory.mode_for``.)
 
 Loss per pattern: ``mse`` over the outputs (``reduction=mean``: the online engines' loss; ``sum``:
 Rumelhart's ½Σe², for configs written for batch mode). ``last_losses`` holds every presented pattern's loss
@@ -40,7 +40,7 @@ from selpres.engines.activations import activation as units
 from selpres.engines.inputs import check_inputs, check_patterns, pruned_epoch_args, pruned_mean
 from selpres.engines.model import forward_replicas
 from selpres.engines.online import ScoredByPredict
-from selpres.engines.optim import make_optimizer
+from selpres.engines.optim import make_optimizer, with_defaults
 from selpres.engines.optim._replicas import ReplicaSteps
 from selpres.errors import ConfigError
 
@@ -63,11 +63,10 @@ def epoch_clock(kind: str, spent: torch.Tensor, epochs: int, n: int) -> None:
         spent.fill_(float(epochs * n))
 
 
-def check_epoch_clock(kind: str, schedule: dict) -> None:
-    """A ConfigError naming ``optim.lr_schedule`` when a schedule (plain ``schedule`` node) cannot run on the epochs'
-    clock: its horizon N n needs one stage of all of U for a known N epochs (a budget's epochs are not known
-    beforehand, a stage of a subset presents fewer than n an epoch)."""
-    sizes, epochs, budget = schedule.get("sizes"), schedule.get("epochs"), schedule.get("budget")
+def check_epoch_clock(kind: str, sizes: list | None, epochs: list | None, budget: int | None) -> None:
+    """A ConfigError naming ``optim.lr_schedule`` when a schedule (its ``sizes``, ``epochs`` and ``budget`` as
+    written) cannot run on the epochs' clock: its horizon N n needs one stage of all of U for a known N epochs (a
+    budget's epochs are not known beforehand, a stage of a subset presents fewer than n an epoch)."""
     all_of_u = list(sizes or []) == [1.0] and isinstance(sizes[0], float)  # (an int 1 is one pattern)
     if kind != EPOCH_CLOCK or (all_of_u and epochs is not None and len(epochs) == 1 and budget is None):
         return
@@ -86,6 +85,14 @@ class MiniBatchEngine(ScoredByPredict):
 
     name = "minibatch"
 
+    @classmethod
+    def from_spec(cls, spec, params):
+        """An engine of ``spec`` (:class:`selpres.engines.factory.EngineSpec`): the optimizer's keys with its
+        defaults for the unset ones (as the native kernel fills them), the units, rate schedule and reduction."""
+        hp = with_defaults(spec.optimizer, spec.hparams)
+        args = (spec.batch_size, spec.activation, spec.lr_schedule, spec.horizon, spec.reduction)
+        return cls(spec.sizes, params, spec.optimizer, hp, *args)
+
     def __init__(
         self,
         sizes,
@@ -97,7 +104,6 @@ class MiniBatchEngine(ScoredByPredict):
         lr_schedule: str = "constant",
         horizon: float = 1.0,
         reduction: str = "mean",
-        fallback_reason: str | None = None,
     ):
         self.sizes = tuple(int(s) for s in sizes)
         if len(params) != 2 * (len(self.sizes) - 1):
@@ -107,7 +113,7 @@ class MiniBatchEngine(ScoredByPredict):
         self.optimizer, self.batch_size, self.activation = optimizer, int(batch_size), activation
         self.act = units(activation)  # forward(z), prime(z, a): selpres.engines.activations
         self.lr_schedule, self.horizon, self.reduction = lr_schedule, float(horizon), reduction
-        self.fallback_reason = fallback_reason
+        self.fallback_reason: str | None = None  # set by selpres.engines.factory when it stands in for the kernel
         self.R = params[0].shape[0]
         # every replica's weights in one row of a flat [R, P] tensor (and its gradient likewise): the optimizer
         # steps it in a dozen ops; self.p / self._g are per-layer views into them

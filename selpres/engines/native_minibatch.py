@@ -9,10 +9,10 @@ with each replica's own step count and rate, a constant or cosine rate over the 
 per presented pattern, each pattern's loss in ``last_losses``). Its numbers agree with the torch engine and
 with one ``BPN`` + one ``torch.optim`` optimizer per replica to rounding (tests/test_native_minibatch.py).
 
-:func:`make_minibatch_engine` picks the engine a job asks for: ``torch`` (the torch engine), ``native`` (this
-one; :class:`selpres.native.KernelUnavailable` where it cannot run) or ``fast`` (this one, else the torch engine
-with ``fallback_reason`` saying why, and one warning logged). Evaluation (``predict``, ``squared_errors``) runs
-the torch engine's forward pass on the unpacked weights, so both engines score alike.
+It is the ``(minibatch, native)`` engine of :mod:`selpres.engines.factory`, whose ``build_engine`` chooses between it
+and the torch engine (it raises :class:`selpres.native.KernelUnavailable` where it cannot run, naming what it
+lacks). Evaluation (``predict``, ``squared_errors``) runs the torch engine's forward pass on the unpacked weights, so
+both engines score alike.
 
 It shares no state with the torch engine: weights and the optimizer's moments live packed for the kernel, 4
 replicas per vector as the online native engine packs them (its ``_pack``/``_unpack``/``_lanes`` are used as they
@@ -21,19 +21,16 @@ are); like every engine it answers the one epoch call, the rate's clock ``spent`
 
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 import torch
 
 from selpres.engines.inputs import check_inputs, check_patterns, pruned_epoch_args, pruned_mean
-from selpres.engines.minibatch import LR_SCHEDULES, MiniBatchEngine, epoch_clock
+from selpres.engines.minibatch import LR_SCHEDULES, epoch_clock
 from selpres.engines.model import forward_replicas
 from selpres.engines.online import NativeEngine, ScoredByPredict, _default_threads
+from selpres.engines.optim import with_defaults
 from selpres.native import KernelUnavailable
 from selpres.native.staging import stage
-
-log = logging.getLogger("selpres")
 
 NAME = "minibatch-native"
 # the optimizer keys the kernel reads, with ReplicaOptimizer's defaults for the ones a config leaves unset
@@ -65,6 +62,14 @@ class NativeMiniBatchEngine(ScoredByPredict):
     name = NAME
     LANES = 4
     _pack, _unpack, _lanes = NativeEngine._pack, NativeEngine._unpack, NativeEngine._lanes
+
+    @classmethod
+    def from_spec(cls, spec, params):
+        """An engine of ``spec`` (:class:`selpres.engines.factory.EngineSpec`): the optimizer's keys with its
+        defaults for the unset ones (as the torch engine fills them), the units, rate schedule and reduction."""
+        hp = with_defaults(spec.optimizer, spec.hparams)
+        args = (spec.batch_size, spec.activation, spec.lr_schedule, spec.horizon, spec.reduction)
+        return cls(spec.sizes, params, spec.optimizer, hp, *args, threads=spec.threads)
 
     def __init__(
         self,
@@ -177,23 +182,3 @@ class NativeMiniBatchEngine(ScoredByPredict):
         self.steps = torch.from_numpy(self._lanes(steps.to(torch.float64).numpy()))
         self.spent = state["spent"].clone()
         self.epochs = int(state.get("epochs", 0))  # (older checkpoints: their clock was the cost's)
-
-
-def make_minibatch_engine(name: str, *args, threads: int | None = None) -> MiniBatchEngine | NativeMiniBatchEngine:
-    """``name``: ``torch`` (the torch mini-batch engine), ``native`` (the kernel; raises
-    :class:`KernelUnavailable` where it cannot run) or ``fast`` (the kernel, else the torch engine with
-    ``fallback_reason`` set and one warning logged). ``args``: both engines' (sizes, params, rule, hparams,
-    batch_size, activation, lr_schedule, horizon, reduction); ``threads``: the kernel's."""
-    if name == "torch":
-        return MiniBatchEngine(*args)
-    if name not in ("native", "fast"):
-        raise ValueError(f"engine {name!r} for a mini-batch job: one of fast, native, torch")
-    try:
-        return NativeMiniBatchEngine(*args, threads=threads)
-    except KernelUnavailable as exc:
-        if name == "native":
-            raise
-        engine = MiniBatchEngine(*args)
-        engine.fallback_reason = f"native mini-batch kernel unavailable: {' '.join(str(exc).split())[:400]}"
-        log.warning("engine 'fast' runs the mini-batch torch engine: %s", engine.fallback_reason)
-        return engine

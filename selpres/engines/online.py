@@ -1,64 +1,47 @@
-"""Training engines: online / mini-batch SGD with momentum for R independent replicas of a sigmoid BPN.
+"""The online engines: SGD with momentum on mini-batches of ``batch_size`` (the paper's ``batch_size`` 1), sigmoid
+units, a constant rate, for R independent replicas (the ``online`` mode of :mod:`selpres.engines.factory`).
 
-Every engine does the same thing, defined by :class:`ReferenceEngine` (plain PyTorch, one
-``nn.Module`` and one ``torch.optim.SGD`` per replica); the others only do it faster:
+Every engine here does the same thing, defined by :class:`ReferenceEngine` (plain PyTorch, one ``nn.Module`` and one
+``torch.optim.SGD`` per replica); the others only do it faster:
 
-* ``"reference"`` -- :class:`ReferenceEngine`: the idiomatic loop. Read it to know what the others do.
-* ``"torch"``     -- :class:`TorchEngine`: all replicas at once in eager PyTorch (batched matmuls,
-  hand-written sigmoid/MSE backward). Pure torch; the fallback when no native kernel can be built.
-* ``"native"``    -- :class:`NativeEngine`: an AVX2 C kernel (4 float64 replicas per vector, inline
-  vector ``exp``, topology compiled in; ``selpres/native/kernels/sgd.c``), built with the system C compiler at
-  first use and cached (see :mod:`selpres.native`). Its ``predict`` runs the kernel's forward pass on
-  the packed weights; its ``squared_errors`` sums inside that pass, writing no outputs; its ``finite``
-  reads the packed weights once, without unpacking them.
-* ``"fast"``      -- ``native`` if the kernel can be had here, else ``torch``. Not a class: the returned
-  engine's ``name`` says which one runs, and its ``fallback_reason`` why it is not native (the
-  compiler's message, "no AVX2/FMA ...", "disabled by SELPRES_NO_NATIVE"); one warning line goes to the
-  ``selpres`` logger. ``make_engine("native")`` raises :class:`selpres.native.KernelUnavailable` instead.
+* ``reference`` -- :class:`ReferenceEngine`: the idiomatic loop. Read it to know what the others do.
+* ``torch``     -- :class:`TorchEngine`: all replicas at once in eager PyTorch (batched matmuls, hand-written
+  sigmoid/MSE backward). Pure torch; what ``engine=fast`` runs where no native kernel can be built.
+* ``native``    -- :class:`NativeEngine`: an AVX2 C kernel (4 float64 replicas per vector, inline vector ``exp``,
+  topology compiled in; ``selpres/native/kernels/sgd.c``), built with the system C compiler at first use and cached
+  (see :mod:`selpres.native`); raises :class:`selpres.native.KernelUnavailable` where it cannot run. Its
+  ``predict`` runs the kernel's forward pass on the packed weights; its ``squared_errors`` sums inside that pass,
+  writing no outputs; its ``finite`` reads the packed weights once, without unpacking them.
 
-Interface (all engines)::
+Which one a job gets, and the fallback of ``fast``, is :func:`selpres.engines.factory.build_engine`'s; what every
+engine offers is :class:`selpres.engines.factory.Engine`. Each class here is built by ``from_spec(spec, params)``
+(params [W1, b1, ...], leading dim R), or directly with ``(sizes, params, lr, momentum, batch_size)``.
 
-    eng = make_engine(name, sizes, params, lr, momentum, batch_size)   # params [W1, b1, ...], leading dim R
-    eng.name              # the engine that actually runs: "reference", "torch" or "native"
-    eng.fallback_reason   # None, or (engine "fast" only) why native could not run
-    losses = eng.train_epoch(X, Y, order)   # order [R, m] int64; returns [R] mean pre-update pattern loss
-    eng.train_epoch(X, Y, order, weights=w, counts=c)   # a pruned epoch (below); then eng.last_losses [R, m]
-    eng.predict(X)        # [N, in] -> [R, N, out] float64: every replica's scaled outputs (evaluation);
-                          # reference/torch: model.forward_replicas(eng.params(), X)
-    eng.squared_errors(X, Y)  # [N, in], [N, out] scaled targets -> [R, out] float64: per replica and
-                          # output, sum over patterns of (output - Y)^2 (scoring without [R, N, out])
-    eng.finite()          # [R] bool: every weight of replica r finite (the divergence check)
-    eng.params(); eng.state_dict(); eng.load_state_dict(state)
+Semantics: replica r presents ``X[order[r, j]]`` for j = 0..m-1 in consecutive mini-batches of ``batch_size`` (the
+last may be smaller); per mini-batch the loss is ``mse_loss(out, target)`` (mean over batch and outputs), then
+``zero_grad(); backward(); step()`` with ``SGD(lr, momentum)`` (no dampening/nesterov/weight decay):
+``buf = momentum*buf + g; p -= lr*buf``. Momentum buffers persist across ``train_epoch`` calls and are part of
+``state_dict``.
 
-Semantics: replica r presents ``X[order[r, j]]`` for j = 0..m-1 in consecutive mini-batches of
-``batch_size`` (the last may be smaller); per mini-batch the loss is
-``mse_loss(out, target)`` (mean over batch and outputs), then ``zero_grad(); backward(); step()`` with
-``SGD(lr, momentum)`` (no dampening/nesterov/weight decay): ``buf = momentum*buf + g; p -= lr*buf``.
-Momentum buffers persist across ``train_epoch`` calls and are part of ``state_dict``.
+Pruned epochs (the data-pruning schedules, :mod:`selpres.presentation.pruning`): with ``counts`` [R] replica r
+presents only ``order[r, :counts[r]]``, in its own mini-batches (the last may be smaller; a replica with nothing
+left does not step: its weights and momenta stay as they are), and with ``weights`` [R, m] pattern j's loss is
+weighted: a mini-batch's loss is the mean over its patterns of ``weight * mse`` (InfoBatch's rescaled loss; at
+batch 1 the pattern's gradient times its weight). ``last_losses`` [R, m] then holds each presented pattern's mse
+before its update (NaN past counts[r]): InfoBatch's scores, at no extra cost. The mini-batch engine
+(:mod:`selpres.engines.minibatch`) defines the same for its other optimizers; with ``optim.reduction=mean`` and sgd
+it is this update. An epoch without ``counts`` or ``weights`` leaves ``last_losses`` empty ([R, 0]).
 
-Pruned epochs (the data-pruning schedules, :mod:`selpres.presentation.pruning`): with ``counts`` [R] replica
-r presents only ``order[r, :counts[r]]``, in its own mini-batches (the last may be smaller; a replica with
-nothing left does not step: its weights and momenta stay as they are), and with ``weights`` [R, m] pattern
-j's loss is weighted: a mini-batch's loss is the mean over its patterns of ``weight * mse`` (InfoBatch's
-rescaled loss; at batch 1 the pattern's gradient times its weight). ``last_losses`` [R, m] then holds each
-presented pattern's mse before its update (NaN past counts[r]): InfoBatch's scores, at no extra cost. The
-mini-batch engine (:mod:`selpres.engines.minibatch`) defines the same for its other optimizers; with
-``optim.reduction=mean`` and sgd it is this update. An epoch without ``counts`` or ``weights`` leaves
-``last_losses`` empty ([R, 0]).
-
-Threads: ``native`` splits replicas (in groups of 4; in ``predict`` and ``squared_errors``, patterns when
-there are fewer groups than threads) over up to ``threads`` OS threads, and runs small calls (a few
-replicas, a few patterns) in the calling thread (see :data:`selpres.native.library.MIN_THREAD_WORK`); the
-default is
-``torch.get_num_threads()`` (set it, or pass ``threads=1`` to ``make_engine``, e.g. when a joblib
-sweep already runs one process per core). Environment variable ``SELPRES_THREADS`` overrides the default.
+Threads: ``native`` splits replicas (in groups of 4; in ``predict`` and ``squared_errors``, patterns when there are
+fewer groups than threads) over up to ``threads`` OS threads, and runs small calls (a few replicas, a few patterns)
+in the calling thread (see :data:`selpres.native.library.MIN_THREAD_WORK`); the default is
+``torch.get_num_threads()`` (set it, or the spec's ``threads=1``, e.g. when a joblib sweep already runs one process
+per core). Environment variable ``SELPRES_THREADS`` overrides the default.
 """
 
 from __future__ import annotations
 
-import logging
 import os
-from typing import Protocol
 
 import numpy as np
 import torch
@@ -66,35 +49,8 @@ import torch.nn.functional as F
 
 from selpres.engines.inputs import check_inputs, check_patterns, check_scoring, pruned_epoch_args, pruned_mean
 from selpres.engines.model import BPN, forward_replicas, load_into, replicas_finite, squared_errors_of
+from selpres.engines.optim import check_hparams
 from selpres.native.staging import stage
-
-ENGINE_NAMES = ("reference", "torch", "native", "fast")
-
-log = logging.getLogger("selpres")
-
-
-class Engine(Protocol):
-    name: str
-    fallback_reason: str | None
-    evaluation: str  # what runs the forward passes of scoring (native: its vector width), for results.json
-
-    def train_epoch(self, X, Y, order, weights=None, counts=None, spent=None) -> torch.Tensor:
-        """The one epoch call: replica r presents ``order[r, :counts[r]]`` (all of ``order[r]`` without counts), each
-        pattern's loss weighted by ``weights`` (1 without), at its rate for the cost ``spent[r]`` it has already
-        spent (an engine whose rate follows a schedule; a constant rate ignores it). Returns each replica's mean
-        loss; a pruned epoch's per-pattern losses are left in ``last_losses``. ReferenceEngine defines it."""
-
-    def predict(self, X: torch.Tensor) -> torch.Tensor: ...
-
-    def squared_errors(self, X: torch.Tensor, Y: torch.Tensor) -> torch.Tensor: ...
-
-    def finite(self) -> torch.Tensor: ...
-
-    def params(self) -> list[torch.Tensor]: ...
-
-    def state_dict(self) -> dict: ...
-
-    def load_state_dict(self, state: dict) -> None: ...
 
 
 def _default_threads(threads: int | None) -> int:
@@ -102,6 +58,21 @@ def _default_threads(threads: int | None) -> int:
         env = os.environ.get("SELPRES_THREADS")
         threads = int(env) if env else torch.get_num_threads()
     return max(1, int(threads))
+
+
+class OnlineSGD:
+    """What the online engines share: built from a spec as SGD with momentum at the spec's rate."""
+
+    @staticmethod
+    def rate(spec) -> tuple[float, float]:
+        """(lr, momentum) of ``spec``'s optimizer, checked, SGD's defaults for the unset ones."""
+        hp = check_hparams(spec.optimizer, spec.hparams)
+        return hp["lr"], hp["momentum"]
+
+    @classmethod
+    def from_spec(cls, spec, params):
+        """An engine of ``spec`` (:class:`selpres.engines.factory.EngineSpec`) from weights ``params``."""
+        return cls(spec.sizes, params, *cls.rate(spec), spec.batch_size)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -120,7 +91,7 @@ class ScoredByPredict:
         return squared_errors_of(self.predict(X), Y)
 
 
-class ReferenceEngine(ScoredByPredict):
+class ReferenceEngine(OnlineSGD, ScoredByPredict):
     """One ``BPN`` + one ``torch.optim.SGD`` per replica, trained pattern by pattern with autograd."""
 
     name = "reference"
@@ -195,7 +166,7 @@ class ReferenceEngine(ScoredByPredict):
 # ----------------------------------------------------------------------------------------------
 # torch: all replicas at once, eager PyTorch (the pure-torch fallback)
 # ----------------------------------------------------------------------------------------------
-class TorchEngine(ScoredByPredict):
+class TorchEngine(OnlineSGD, ScoredByPredict):
     """Replica-batched eager PyTorch with a hand-written backward. Same updates as the reference."""
 
     name = "torch"
@@ -286,7 +257,7 @@ class TorchEngine(ScoredByPredict):
 # ----------------------------------------------------------------------------------------------
 # native: the C kernel
 # ----------------------------------------------------------------------------------------------
-class NativeEngine:
+class NativeEngine(OnlineSGD):
     """AVX2 C kernel over groups of 4 replicas (replica index innermost), threads over groups."""
 
     name = "native"
@@ -298,6 +269,10 @@ class NativeEngine:
         return f"native, {lanes} lanes ({'AVX-512' if lanes == 8 else 'AVX2'})"
 
     LANES = 4
+
+    @classmethod
+    def from_spec(cls, spec, params):
+        return cls(spec.sizes, params, *cls.rate(spec), spec.batch_size, threads=spec.threads)
 
     def __init__(self, sizes, params, lr, momentum, batch_size, threads: int | None = None):
         from selpres.native import load
@@ -400,40 +375,3 @@ class NativeEngine:
     def load_state_dict(self, state):
         self.w = self._pack(state["params"])
         self.buf = self._pack(state["momentum"])
-
-
-def make_engine(
-    name: str, sizes, params, lr: float, momentum: float, batch_size: int, threads: int | None = None
-) -> Engine:
-    """``name``: ``"reference"``, ``"torch"``, ``"native"`` or ``"fast"`` (native if it can be had, else
-    torch, with ``fallback_reason`` set and one warning logged); ``"native"`` raises ``KernelUnavailable``.
-
-    ``threads`` (native only): OS threads over replica groups; default ``$SELPRES_THREADS`` or
-    ``torch.get_num_threads()``.
-    """
-    sizes = tuple(int(s) for s in sizes)
-    if len(params) != 2 * (len(sizes) - 1):
-        raise ValueError(f"{len(params)} parameter tensors for topology {sizes}: expected {2 * (len(sizes) - 1)}")
-    if int(batch_size) < 1:
-        raise ValueError(f"batch_size must be >= 1, got {batch_size}")
-    if name == "reference":
-        return ReferenceEngine(sizes, params, lr, momentum, batch_size)
-    if name == "torch":
-        return TorchEngine(sizes, params, lr, momentum, batch_size)
-    if name == "native":
-        return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
-    if name == "fast":
-        from selpres.native import KernelUnavailable
-
-        try:
-            return NativeEngine(sizes, params, lr, momentum, batch_size, threads=threads)
-        except KernelUnavailable as exc:
-            engine = TorchEngine(sizes, params, lr, momentum, batch_size)
-            engine.fallback_reason = str(exc)
-            line = " ".join(str(exc).split())  # one line, however long the compiler's message
-            log.warning(
-                "engine 'fast' runs the torch engine: native kernel unavailable: %s",
-                line if len(line) <= 400 else line[:400] + " ...",
-            )
-            return engine
-    raise ValueError(f"unknown engine {name!r}: choose one of {ENGINE_NAMES}")

@@ -8,7 +8,7 @@ file and renamed, so parallel processes may race safely; a ``.sha256`` sidecar w
 marks it complete. Before any library is opened the CPU must list AVX2 and FMA (a cache shared between
 machines ends in a fallback, never in SIGILL); a cached library that fails its checksum (truncated,
 corrupt, unfinished) is rebuilt. Anything missing (no compiler, a failed or timed-out build, no AVX2/FMA,
-``SELPRES_NO_NATIVE=1``) raises :class:`KernelUnavailable` with the reason, and ``make_engine("fast")``
+``SELPRES_NO_NATIVE=1``) raises :class:`KernelUnavailable` with the reason, and ``engine=fast``
 falls back to pure torch. Only successes are remembered in the process: a later load retries a failed build.
 """
 
@@ -149,6 +149,7 @@ def compile_library(stem: str, source: Path, flags: list[str]) -> Path:
     its checksum."""
     cc = _compiler()
     target = _library_path(stem, source, flags, cc)
+    _BUILT[target] = (tuple(cc), (*CFLAGS, *flags))
     if target.exists():
         if _intact(target):
             return target
@@ -181,6 +182,29 @@ def compile_library(stem: str, source: Path, flags: list[str]) -> Path:
 
 _lock = threading.Lock()
 _loaded: dict = {}  # key -> a loaded binding (sgd: topology sizes, shuffle: "shuffle"); failures are not remembered
+_BUILT: dict[Path, tuple[tuple[str, ...], tuple[str, ...]]] = {}  # library -> (compiler, flags) it was built with
+
+
+def build_info() -> dict | None:
+    """How the native code this process loaded was built, for the record of what ran (None: it loaded none): each
+    library's compiler command and flags, the compiler's version, and the instruction-set extensions the kernels use
+    that ``-march=native`` enabled on this CPU (an extra flag such as ``-mno-avx512f`` shows in that library's
+    flags)."""
+    with _lock:
+        paths = [b.path for b in _loaded.values() if getattr(b, "path", None) in _BUILT]
+    if not paths:
+        return None
+    builds = {_BUILT[p] for p in paths}
+    versions = {" ".join(cc): _compiler_version(cc).strip().splitlines()[0] for cc, _ in builds}
+    flags = cpu_flags()
+    return {
+        "libraries": sorted(p.name for p in paths),
+        "compiler": "; ".join(f"{cc} ({version})" for cc, version in sorted(versions.items())),
+        # the topology's -D macros left out: the config records the topology; these are what the code is built by
+        "flags": sorted({" ".join(x for x in f if not x.startswith("-D")) for _, f in builds}),
+        "instruction_set": " ".join(x.upper() for x in ("avx512f", "avx2", "fma") if x in flags) or platform.machine(),
+        "cpu": ", ".join(sorted({ln.split(":", 1)[-1].strip() for ln in _cpu_model().splitlines() if ln.strip()})),
+    }
 
 
 def load_once(key, cls: type, built: Callable[[], Path]):

@@ -1,4 +1,4 @@
-"""The native SGD kernel behind ``make_engine("native"/"fast")``: its ctypes binding, built by ``build.py``.
+"""The native SGD kernel behind the online engine `native` (and `fast`): its ctypes binding, built by ``build.py``.
 
 The kernel itself is the C file ``selpres/native/kernels/sgd.c`` (read its header for the layout and the
 arithmetic). Replicas are packed in groups of 4 (one AVX2 vector of float64 per parameter), a group's

@@ -12,7 +12,7 @@ second page and line). Both parts count: in a throwaway side-by-side script (6-1
 x1.10-1.27, rows in 2 MB pages x1.01-1.29. The kernel reads the same numbers with a row stride, so results
 are bitwise those of the unstaged path (tests/test_staging.py checks it, and the reference engine).
 
-Measured with ``python -m selpres.bench.scale`` (both paths side by side in each run; R = 4, CPU time of
+Measured with ``python -m selpres_bench.scale`` (both paths side by side in each run; R = 4, CPU time of
 the training thread, the time of n = 10^6 over that of n = 10^3, median of 5 interleaved repeats; five runs
 on the 2 shared cores at load 7-13, 2026-12-01): 6-13-2 read as is x1.01, 1.23, 1.52, 1.58, 1.72, staged
 x1.03, 1.04, 1.06, 1.09, 1.12 -- within the 25 % of issue 22, item 6, in every run, where the path as is

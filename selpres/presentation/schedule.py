@@ -14,7 +14,7 @@ import functools
 import itertools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from selpres.errors import ConfigError
 
@@ -43,6 +43,9 @@ class EpochPlan:
 @dataclass(frozen=True)
 class Schedule:
     stages: tuple[Stage, ...]
+    # how the sizes and epochs were given, in the parametric schedule's words (selpres.presentation.proportions
+    # ``rule_of``: p, first, growth, profile, the total or budget): recorded, never part of what the stages are
+    rule: dict | None = field(default=None, compare=False, hash=False)
 
     @property
     def n(self) -> int:
@@ -100,6 +103,9 @@ class Schedule:
             "presentations": self.presentations,
             "conventional_presentations": self.conventional_presentations,
             "cost_ratio": self.presentations / self.conventional_presentations,
+            "n1": self.sizes[0],
+            "epochs_total": sum(self.epochs),  # ΣN_i, full epochs (a partial one is in extra_presentations)
+            **(self.rule or {}),
         }
 
 

@@ -1,57 +1,44 @@
 """The report: its sections in order, rendered to one Markdown file plus the CSV and PNG files behind it.
 
-Every section but one is a study's. A study (Table 1, modern, selection, sensitivity, ...) is one module of
-:mod:`selpres.studies`, found by :data:`STUDIES` (a registry: the package's public modules, listed without importing
-them), exporting ``SECTION(ctx) -> Section | list[Section] | None`` (None: the study does not apply to this sweep)
-composed of this package's blocks, and optionally ``ORDER``, the order of its methods' rows. So a new study is one
-module there and no list here; the library and ``import selpres.report`` import no study until a report is built,
-and nothing here names a study's methods. The one generic section, the runs (every job folder and its status),
-closes every report.
+Every section but the generic ones is a study's. The studies are plug-ins the report is given by import path
+(:mod:`selpres.report.plugins`: the command line's ``--sections``, else the ones the sweep names, else the ones
+installed), each exporting ``SECTION(ctx)`` composed of this package's blocks; nothing here names or imports a
+study before it is given. The one generic section, the runs (every job folder and its status), closes every
+report.
 
 Order: the sections of the studies that apply, the study the sweep ran (its recorded ``experiment=NAME``) first,
-the others by name; then the runs. Rows of methods follow the ``ORDER`` of the study the sweep ran, else of the
-first study (by name) that has one (:func:`study_order`).
+the others in the order given; then the runs. Rows of methods follow the ``ORDER`` of the study the sweep ran,
+else of the first study that has one (:func:`selpres.report.plugins.study_order`).
 """
 
 from __future__ import annotations
 
-import importlib
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from selpres.registry import Registry
+from selpres.report import plugins
 from selpres.report.compare import Options
 from selpres.report.context import Context, Section, experiment_of
 from selpres.report.markdown import to_csv
-from selpres.report.sections import runs
+from selpres.report.sections import runs, sweep
 from selpres.storage import atomic_write
 
-STUDIES = Registry("report.study", "selpres.studies", "SECTION")
 # the sections every report ends with, whatever its study; a section with nothing to show is left out
-GENERIC_SECTIONS = [runs.section]
+GENERIC_SECTIONS = [sweep.section, runs.section]
 
 
-def _by_lead(experiment: str | None) -> list[str]:
-    """The studies' names, the one the sweep ran first, the others by name."""
-    return sorted(STUDIES.names, key=lambda name: (name != experiment, name))
-
-
-def study_order(experiment: str | None) -> tuple[str, ...]:
-    """The order of the methods' rows: the ``ORDER`` of the study the sweep ran, else of the first study (by name)
-    that exports one; () when none does (methods by name)."""
-    for name in _by_lead(experiment):
-        order = getattr(importlib.import_module(f"{STUDIES.package}.{name}"), "ORDER", None)
-        if order is not None:
-            return tuple(order)
-    return ()
-
-
-def study_sections(ctx: Context) -> list[Section]:
-    """The sections of every study that applies to the sweep: the one it ran first, then the others by name."""
+def study_sections(ctx: Context, found: list[plugins.Study]) -> list[Section]:
+    """The sections of every study of ``found`` that applies to the sweep, the one it ran first; a plug-in that
+    could not be imported is one line saying so."""
     out = []
-    for name in _by_lead(ctx.experiment):
-        made = built(STUDIES.get(name), ctx)
+    for study in plugins.by_lead(found, ctx.experiment):
+        if study.error is not None:
+            line = f"the report plug-in {study.path} could not be imported ({study.error}); {plugins.INSTALL}"
+            print(f"warning: {line}", file=sys.stderr)
+            out.append(Section(f"{study.name} (not built)", [line]))
+            continue
+        made = built(lambda ctx, study=study: study.module.SECTION(ctx), ctx, study.name)
         out += made if isinstance(made, list) else [made] if made is not None else []
     return out
 
@@ -81,10 +68,13 @@ class Report:
     sections: list[Section]
 
     @classmethod
-    def build(cls, sweep: Path, options: Options | None = None) -> Report:
-        ctx = Context.load(sweep, options, study_order(experiment_of(sweep)))
+    def build(cls, sweep: Path, options: Options | None = None, sections: list[str] | None = None) -> Report:
+        """The report of ``sweep``; ``sections``: the study plug-ins to show (import paths), in place of the ones
+        the sweep names or that are installed (:func:`selpres.report.plugins.given`)."""
+        found = plugins.studies(plugins.given(sweep, sections))
+        ctx = Context.load(sweep, options, plugins.study_order(found, experiment_of(sweep)))
         generic = [s for make in GENERIC_SECTIONS if (s := built(make, ctx)) is not None]
-        return cls(ctx, study_sections(ctx) + generic)
+        return cls(ctx, study_sections(ctx, found) + generic)
 
     @property
     def title(self) -> str:
@@ -120,6 +110,8 @@ class Report:
             for name, (_, draw) in s.figures.items():
                 try:
                     draw(out / name)
+                except OSError:  # the disk refused the file: the report fails in one line (__main__), no gap
+                    raise
                 except Exception as e:  # the rest of the report is still written (see built)
                     print(f"warning: {name} not drawn: {type(e).__name__}: {e}", file=sys.stderr)
                     continue
@@ -128,8 +120,9 @@ class Report:
         return files
 
 
-def write_report(sweep: Path, out: Path, options: Options | None = None) -> str:
-    """Build the report of ``sweep`` and write it into ``out``; returns its Markdown."""
-    report = Report.build(sweep, options)
+def write_report(sweep: Path, out: Path, options: Options | None = None, sections: list[str] | None = None) -> str:
+    """Build the report of ``sweep`` and write it into ``out``; returns its Markdown. ``sections``: the study
+    plug-ins to show by import path (default: the sweep's, else the installed ones)."""
+    report = Report.build(sweep, options, sections)
     report.write(out)
     return report.markdown

@@ -63,10 +63,12 @@ class Margin:
 
 @dataclass(frozen=True)
 class Options:
-    """How verdicts are read: the equivalence margin, and whether p-values are Holm-adjusted per family."""
+    """How verdicts are read: the equivalence margin, and whether p-values are Holm-adjusted per family; ``budget``:
+    a cost (presentations) within which a sweep's best setting is named (``--budget``; None: the Pareto set only)."""
 
     margin: Margin = field(default_factory=Margin)
     holm: bool = False
+    budget: int | None = None
 
 
 def outcome(v: dict) -> str:

@@ -1,11 +1,12 @@
-"""What every report section reads (:class:`Context`) and what it gives back (:class:`Section`)."""
+"""What every report section reads (:class:`Context`), what it gives back (:class:`Section`), and what a section's
+README block reads of the built report (:class:`Built`)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from omegaconf import OmegaConf
 
@@ -13,14 +14,11 @@ from selpres.report.compare import Options
 from selpres.report.groups import Group, aggregate
 from selpres.report.jobs import Job, load_jobs
 
-if TYPE_CHECKING:
-    from selpres.report.build import Report
-
 
 @dataclass
 class Context:
     """A sweep, loaded and grouped once for all sections; ``order``: the order of the methods' rows, a study's
-    (:func:`selpres.report.build.study_order`), the methods it does not list after them by name."""
+    (:func:`selpres.report.plugins.study_order`), the methods it does not list after them by name."""
 
     sweep: Path
     jobs: list[Job]
@@ -77,7 +75,17 @@ class Section:
     csv: dict[str, list[dict]] = field(default_factory=dict)
     figures: dict[str, tuple[str, Callable[[Path], None]]] = field(default_factory=dict)
     heading: str | None = None
-    readme: Callable[[Report, str], str] | None = None
+    readme: Callable[[Built, str], str] | None = None
 
     def markdown(self) -> str:
         return "\n\n".join([f"## {self.title}", *self.blocks])
+
+
+class Built(Protocol):
+    """What a section's ``readme`` reads of the built report (:class:`selpres.report.build.Report` is one): the
+    sweep's context and the rows behind any section's CSV file."""
+
+    ctx: Context
+    sections: list[Section]
+
+    def rows(self, csv_name: str) -> list[dict]: ...

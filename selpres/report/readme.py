@@ -1,7 +1,7 @@
 """A README's generated block, rewritten from a report so that its numbers cannot drift from what the sweep
 produced: ``python -m selpres.report DIR --readme README.md`` rewrites only the block between :data:`BEGIN` and
 :data:`END` in that file, with the block the report's study writes (a section's ``readme``; Table 1's, whose
-generator is :mod:`selpres.studies.table1`).
+generator is the repository's studies' ``selpres_studies.table1``).
 """
 
 from __future__ import annotations

@@ -38,7 +38,16 @@ from pathlib import Path
 import orjson
 import torch
 
-from selpres.storage import CHECKPOINT, CHECKPOINT_ALT, HISTORY, HISTORY_PICKLE, atomic_write, naming
+from selpres.storage import (
+    CHECKPOINT,
+    CHECKPOINT_ALT,
+    HISTORY,
+    HISTORY_PICKLE,
+    atomic_write,
+    naming,
+    one_line,
+    why_unreadable,
+)
 
 log = logging.getLogger("selpres")
 HISTORY_FORMAT = "jsonl"  # of history.jsonl; a checkpoint without a format (an older selpres) is set aside
@@ -216,8 +225,10 @@ class Checkpoints:
                 continue
             try:
                 ck = read(path)
-            except Exception as exc:  # any unreadable file is set aside, never resumed
-                bad.append((path, f"cannot be read ({type(exc).__name__}: {exc})"))
+            except FileNotFoundError:  # gone since the check (a racing cleanup): not there, nothing to set aside
+                continue
+            except Exception as exc:  # any unreadable file is set aside, never resumed (said in one line)
+                bad.append((path, why_unreadable(path, exc)))
                 continue
             if not isinstance(ck, dict):
                 bad.append((path, f"is not a checkpoint (a {type(ck).__name__})"))
@@ -271,7 +282,7 @@ class Checkpoints:
             moved = self.move_aside([*self.paths, *self.logs])
             where = ", ".join(p.name for p in moved.values())
             log.warning("%s: its engine state does not fit this job (%s: %s); moved the job's files aside (%s), "
-                        "started afresh", self.paths[slot], type(e).__name__, e, where)  # fmt: skip
+                        "started afresh", self.paths[slot], type(e).__name__, one_line(str(e)), where)  # fmt: skip
             progress = Progress.fresh(replicas)
             progress.stale_checkpoint = str(moved[self.paths[slot]])
             return progress

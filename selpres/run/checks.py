@@ -1,33 +1,34 @@
 """Checks a type cannot express, run before any training or output: each failure is one ConfigError naming the
 key, the bad value and what is allowed (exit code 2 from ``python train.py``).
 
-``validate`` checks values against each other (ranges, grid steps, the robot and data configs of each kind,
-topology widths against the task's inputs and outputs); the checks that need the exemplar set (stage sizes
-against n, filters that keep nothing, a data file's cells) run in ``selpres.run.problem.prepare``, still before
-anything is written. Work that cannot fit this machine's memory or would take absurdly long is refused from
-estimates (``selpres.run.estimate``): replicas and the plan's length here, before the task is built, the whole
-job once the exemplar set is known.
+``selpres.run.resolve`` calls them on the job's plain specs: values against each other (ranges, the optimizer and
+the units, the schedule and its pruning, the robot and data specs of each kind, topology widths against the task's
+inputs and outputs); the checks that need the exemplar set (stage sizes against n, filters that keep nothing, a data
+file's cells) run in ``selpres.run.problem.prepare``, still before anything is written. Work that cannot fit this
+machine's memory or would take absurdly long is refused from estimates (``selpres.run.estimate``): replicas and the
+plan's length here, before the task is built, the whole job once the exemplar set is known.
 """
 
 from __future__ import annotations
 
 import math
 
-from omegaconf import DictConfig
-
 from selpres.data.paper import heldout_count
 from selpres.data.routes import ROUTES, required_of
+from selpres.data.spec import DataSpec
 from selpres.data.task import Shape, task_shape
 from selpres.engines.activations import activation
 from selpres.engines.minibatch import check_epoch_clock
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.errors import ConfigError
 from selpres.presentation.orders import make_order
-from selpres.presentation.pruning import REGISTRY as PRUNING
+from selpres.presentation.proportions import check_form
 from selpres.presentation.pruning._job import check_pruning
+from selpres.registry import Choice
+from selpres.run.config import undeclared
 from selpres.run.estimate import refuse_before_task
 from selpres.run.optimizer import check_optim
-from selpres.run.specs import plain, task_specs
+from selpres.run.specs import Cadence, JobSpec, OptimSpec, ScheduleSpec
 
 MAX_SEED = 2**64 - 1  # torch.manual_seed's largest
 MAX_LAYER_WIDTH = 4096  # wider layers are refused: a guard against typos such as 6-13000-2
@@ -45,89 +46,79 @@ def _walk(node, prefix=""):
         yield prefix, node
 
 
-def validate(cfg: DictConfig) -> tuple[int, ...]:
-    """Checks that need more than a type; returns the parsed topology. Raises ConfigError."""
-    for key, value in _walk(plain(cfg)):
+def check_plain(c: dict) -> None:
+    """The plain config as a whole: an appended key no code reads (``+schedule.p=1``: it would be recorded as if it
+    ran) and a number that is not finite are refused, naming their key."""
+    appended = undeclared(c)
+    if appended is not None:
+        raise ConfigError(*appended)
+    for key, value in _walk(c):
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(key, value, "a finite number (NaN and inf are not allowed)")
-    activation(cfg.model.activation)  # ConfigError naming model.activation
-    spec = check_optim(cfg)  # ConfigError naming optim.<key>
-    check_epoch_clock(spec.lr_schedule, plain(cfg.schedule))  # cosine_epochs: one stage of U for N epochs
-    make_order(cfg.schedule.order)  # a built-in or an importable Order: ConfigError naming schedule.order
-    pruning = pruning_spec(cfg.schedule)
-    if pruning is not None:
-        s = cfg.schedule
-        epochs = None if s.epochs is None else list(s.epochs)
-        check_pruning(
-            *pruning,
-            sizes=list(s.sizes),
-            order=s.order,
-            budget=s.budget,
-            epochs=epochs,
-            selection_cost=s.selection_cost,
-        )
-        if spec.batch:
-            why = f"a mini-batch >= 1 with schedule.pruning._target_={pruning[0]}"
-            raise ConfigError("optim.batch_size", cfg.optim.batch_size, why)
-    if cfg.replicas < 1:
-        raise ConfigError("replicas", cfg.replicas, "a whole number >= 1")
-    check_seed(cfg)
-    refuse_before_task(cfg)  # replicas=1000000000 and 10^9 epochs: refused before any data or seed list is made
-    if cfg.threads < 0:
-        raise ConfigError("threads", cfg.threads, "0 (all cores) or a positive number of threads")
-    if cfg.eval.every < 0:
-        raise ConfigError("eval.every", cfg.eval.every, "0 (stage ends only) or a positive number of epochs")
-    if cfg.eval.heldout_curve < 1:
-        raise ConfigError("eval.heldout_curve", cfg.eval.heldout_curve, "a positive number of held-out patterns")
-    if cfg.checkpoint.every < 0:
-        raise ConfigError(
-            "checkpoint.every", cfg.checkpoint.every, "0 (stage boundaries only) or a positive number of epochs"
-        )
-    if cfg.schedule.strata_bins < 1:
-        raise ConfigError("schedule.strata_bins", cfg.schedule.strata_bins, "a whole number >= 1")
-    if not 0 <= cfg.schedule.selection_cost <= 1:
+
+
+def check(job: JobSpec) -> tuple[int, ...]:
+    """Every check of a read job that needs no exemplar set, before the task is built but the last two (they build
+    the arm or read a data file's header); returns the topology's widths, which fit the task."""
+    check_run(job.replicas, job.seed, job.threads, job.cadence)
+    check_optim(job.optim, job.engine)  # the optimizer's keys, its modes against the units and the engine
+    activation(job.activation)  # a built-in or an importable class with forward and prime (model.activation)
+    check_schedule(job.schedule, job.optim)
+    refuse_before_task(job.replicas, job.layers, job.schedule)  # replicas=10^9: before the task is built
+    return check_topology(job.layers, check_task(job.robot, job.data))
+
+
+def check_schedule(s: ScheduleSpec, optim: OptimSpec) -> None:
+    """The order, the pruning policy around the schedule and the optimizer, the strata and the choosing charge."""
+    make_order(s.order)  # a built-in or an importable Order: ConfigError naming schedule.order
+    check_form(s.node)  # listed sizes or the parametric keys, not both (selpres.presentation.proportions)
+    check_epoch_clock(optim.lr_schedule, s.sizes, s.epochs, s.budget)  # cosine_epochs: one stage of U for N epochs
+    if s.pruning is not None:
+        kw = dict(sizes=s.sizes, order=s.order, budget=s.budget, epochs=s.epochs, selection_cost=s.selection_cost)
+        check_pruning(*s.pruning, **kw)
+        if optim.batch:
+            why = f"a mini-batch >= 1 with schedule.pruning._target_={s.pruning[0]}"
+            raise ConfigError("optim.batch_size", optim.batch_size, why)
+    if s.strata_bins < 1:
+        raise ConfigError("schedule.strata_bins", s.strata_bins, "a whole number >= 1")
+    if not 0 <= s.selection_cost <= 1:
         raise ConfigError(
             "schedule.selection_cost",
-            cfg.schedule.selection_cost,
+            s.selection_cost,
             "a fraction of a training presentation in [0, 1] charged per candidate scored "
             "(0 = choosing is free; default 1/3, a forward pass of forward + backward)",
         )
-    return check_topology(cfg.topology.layers, check_task(cfg))
 
 
-def pruning_spec(s: DictConfig) -> tuple[str, dict] | None:
-    """``schedule.pruning`` as the plain spec the pruning room takes: (the policy's name or import path, its
-    parameters), or None (no pruning). The old spelling ``schedule.pruning=infobatch`` is refused naming the new."""
-    node = s.pruning
-    if node is None:
-        return None
-    if not isinstance(node, DictConfig):
+def check_run(replicas: int, seed: int, threads: int, cadence: Cadence) -> None:
+    """Replicas, the seed range they take, threads, and how often the loop scores and checkpoints."""
+    if replicas < 1:
+        raise ConfigError("replicas", replicas, "a whole number >= 1")
+    check_seed(seed, replicas)
+    if threads < 0:
+        raise ConfigError("threads", threads, "0 (all cores) or a positive number of threads")
+    if cadence.heldout_every < 0:
+        raise ConfigError("eval.every", cadence.heldout_every, "0 (stage ends only) or a positive number of epochs")
+    if cadence.heldout_curve < 1:
+        raise ConfigError("eval.heldout_curve", cadence.heldout_curve, "a positive number of held-out patterns")
+    if cadence.checkpoint_every < 0:
         raise ConfigError(
-            "schedule.pruning",
-            node,
-            f"null or a node {{_target_: <policy>, <its parameters>}}: schedule={node} sets one, or "
-            f"schedule.pruning._target_={node} (policies: {PRUNING.allowed()})",
+            "checkpoint.every", cadence.checkpoint_every, "0 (stage boundaries only) or a positive number of epochs"
         )
-    params = plain(node)
-    target = params.pop("_target_", None)
-    if target is None:
-        raise ConfigError("schedule.pruning._target_", None, PRUNING.allowed())
-    return PRUNING.check(target), params
 
 
-def check_seed(cfg: DictConfig) -> None:
+def check_seed(seed: int, replicas: int) -> None:
     """Replica r uses seed + r, and torch.manual_seed takes [0, 2^64): checked before anything is seeded."""
-    top = MAX_SEED - max(1, cfg.replicas) + 1
-    if not 0 <= cfg.seed <= top:
-        raise ConfigError("seed", cfg.seed, f"a whole number in [0, {top}] (seed + replicas - 1 < 2^64)")
+    top = MAX_SEED - max(1, replicas) + 1
+    if not 0 <= seed <= top:
+        raise ConfigError("seed", seed, f"a whole number in [0, {top}] (seed + replicas - 1 < 2^64)")
 
 
-def check_task(cfg: DictConfig) -> Shape:
-    """The robot and data configs: the data node holds only keys its route reads, of the types it declares
+def check_task(robot: Choice, d: DataSpec) -> Shape:
+    """The robot and data specs: the data node holds only keys its route reads, of the types it declares
     (``selpres.run.specs.data_spec``), its required ones set, the common ones in range, the route's own values in
     range (its ``check``); returns the shape of the task (``selpres.data.task.task_shape``: builds the arm or reads a
     data file's header)."""
-    robot, d = task_specs(cfg)
     route = ROUTES.get(d.kind)
     for k in required_of(route):
         if d.params[k] is None:

@@ -1,4 +1,4 @@
-"""Typed configuration schema (Hydra structured configs): types here, values in ``selpres/configs/``.
+"""Typed configuration schema (Hydra structured configs): types here, values in ``configs/`` (:data:`CONFIG_DIR`).
 
 The dataclasses are registered in Hydra's ConfigStore as ``selpres_schema`` and listed first in
 ``configs/train.yaml``'s defaults, so omegaconf itself rejects unknown keys and wrong types with a
@@ -11,6 +11,8 @@ or checks its own keys, so a new choice edits no schema.
 
 from __future__ import annotations
 
+import dataclasses
+import typing
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
@@ -19,7 +21,10 @@ from typing import Any, Dict, List, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, OmegaConf
 
-CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"  # shipped in the package (wheel and checkout alike)
+# The configs: a checkout's top-level configs/, which the wheel maps into the package (selpres/configs/), so a
+# checkout and an install compose the same files
+_PACKAGE = Path(__file__).resolve().parents[1]
+CONFIG_DIR = _PACKAGE / "configs" if (_PACKAGE / "configs").is_dir() else _PACKAGE.parent / "configs"
 
 
 class EngineName(Enum):
@@ -32,10 +37,19 @@ class EngineName(Enum):
 @dataclass
 class ScheduleConfig:
     name: str = MISSING
-    # counts (ints) or fractions of n (floats in (0, 1]); Any keeps 50 and 0.05 apart
-    sizes: List[Any] = MISSING
+    # counts (ints) or fractions of n (floats in (0, 1]); Any keeps 50 and 0.05 apart; null in the parametric form
+    sizes: Optional[List[Any]] = None
     epochs: Optional[List[int]] = None
-    budget: Optional[int] = None  # total presentations for a one-stage, compute-matched schedule
+    # total presentations: of a one-stage, compute-matched schedule; in the parametric form split over the stages
+    budget: Optional[int] = None
+    # the parametric schedule (configs/schedule/stages.yaml, selpres.presentation.proportions): set p, and the sizes
+    # and epochs follow from these keys. Null everywhere else: a key left null is not recorded (selpres.run.specs
+    # recorded), so the configs written before them keep their identity
+    p: Optional[int] = None  # enlargements: p + 1 nested sets
+    first: Optional[Any] = None  # n_1: a count, or a share of n in (0, 1)
+    growth: Optional[str] = None  # geometric | linear | paper (Table 1's sizes, p = 4)
+    profile: Optional[str] = None  # the N_i rule: equal | increasing | decreasing
+    total_epochs: Optional[int] = None  # ΣN_i (or budget, or epochs listed)
     order: str = MISSING  # an order of selpres.presentation.orders (its registry) or an import path, checked there
     strata_bins: int = MISSING
     selection_cost: float = MISSING  # presentations charged per candidate scored (selpres.presentation.selection)
@@ -107,7 +121,7 @@ class TrainConfig:
 
 
 # Spellings users typed that the schema no longer has -> the new spelling (refused in one line by
-# selpres.run.guard before Hydra composes: Hydra's own refusal of an unknown key does not name the new one)
+# selpres.run.main before Hydra composes: Hydra's own refusal of an unknown key does not name the new one)
 RETIRED = {
     "schedule.prune_ratio": "schedule.pruning.prune_ratio",
     "schedule.delta": "schedule.pruning.delta",
@@ -121,6 +135,53 @@ def retired(overrides: list[str]) -> str | None:
         key, eq, value = arg.lstrip("+~").partition("=")
         if key in RETIRED:
             return f"{key}{eq}{value} is no longer a key: use {RETIRED[key]}{eq}{value} (the pruning policy's node)"
+    return None
+
+
+def undeclared(c: dict) -> tuple[str, Any, str] | None:
+    """(key, value, what is allowed) of the first key of a typed node of the plain config ``c`` that the schema does
+    not declare (``+schedule.q=1``, ``+eval.foo=1``, ``+foo=1``), or None. Such a key was appended (Hydra's ``+``)
+    and no code reads it: a job that ran with it would record a setting that did not run. The open nodes (robot,
+    data, optim, schedule.pruning) are their classes' to check."""
+    return _undeclared(c, TrainConfig, "")
+
+
+def _undeclared(c: dict, schema: type, prefix: str) -> tuple[str, Any, str] | None:
+    hints = typing.get_type_hints(schema)
+    for k, v in c.items():
+        if not prefix and k == "hydra":
+            continue
+        if k not in hints:
+            node = prefix.rstrip(".") or "the config"
+            keys = ", ".join(hints)
+            return f"{prefix}{k}", v, f"a key {node} declares ({keys}): no code reads {prefix}{k}"
+        if dataclasses.is_dataclass(hints[k]) and isinstance(v, dict):
+            found = _undeclared(v, hints[k], f"{prefix}{k}.")
+            if found:
+                return found
+    return None
+
+
+def unread(overrides: list[str]) -> str | None:
+    """The one-line refusal of the first command-line override that appends (``+``/``++``) a key to a typed node of
+    the schema that declares no such key (``+schedule.q=1,2``), or None: said before Hydra composes or a sweep
+    launches anything. Config groups (``+experiment=...``) and the open nodes (checked per job by the class they
+    name) pass."""
+    for arg in overrides:
+        if not arg.startswith("+") or "=" not in arg:
+            continue
+        key, _, value = arg.lstrip("+").partition("=")
+        if "/" in key or key.startswith("hydra") or (CONFIG_DIR / key).is_dir():
+            continue
+        schema, parts = TrainConfig, key.split(".")
+        for i, part in enumerate(parts):
+            hints = typing.get_type_hints(schema)
+            if part not in hints:
+                node = ".".join(parts[:i]) or "the config"
+                return f"{key}={value}: {node} has no such key (it declares {', '.join(hints)}): no code would read it"
+            if not dataclasses.is_dataclass(hints[part]):
+                break
+            schema = hints[part]
     return None
 
 

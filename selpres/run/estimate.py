@@ -18,7 +18,7 @@ The limit is what this process may still allocate: ``MemAvailable`` (/proc/memin
 what the process's own caps leave (``ulimit -v``: RLIMIT_AS less the address space it has mapped, VmSize;
 ``ulimit -d``: RLIMIT_DATA less its data segment, VmData), whichever is lowest; ``SELPRES_MEMORY_LIMIT`` (bytes)
 sets it, for a machine shared with other work (and for tests). An allocation that fails all the same (torch
-raises RuntimeError "can't allocate memory", not MemoryError) is the same one-line refusal (selpres.run.cli).
+raises RuntimeError "can't allocate memory", not MemoryError) is the same one-line refusal (selpres.run.job).
 
 Time: a lower bound, at speeds no engine here reaches (10 us an epoch for the loop's bookkeeping, 0.1 ns per
 weight per presentation and replica, ~10x faster than the native kernel's one-off timing); a plan whose lower
@@ -30,8 +30,10 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from selpres.errors import ConfigError
+from selpres.run.specs import ScheduleSpec
 
 PER_PATTERN = 72  # bytes per replica per pattern of U
 PER_WEIGHT = 8 * 8  # bytes per replica per weight (8 float64 copies)
@@ -171,26 +173,44 @@ def refuse_unfit(make: Callable[[int], Estimate], replicas: int, schedule_key: s
         )
 
 
-def refuse_before_task(cfg) -> None:
+def refuse_before_task(replicas: int, layers: str, planned: ScheduleSpec) -> None:
     """The checks that need no data: replicas against memory at its smallest per replica (one pattern of U,
     no history), and a plan of more epochs than the history can hold, so ``replicas=1000000000`` is refused
-    before the task is built or a list of seeds is made."""
+    before the task is built or a list of seeds is made. ``planned``: the schedule as written."""
     from selpres.engines.model import parse_topology
 
     try:
-        sizes = parse_topology(cfg.topology.layers)
+        sizes = parse_topology(layers)
     except Exception:
         return  # check_topology names it
-    epochs = cfg.schedule.epochs
-    total = sum(int(e) for e in epochs) if epochs is not None and cfg.schedule.budget is None else 0
-    key, value = ("schedule.epochs", list(epochs)) if total else ("schedule.budget", cfg.schedule.budget)
-    refuse_unfit(lambda r: estimate(r, sizes, 1, total, 0), int(cfg.replicas), key, value)
+    epochs, budget = planned.epochs, planned.budget
+    total = sum(int(e) for e in epochs) if epochs is not None and budget is None else 0
+    key, value = ("schedule.epochs", list(epochs)) if total else ("schedule.budget", budget)
+    refuse_unfit(lambda r: estimate(r, sizes, 1, total, 0), int(replicas), key, value)
 
 
-def refuse_job(cfg, sizes: tuple[int, ...], schedule, n: int, test_patterns: int, torch_eval: bool) -> None:
+@dataclass(frozen=True)
+class Work:
+    """What a job will hold and do, once its task is known: ``replicas`` of a network of ``sizes`` on ``n``
+    patterns, ``planned`` as written (the key a refusal names), the plan on this n (``schedule``: its epochs and
+    presentations), the largest test set, held-out scores every ``heldout_every`` epochs, and whether scoring runs
+    in torch (its working arrays)."""
+
+    replicas: int
+    sizes: tuple[int, ...]
+    planned: ScheduleSpec
+    schedule: Any
+    n: int
+    test_patterns: int
+    heldout_every: int
+    torch_eval: bool
+
+
+def refuse_job(w: Work) -> None:
     """The full estimate, once the exemplar set's size and the schedule are known (before any replica)."""
-    budget = cfg.schedule.budget
-    key, value = ("schedule.budget", budget) if budget is not None else ("schedule.epochs", list(cfg.schedule.epochs))
-    epochs, presentations, every = schedule.total_epochs, schedule.presentations, int(cfg.eval.every)
-    make = lambda r: estimate(r, sizes, n, epochs, presentations, test_patterns, torch_eval, every)
-    refuse_unfit(make, int(cfg.replicas), key, value)
+    s = w.planned.node  # what sets the plan's length: a budget, the epochs listed, or ΣN_i (the parametric schedule)
+    name = next((k for k in ("budget", "epochs", "total_epochs") if s.get(k) is not None), "epochs")
+    key, value = f"schedule.{name}", list(s[name]) if name == "epochs" and s.get(name) is not None else s.get(name)
+    epochs, presentations = w.schedule.total_epochs, w.schedule.presentations
+    make = lambda r: estimate(r, w.sizes, w.n, epochs, presentations, w.test_patterns, w.torch_eval, w.heldout_every)
+    refuse_unfit(make, int(w.replicas), key, value)

@@ -37,9 +37,9 @@ from selpres.run.specs import task_specs
 
 def compose_data_config(overrides: list[str]):
     """(robot, data) specs of train.py's config with ``robot``/``data`` overrides, checked (not the topology)."""
-    cfg = compose_train(CONFIG_DIR, overrides)
-    check_task(cfg)
-    return task_specs(cfg)
+    robot, data = task_specs(compose_train(CONFIG_DIR, overrides))
+    check_task(robot, data)
+    return robot, data
 
 
 def export_data(stem: Path, robot_cfg, data_cfg, urdf: Path | None = None) -> dict[str, Path]:

@@ -20,7 +20,7 @@ import math
 
 import torch
 
-from selpres.data import paper as D
+from selpres.patterns import metric_names
 
 MARGIN = 0.1  # a network must beat the mean predictor's RMS by more than 10 % not to be warned about
 
@@ -30,7 +30,7 @@ def nmse(nm_sums: torch.Tensor, n: int, Y: torch.Tensor) -> dict[str, torch.Tens
     ``[R, out]`` over the ``n`` patterns whose targets (Nm) are ``Y [n, out]``."""
     var = Y.var(0, unbiased=False).to(nm_sums.dtype)
     per = torch.where(var > 0, nm_sums.div(n) / var.clamp_min(torch.finfo(var.dtype).tiny), math.nan)
-    names = D.metric_names(Y.shape[1])[1:]
+    names = metric_names(Y.shape[1])[1:]
     return {"overall": per.mean(1), **{joint: per[:, k] for k, joint in enumerate(names)}}
 
 
@@ -41,7 +41,7 @@ def task_floor(train_Y: torch.Tensor, tests: dict[str, tuple[torch.Tensor, torch
     for name, (_, Y) in tests.items():
         sq = (Y - mean).square().sum(0, keepdim=True)  # [1, out]
         per = sq.div(Y.shape[0]).sqrt()[0]
-        names = D.metric_names(Y.shape[1])[1:]
+        names = metric_names(Y.shape[1])[1:]
         rms = {"overall": float(sq.sum().div(Y.numel()).sqrt()), **{j: float(v) for j, v in zip(names, per)}}
         ratio = {k: (None if math.isnan(float(v[0])) else float(v[0])) for k, v in nmse(sq, Y.shape[0], Y).items()}
         out[name] = {"nm": rms, "nmse": ratio}

@@ -1,8 +1,9 @@
 """One writer per job folder: an advisory lock the operating system holds for the process.
 
 Two processes that train into one folder interleave their history and checkpoints (each "resumes" the
-other's in-flight checkpoint), so ``python train.py`` takes this lock before it reads or writes anything of
-the job, and a second process on the same folder exits naming the holder instead.
+other's in-flight checkpoint), so a job holds its folder's lock (:func:`holding`) before it reads or writes
+anything there (:mod:`selpres.run.job` takes it before even Hydra's record is written), and a second process on
+the same folder is told who holds it instead (:class:`FolderBusy`).
 
 The lock is ``fcntl.flock`` on ``.selpres.lock`` in the job folder (stdlib; ``filelock`` would buy the same
 ``flock`` on Linux plus Windows support, which the native kernel and the rest of selpres do not have): the
@@ -15,40 +16,32 @@ let two processes both believe they hold the folder.
 
 from __future__ import annotations
 
-import base64
 import fcntl
-import json
 import os
 from contextlib import contextmanager
 from pathlib import Path
+
+from selpres.run import stop
 
 LOCK = ".selpres.lock"
 
 
 class FolderBusy(RuntimeError):
-    """The job folder is held by another live process (named by its PID when it has written it); ``record``:
-    the holder's Hydra record (``.hydra/`` file name -> bytes) as it left it in the lock file, if it did."""
+    """The job folder is held by another live process (named by its PID when it has written it)."""
 
-    def __init__(self, folder, pid: str, record: dict[str, bytes] | None = None):
-        self.folder, self.pid, self.record = str(folder), pid, record or {}
+    def __init__(self, folder, pid: str):
+        self.folder, self.pid = str(folder), pid
         holder = f"process {pid}" if pid else "another process"
         super().__init__(f"{self.folder} is in use by {holder} (one writer per job folder); nothing was touched")
 
     def __reduce__(self):
-        return type(self), (self.folder, self.pid, self.record)
+        return type(self), (self.folder, self.pid)
 
 
-def _read_lock(fd: int) -> tuple[str, dict[str, bytes]]:
-    """(PID, Hydra record) from a lock file: the PID on the first line, then the record as JSON (base64)."""
-    data = b""
-    while chunk := os.pread(fd, 1 << 16, len(data)):
-        data += chunk
-    first, _, rest = data.partition(b"\n")
-    try:
-        record = {k: base64.b64decode(v) for k, v in json.loads(rest).items()} if rest.strip() else {}
-    except ValueError:
-        record = {}
-    return first.decode(errors="replace").strip(), record
+def _holder(fd: int) -> str:
+    """The PID its holder wrote on the lock file's first line ('' if none yet)."""
+    data = os.pread(fd, 64, 0)
+    return data.partition(b"\n")[0].decode(errors="replace").strip()
 
 
 class FolderLock:
@@ -76,9 +69,9 @@ class FolderLock:
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
-                pid, record = _read_lock(fd)
+                pid = _holder(fd)
                 os.close(fd)
-                raise FolderBusy(folder, pid, record) from None
+                raise FolderBusy(folder, pid) from None
             try:
                 same = os.stat(path).st_ino == os.fstat(fd).st_ino
             except FileNotFoundError:
@@ -96,13 +89,6 @@ class FolderLock:
                 raise
             return cls(folder, fd, created)
         raise FolderBusy(folder, "")
-
-    def remember(self, record: dict[str, bytes]) -> None:
-        """Keep the holder's Hydra record (``.hydra/`` files) in the lock file: in a sweep, Hydra rewrites a
-        job's ``.hydra/`` before any callback runs, so a job that finds the folder busy puts these back."""
-        text = json.dumps({k: base64.b64encode(v).decode() for k, v in record.items()})
-        os.ftruncate(self._fd, 0)
-        os.pwrite(self._fd, f"{os.getpid()}\n{text}\n".encode(), 0)
 
     def release(self) -> None:
         if self._fd < 0:
@@ -125,29 +111,20 @@ def _key(folder: str | Path) -> Path:
     return Path(os.path.abspath(folder))
 
 
-def hold(folder: str | Path) -> FolderLock:
-    """Take the lock of ``folder`` for the rest of this job (again for the same folder: the one held)."""
-    key = _key(folder)
-    if key not in _HELD:
-        _HELD[key] = FolderLock.take(key)
-    return _HELD[key]
-
-
-def release(folder: str | Path) -> None:
-    lock = _HELD.pop(_key(folder), None)
-    if lock is not None:
-        lock.release()
-
-
 @contextmanager
 def holding(folder: str | Path | None):
-    """The lock of ``folder`` for the duration (None: no folder, no lock); one already held by this process
-    (``python train.py`` takes it before Hydra writes) is kept, not released here."""
+    """The lock of ``folder`` for the duration (None: no folder, no lock), or :class:`FolderBusy`: the one place a
+    job folder's lock is taken and released. A folder this process holds already (a job's folder, which
+    :func:`selpres.run.train.train` is then given) is not taken again, nor released at the inner exit. Taking and
+    releasing are not cut by a signal (it is answered after them: :mod:`selpres.run.stop`)."""
     if folder is None or _key(folder) in _HELD:
         yield
         return
-    hold(folder)
+    key = _key(folder)
+    with stop.deferred():
+        _HELD[key] = FolderLock.take(key)
     try:
         yield
     finally:
-        release(folder)
+        with stop.deferred():
+            _HELD.pop(key).release()

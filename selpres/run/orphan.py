@@ -3,8 +3,8 @@
 A joblib (loky) worker of ``-m hydra/launcher=local2`` keeps training when the sweep's own process is
 killed: reparented to PID 1 it finishes its job while the user re-runs the sweep, a second writer on the
 same folders. The sweep's process records who it is in the environment its workers inherit
-(:func:`record_sweep_parent`, from ``OutputGuard.on_multirun_start``); a worker's job watches that process
-(:func:`watch`: a daemon thread polling once a second) and the training loop, at the end of every epoch,
+(:func:`record_sweep_parent`, from ``selpres.run.job.FolderNote.on_multirun_start``); a worker's job watches that
+process (:func:`watch`: a daemon thread polling once a second) and the training loop, at the end of every epoch,
 stops once it is gone, writing a checkpoint first, so the re-run resumes every such job.
 
 Why not ``prctl(PR_SET_PDEATHSIG)``: it fires when the *thread* that forked the worker exits, and a loky

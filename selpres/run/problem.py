@@ -1,6 +1,7 @@
-"""The problem a config determines before the first update: validated data, schedule, samplers, initial weights
-(``prepare``, which writes nothing), and the engine that will train it (``job_engine``). The loop that runs it is
-``selpres.run.train``.
+"""The problem a resolved job determines before the first update: validated data, schedule, samplers, initial
+weights (``prepare``, which writes nothing), and the engine that will train it (``job_engine``, through
+``selpres.engines.factory.build_engine``). It reads the job's specs (``selpres.run.resolve.JobSpec``), never the
+config. The loop that runs it is ``selpres.run.train``.
 """
 
 from __future__ import annotations
@@ -10,28 +11,22 @@ import logging
 from dataclasses import dataclass
 
 import torch
-from omegaconf import DictConfig
 
-from selpres.data import paper as D
 from selpres.data.file import DataFileError
 from selpres.data.task import Task, load_task
-from selpres.engines.batch import BatchEngine
+from selpres.engines.factory import ONLINE, Engine, build_engine
 from selpres.engines.model import init_replica_params
-from selpres.engines.native_minibatch import NAME as NATIVE_MINIBATCH
-from selpres.engines.native_minibatch import make_minibatch_engine
-from selpres.engines.online import make_engine
-from selpres.engines.optim import check_hparams, with_defaults
 from selpres.errors import ConfigError
+from selpres.patterns import Scaler
 from selpres.presentation.orders import make_order
-from selpres.presentation.proportions import fit_schedule, with_fraction_form
+from selpres.presentation.proportions import fit_schedule, schedule_of
 from selpres.presentation.pruning._job import Pruning, pruning_plan
 from selpres.presentation.sampler import SelectivePresentation
-from selpres.presentation.schedule import EpochPlan, Schedule, build_schedule
+from selpres.presentation.schedule import EpochPlan, Schedule
 from selpres.presentation.selection import StageSelection, stage_selection
-from selpres.run.checks import pruning_spec, validate
-from selpres.run.estimate import refuse_job
-from selpres.run.optimizer import minibatch_reason, optim_spec
-from selpres.run.specs import plain, task_specs
+from selpres.run.estimate import Work, refuse_job
+from selpres.run.resolve import engine_kind, kind_of
+from selpres.run.specs import JobSpec, ScheduleSpec
 from selpres.seeding import derive_seed, generator
 
 log = logging.getLogger("selpres")
@@ -44,7 +39,7 @@ class Problem:
     sizes: tuple[int, ...]
     schedule: Schedule
     seeds: list[int]
-    scaler: D.Scaler
+    scaler: Scaler
     X: torch.Tensor  # exemplar inputs, scaled
     Y: torch.Tensor  # exemplar targets, scaled
     tests: dict  # name -> (X scaled, Y in Nm)
@@ -80,30 +75,28 @@ class Problem:
         return self.nm_per_scaled.square()
 
 
-def prepare(cfg: DictConfig) -> Problem:
-    """Validate ``cfg`` against itself and against the exemplar set; raises ConfigError, writes nothing."""
-    sizes = validate(cfg)
-    task = load_task(*task_specs(cfg))
-    schedule, note = task_schedule(cfg, task)
+def prepare(job: JobSpec) -> Problem:
+    """The resolved job against the exemplar set; raises ConfigError, writes nothing."""
+    task = load_task(job.robot, job.data)
+    sch = job.schedule
+    schedule, note = task_schedule(sch, task)
     # scored in torch: batch methods, the mini-batch engine (what the native kernel cannot run), torch/reference
-    torch_eval = (
-        optim_spec(cfg).batch or minibatch_reason(cfg) is not None or cfg.engine.value in ("torch", "reference")
-    )
+    torch_eval = job.engine.mode != ONLINE or job.engine.requested in ("torch", "reference")
     largest_test = max(len(task.tests.heldout.X), len(task.tests.test10.X))
-    refuse_job(cfg, sizes, schedule, task.n, largest_test, torch_eval)  # before any replica's state is made
-    seed = int(cfg.seed)  # read once: an OmegaConf access costs ~20 us, 1000 of them 23 ms at R = 1000
-    seeds = [seed + r for r in range(cfg.replicas)]
-    order = make_order(cfg.schedule.order, cfg.schedule.strata_bins)
+    work = Work(job.replicas, job.sizes, sch, schedule, task.n, largest_test, job.cadence.heldout_every, torch_eval)
+    refuse_job(work)  # before any replica's state is made
+    seeds = job.seeds
+    order = make_order(sch.order, sch.strata_bins)
     orders = order.orders(task.exemplar.X, [generator(s, "subset") for s in seeds])
     samplers = [SelectivePresentation(order=order, schedule=schedule, seed=s) for order, s in zip(orders, seeds)]
     X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
-    pruning, budget = None, schedule.presentations + order.planned_charge(schedule.sizes, cfg.schedule.selection_cost)
-    spec = pruning_spec(cfg.schedule)
-    if spec is not None:
-        fitted = fit_schedule(cfg.schedule.sizes, cfg.schedule.budget, task.n)[1]
-        epochs = None if cfg.schedule.epochs is None else int(cfg.schedule.epochs[0])
-        pruning = Pruning(*spec, task.n, seeds, fitted, epochs, float(cfg.schedule.selection_cost))
+    pruning, budget = None, schedule.presentations + order.planned_charge(schedule.sizes, sch.selection_cost)
+    if sch.pruning is not None:
+        fitted = fit_schedule(sch.sizes, sch.budget, task.n)[1]
+        epochs = None if sch.epochs is None else int(sch.epochs[0])
+        pruning = Pruning(*sch.pruning, task.n, seeds, fitted, epochs, float(sch.selection_cost))
         budget = fitted if fitted is not None else task.n * epochs
+    sizes = job.sizes
     return Problem(
         sizes=sizes,
         schedule=schedule,
@@ -114,7 +107,7 @@ def prepare(cfg: DictConfig) -> Problem:
         tests=task.scaled_tests(),
         samplers=samplers,
         init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
-        selection=stage_selection(order, schedule, seeds, task.exemplar.X, X, Y, cfg.schedule.selection_cost, samplers),
+        selection=stage_selection(order, schedule, seeds, task.exemplar.X, X, Y, sch.selection_cost, samplers),
         task=task,
         schedule_note=note,
         pruning=pruning,
@@ -122,20 +115,21 @@ def prepare(cfg: DictConfig) -> Problem:
     )
 
 
-def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
+def task_schedule(sch: ScheduleSpec, task: Task) -> tuple[Schedule, str | None]:
     """The schedule on the task's n: the paper's counts by their proportions when n is not 1002
     (``selpres.presentation.proportions``, logged), refusals with the fraction form, and a data file too short for
     the schedule named as such."""
-    sch = plain(cfg.schedule)
-    sizes, budget, note = fit_schedule(sch["sizes"], sch["budget"], task.n)
-    if note:
-        log.info(note)
-    spec = pruning_spec(cfg.schedule)
-    if spec is not None:  # checked in validate: sizes [1.0], a budget or one epoch count
-        epochs = None if sch["epochs"] is None else int(sch["epochs"][0])
-        return pruning_plan(*spec, task.n, budget, epochs, float(cfg.schedule.selection_cost)), note
+    if sch.pruning is not None:  # checked in resolve: sizes [1.0], a budget or one epoch count
+        sizes, budget, note = fit_schedule(sch.sizes, sch.budget, task.n)
+        if note:
+            log.info(note)
+        epochs = None if sch.epochs is None else int(sch.epochs[0])
+        return pruning_plan(*sch.pruning, task.n, budget, epochs, float(sch.selection_cost)), note
     try:
-        return build_schedule(sizes, sch["epochs"], task.n, budget), note
+        schedule, note = schedule_of(sch.node, task.n)  # listed or parametric (selpres.presentation.proportions)
+        if note:
+            log.info(note)
+        return schedule, note
     except ConfigError as e:
         if e.key == "schedule.sizes" and task.info.get("kind") == "file":
             i = task.info
@@ -143,66 +137,16 @@ def task_schedule(cfg: DictConfig, task: Task) -> tuple[Schedule, str | None]:
                 i["path"],
                 "rows",
                 f"{i['rows']:,} rows ({task.n:,} for training after "
-                f"holding out {i['heldout']:,}): too few for schedule.sizes={sch['sizes']} "
+                f"holding out {i['heldout']:,}): too few for schedule.sizes={sch.sizes} "
                 f"({e.allowed})",
             ) from None
-        raise with_fraction_form(e, sizes) from None
+        raise
 
 
-def engine_kind(cfg: DictConfig) -> str:
-    """The update a config's job runs: ``minibatch`` (selpres.engines.minibatch), ``batch`` (one step an epoch)
-    or ``online`` (the native, torch and reference engines: one update rule)."""
-    if minibatch_reason(cfg) is not None:
-        return "minibatch"
-    return "batch" if optim_spec(cfg).batch else "online"
+def job_engine(job: JobSpec, prob: Problem) -> Engine:
+    """The engine the job asks for, its replicas from the problem's initial weights, its planned cost the problem's
+    (a cosine rate's horizon): ``selpres.engines.factory.build_engine`` chooses, and falls back once saying why."""
+    return build_engine(job.engine.replace(horizon=prob.budget), prob.init_params)
 
 
-def kind_of(engine_name: str | None) -> str:
-    """:func:`engine_kind` of an engine that ran (results.json ``engine``; records older than it name none)."""
-    if engine_name == NATIVE_MINIBATCH:  # the mini-batch update, run by the native kernel
-        return "minibatch"
-    return engine_name if engine_name in ("minibatch", "batch") else "online"
-
-
-def job_engine(cfg: DictConfig, prob: Problem):
-    """The engine the config asks for; ``engine=native`` where the kernel cannot run is a user error.
-    Batch methods (QuickProp, Delta-Bar-Delta, Rprop, Adam, batch SGD) step once per epoch in torch."""
-    from selpres.native import KernelUnavailable
-
-    o = optim_spec(cfg)
-    kind = engine_kind(cfg)
-    if kind == "minibatch":  # the native mini-batch kernel (fast, native) or the torch mini-batch engine (torch)
-        log.info("engine=%s: the mini-batch update (%s)", cfg.engine.value, minibatch_reason(cfg))
-        try:
-            return make_minibatch_engine(
-                cfg.engine.value,
-                prob.sizes,
-                prob.init_params,
-                o.target,
-                with_defaults(o.target, o.params),  # the optimizer's defaults for unset keys, for both engines
-                o.batch_size,
-                cfg.model.activation,
-                o.lr_schedule,
-                prob.budget,
-                o.reduction,
-            )
-        except KernelUnavailable as exc:
-            raise ConfigError(
-                "engine", "native", f"fast or torch: the native mini-batch kernel cannot run this job ({exc})"
-            ) from None
-    if kind == "batch":
-        return BatchEngine(
-            prob.sizes,
-            prob.init_params,
-            o.target,
-            o.params,
-            sigmoid_prime_offset=o.sigmoid_prime_offset,
-            reduction=o.reduction,
-        )
-    try:
-        hp = check_hparams(o.target, o.params)  # the online rule, SGD with momentum: lr, momentum
-        return make_engine(cfg.engine.value, prob.sizes, prob.init_params, hp["lr"], hp["momentum"], o.batch_size)
-    except KernelUnavailable as exc:
-        raise ConfigError(
-            "engine", cfg.engine.value, f"fast, torch or reference: the native kernel cannot run here ({exc})"
-        ) from None
+__all__ = ["Problem", "prepare", "task_schedule", "job_engine", "engine_kind", "kind_of"]  # the last two: run/cli's

@@ -1,46 +1,34 @@
 """What a job reports: ``results.json`` (identity, cost, timing, per-replica and summary metrics, curves).
 
-A job's identity is the hash of everything that can change its numbers (``job_hash``); the knobs that
-cannot (logging, threads, checkpoints, the sweep's name, overwrite) are left out, so changing them finds
-the same finished job.
+A job's identity is the hash of everything that can change its numbers (``job_hash`` of a composed config; a
+resolved job holds it as ``JobSpec.hash``, both ``selpres.run.specs.identity``); the knobs that cannot (logging,
+threads, checkpoints, the sweep's name, overwrite) are left out, so changing them finds the same finished job.
 """
 
 from __future__ import annotations
 
 import math
-import subprocess
 import time
-from pathlib import Path
 
 import torch
 from omegaconf import DictConfig
 
-from selpres.data.file import file_digest
-from selpres.data.task import task_files
 from selpres.engines.activations import ACTIVATIONS
+from selpres.engines.factory import Engine
 from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.sampler import shuffle_implementation
-from selpres.run import floor, stalls
-from selpres.run.optimizer import optim_spec
-from selpres.run.specs import recorded, task_specs
+from selpres.run import floor, provenance, stalls
+from selpres.run.specs import JobSpec, identity, recorded, task_specs
 from selpres.run.stats import summarize
-from selpres.storage import stable_hash
 
-NOT_IDENTITY = ("logging", "overwrite", "threads", "checkpoint", "name")
 SETS = ("test10", "heldout")
 UNITS = ("nm", "scaled", "nmse")  # nmse: MSE ÷ the set's target variance (selpres.run.floor)
 
 
 def job_hash(cfg: DictConfig) -> str:
-    """Identity of a job's numbers: everything but the knobs that cannot change them, and the contents of the
-    files its task reads (``selpres.data.task.task_files``: what the arm's source reads, a data file), so an edited
-    URDF or CSV is not taken for the finished job. The config as results.json records it (``recorded``: the data node
-    typed by its route)."""
-    c = recorded(cfg)
-    for k in NOT_IDENTITY:
-        c.pop(k, None)
-    c["file_sha256"] = [file_digest(p) if p.is_file() else None for p in task_files(*task_specs(cfg))]
-    return stable_hash(c)
+    """The identity of a composed config's job (``selpres.run.specs.identity``): what a job resolved from it records
+    as ``config_hash``, so the command line finds a finished job without resolving it."""
+    return identity(recorded(cfg), *task_specs(cfg))
 
 
 def replica_results(seeds: list[int], final: dict, diverged_at: list, last_train_mse: list) -> list[dict]:
@@ -96,7 +84,7 @@ def summary(replicas: list[dict]) -> dict:
     }
 
 
-def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seconds: dict) -> dict:
+def build(job: JobSpec, prob, engine: Engine, final: dict, progress, seconds: dict) -> dict:
     """results.json of a finished job (``prob``: selpres.run.problem.Problem; ``progress``: its Progress)."""
     R = len(prob.seeds)
     unscored(final, progress)
@@ -107,25 +95,24 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
     train_Y = prob.task.exemplar.Y if prob.task is not None else prob.scaler.inverse_y(prob.Y)
     task_floor = floor.task_floor(train_Y, prob.tests)
     stats = summary(reps)
-    spec = optim_spec(cfg)
     pruning = prob.pruning.describe() if getattr(prob, "pruning", None) is not None else None
-    order = {"order": cfg.schedule.order, "order_class": ORDERS.path_of(cfg.schedule.order)}  # the class that ran
-    schedule = {"name": cfg.schedule.name, **order, **prob.schedule.describe()}
+    sch = job.schedule
+    order = {"order": sch.order, "order_class": ORDERS.path_of(sch.order)}  # the class that ran
+    schedule = {"name": sch.name, **order, **prob.schedule.describe()}
     if pruning is not None:  # what ran, not the plan's upper bound: mean over replicas (each in pruning)
         training = sum(pruning["trained_presentations"]) / R
         schedule.update(presentations=training, epochs=[max(pruning["epochs"])], planned_epochs=schedule["epochs"])
     return {
         "status": "diverged" if n_div == R else "complete",
         "diverged_replicas": n_div,
-        "config_hash": chash,
+        "config_hash": job.hash,
         "schedule": schedule,
         "pruning": pruning,  # infobatch / selective_backprop: parameters, per-replica cost, patterns left out
-        "topology": cfg.topology.layers,
+        "topology": job.layers,
         "engine": engine.name,  # what ran
-        "optimizer": spec.path,  # the class whose rule ran (selpres.engines.optim, or the user's own)
-        "optimizer_dropped": spec.dropped or None,  # keys of the optim group file the chosen class does not take
-        "activation": ACTIVATIONS.path_of(cfg.model.activation),  # the hidden units' class that ran (a user's too)
-        "engine_requested": cfg.engine.value,
+        "optimizer": job.optim.path,  # the class whose rule ran (selpres.engines.optim, or the user's own)
+        "activation": ACTIVATIONS.path_of(job.activation),  # the hidden units' class that ran (a user's too)
+        "engine_requested": job.engine.requested,
         "engine_fallback": engine.fallback_reason,  # why "fast" did not run natively (None if it did)
         "evaluation": engine.evaluation,  # e.g. "native, 8 lanes (AVX-512)": the same numbers, not the same speed
         "shuffle": shuffle_implementation(),  # native, or numpy (why): the same permutations either way
@@ -134,41 +121,27 @@ def build(cfg: DictConfig, chash: str, prob, engine, final: dict, progress, seco
         "presentations_done": progress.presentations,  # the cost: training + selection presentations
         "training_presentations": training,
         "selection_presentations": progress.selection_presentations,  # forward passes (selpres.presentation.selection)
-        "selection_cost": cfg.schedule.selection_cost,  # the charge per candidate scored
+        "selection_cost": sch.selection_cost,  # the charge per candidate scored
         "tests": {
             "test10": {"n": int(prob.tests["test10"][0].shape[0])},
-            "heldout": {"n": heldout_n, "curve_n": min(cfg.eval.heldout_curve, heldout_n)},
-            "heldout_curve_every": cfg.eval.every,
+            "heldout": {"n": heldout_n, "curve_n": min(job.cadence.heldout_curve, heldout_n)},
+            "heldout_curve_every": job.cadence.heldout_every,
         },
         "data": prob.task.info if prob.task is not None else None,  # what data was made, how, its hash
         "schedule_note": prob.schedule_note,  # how a named schedule's counts were applied to this n
         "resumed_from_epoch": progress.resumed_from,
         "stale_checkpoint": progress.stale_checkpoint,
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        "git_commit": _git_commit(),
+        "provenance": provenance.record(),  # versions, commit (selpres's own checkout only), platform, native build
         "wall_seconds": seconds,
         "seconds_per_presentation": seconds["train"] / max(1, training * R),
         "summary": stats,
         "floor": task_floor,  # predicting the training mean: RMS and nMSE per set and joint (selpres.run.floor)
         "floor_warnings": floor.floor_warnings(
-            stats, task_floor, prob.task.info if prob.task else None, str(cfg.topology.layers)
+            stats, task_floor, prob.task.info if prob.task else None, str(job.layers)
         ),
         "replica_results": reps,
-        "stalls": stalls.evidence(reps, engine, prob, cfg.model.activation, task_floor),  # stalled? dead units
+        "stalls": stalls.evidence(reps, engine, prob, job.activation, task_floor),  # stalled? dead units
         "curves": progress.history,
-        "config": recorded(cfg),
+        "config": job.config,
     }
-
-
-def _git_commit() -> str | None:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=Path(__file__).parent,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        )
-        return out.stdout.strip() or None
-    except (OSError, subprocess.SubprocessError):
-        return None

@@ -2,9 +2,11 @@
 
 Curves against cumulative presentations are the fair axis: a selective and a conventional run are
 compared at equal cost there. The log is a pure function of the history records, so a resumed run
-rebuilds it from the checkpoint's history instead of appending duplicates. A job's final metrics are single
-values, so they go where single values belong, not into one-point charts: the HParams tab (each curve's last value)
-and a Markdown table in the Text tab; the Time Series tab holds only curves.
+rebuilds it from the checkpoint's history instead of appending duplicates.
+
+What a sweep is compared by (its HParams, the final metrics at each job's cost) is :mod:`selpres.run.hparams`'s;
+the Custom Scalars tab (:func:`layout_summary`, once per file) has one chart per quantity against presentations and
+against epochs: the mean over replicas with its min–max band (a Margin chart), every run in one chart.
 """
 
 from __future__ import annotations
@@ -70,7 +72,8 @@ class EventFile:
             self._file.flush()
 
     def close(self) -> None:
-        self._file.close()
+        with naming(self.path):  # the buffer's last bytes are written here: a full disk fails here too
+            self._file.close()
 
 
 def hparams_and_metrics(hparams: dict, metrics: dict) -> tuple[dict, dict]:
@@ -151,6 +154,46 @@ def metrics_table(metrics: dict) -> str:
     return "\n".join(["| final metric | value |", "|---|---|", *rows])
 
 
+CHARTS = (  # (title, the curve's tag stem): one Margin chart each, against presentations and against epochs
+    ("held-out RMS (Nm), first eval.heldout_curve patterns", "heldout_rms_nm"),
+    ("test-10 RMS (Nm)", "test10_rms_nm"),
+    ("training MSE (scaled)", "train_mse"),
+)
+
+
+def layout_summary():
+    """TensorBoard's Custom Scalars layout (as ``torch.utils.tensorboard.summary.custom_scalars`` builds it): per
+    quantity one Margin chart, the mean over replicas with its min–max band, against presentations (the cost axis
+    on which runs of different cost line up) and against epochs; the stage and training-set size as lines."""
+    from tensorboard.compat.proto import tensor_pb2, tensor_shape_pb2, types_pb2
+    from tensorboard.compat.proto.summary_pb2 import Summary, SummaryMetadata
+    from tensorboard.plugins.custom_scalar import layout_pb2
+
+    def margin(title: str, stem: str, axis: str):
+        tags = [f"{stem}/{k}/by_{axis}" for k in ("mean", "min", "max")]
+        series = layout_pb2.MarginChartContent.Series(value=tags[0], lower=tags[1], upper=tags[2])
+        return layout_pb2.Chart(title=title, margin=layout_pb2.MarginChartContent(series=[series]))
+
+    def lines(title: str, pattern: str):
+        return layout_pb2.Chart(title=title, multiline=layout_pb2.MultilineChartContent(tag=[pattern]))
+
+    categories = [
+        layout_pb2.Category(
+            title=f"against {axis} (mean over replicas, band: min to max)",
+            chart=[margin(f"{title} by {axis}", stem, axis) for title, stem in CHARTS]
+            + [lines(f"stage by {axis}", f"^schedule/stage/by_{axis}$")],
+        )
+        for axis in ("presentations", "epoch")
+    ]
+    tensor = tensor_pb2.TensorProto(
+        dtype=types_pb2.DT_STRING,
+        string_val=[layout_pb2.Layout(category=categories).SerializeToString()],
+        tensor_shape=tensor_shape_pb2.TensorShapeProto(),
+    )
+    meta = SummaryMetadata(plugin_data=SummaryMetadata.PluginData(plugin_name="custom_scalars"))
+    return Summary(value=[Summary.Value(tag="custom_scalars__config__", tensor=tensor, metadata=meta)])
+
+
 def _varint(n: int) -> bytes:
     """A non-negative int in protobuf's base-128 varint encoding."""
     out = bytearray()
@@ -193,7 +236,7 @@ class ScalarEvents:
 class Tracker:
     """TensorBoard event files written in the loop's own thread.
 
-    Kept by measurement (``python -m selpres.bench.tracking``, 2026-12-01, load 0.6, 3 rounds, conventional
+    Kept by measurement (``python -m selpres_bench.tracking``, 2026-12-01, load 0.6, 3 rounds, conventional
     6-13-2): against the same scalars and hparams through ``torch.utils.tensorboard.SummaryWriter``, the R = 1
     job's ``train()`` took 0.31 s instead of 0.60 s (x1.79-2.26) and its whole process 2.42 s instead of 2.85 s;
     the R = 1000 job's ``train()`` 9.9 s instead of 12.8 s (x1.29-1.38). The byte-for-byte tests against
@@ -215,6 +258,7 @@ class Tracker:
         self.logdir = Path(logdir)
         self.writer = None  # the EventFile, while open
         self._curve_tags: list[str] = []  # the by-epoch curves written, whose last values HParams shows
+        self._final_tags: list[str] = []  # the final metrics written (:meth:`final`): HParams' metrics instead
         if enabled:
             from tensorboard.compat.proto import event_pb2
 
@@ -227,6 +271,7 @@ class Tracker:
             name = f"events.out.tfevents.{int(time.time()):010d}.{socket.gethostname()}.{os.getpid()}.selpres"
             self.writer = EventFile(self.logdir / name)  # closed in close()
             self._append(self._event(wall_time=time.time(), file_version="brain.Event:2"))
+            self._append(self._event(wall_time=time.time(), summary=layout_summary()))
 
     def _append(self, event) -> None:
         self.writer.write(event.SerializeToString())
@@ -274,16 +319,26 @@ class Tracker:
         for rec in history:
             self.log_epoch(rec)
 
+    def final(self, scalars: dict, step: int) -> None:
+        """The job's final metrics (:data:`FINAL`), one scalar each at ``step`` (the job's cost): the metrics the
+        HParams tab declares, and in the Time Series tab one point per run at its cost."""
+        finite = [(k, v) for k, v in scalars.items() if v is not None and math.isfinite(v)]
+        if self.writer is None or not finite:
+            return
+        self._write(finite, step)
+        self._final_tags += [k for k, _ in finite]
+
     def close(self, hparams: dict, metrics: dict) -> None:
         """The hyperparameters for TensorBoard's HParams plugin (torch's ``add_hparams`` summaries, into this same
-        file), its metrics the mean curves (it shows a curve's last value: the job's final one), and every final
-        metric in a Markdown table (Text tab, tag ``final``); then the file is closed. No final metric becomes a
-        scalar: a one-point chart at step 0 is an empty card at the top of the Time Series tab."""
+        file), its metrics the final ones written by :meth:`final` (else the mean curves, whose last value it
+        shows), and every final metric in a Markdown table (Text tab, tag ``final``); then the file is closed."""
         if self.writer is None:
             return
         hp, mt = hparams_and_metrics(hparams, metrics)
-        curves = {tag: None for tag in self._curve_tags}
-        for summary in hparams_summaries(hp, curves):  # experiment, session start, session end
+        curves = {tag: None for tag in self._final_tags or self._curve_tags}
+        # the session's start and end; the experiment (which columns and metrics) is the sweep's, written once at its
+        # root after it (write_sweep_experiment), else TensorBoard infers it from the sessions
+        for summary in hparams_summaries(hp, curves)[1:]:
             self._append(self._event(wall_time=time.time(), summary=summary))
         if mt:
             self._append(self._event(wall_time=time.time(), summary=text_summary("final", metrics_table(mt))))

@@ -1,9 +1,10 @@
 """The training loop: one job trains R replicas of one (schedule, topology) through every stage.
 
-Read top to bottom: ``prepare`` (``selpres.run.problem``) turns a config into a validated problem (data,
-schedule, samplers, initial weights) without writing anything; ``train`` runs the epochs of the schedule's
-plan, asking each replica's sampler for its presentation order and the engine for the updates, scores the test sets,
-logs, checkpoints, and returns the results that ``results.json`` holds.
+Read top to bottom: ``train`` resolves the config into a checked job (``selpres.run.resolve``: read once, never
+again), ``prepare`` (``selpres.run.problem``) turns that into a validated problem (data, schedule, samplers,
+initial weights) without writing anything; the loop runs the epochs of the schedule's plan, asking each replica's
+sampler for its presentation order and the engine for the updates, scores the test sets, logs, checkpoints, and
+returns the results that ``results.json`` holds.
 """
 
 from __future__ import annotations
@@ -22,14 +23,17 @@ from pathlib import Path
 import torch
 from omegaconf import DictConfig
 
-from selpres.data import paper as D
+from selpres.engines.factory import Engine
+from selpres.patterns import metric_names
 from selpres.presentation.sampler import epoch_orders, shuffle_implementation
 from selpres.presentation.schedule import EpochPlan
 from selpres.run import floor, lock, orphan, stop
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
-from selpres.run.checks import check_seed
+from selpres.run.hparams import close_job
 from selpres.run.problem import Problem, job_engine, prepare
+from selpres.run.resolve import resolve
+from selpres.run.specs import Cadence, JobSpec
 from selpres.run.tracking import Tracker
 from selpres.seeding import seed_everything
 from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
@@ -85,20 +89,6 @@ def _rms_nm(sums: torch.Tensor, n: int, prob: Problem) -> torch.Tensor:
     return _rms(sums * prob.nm2_per_scaled2, n)
 
 
-@dataclass(frozen=True)
-class Cadence:
-    """The config values the loop reads every epoch, read once: an OmegaConf access costs ~10 us, and an
-    epoch's bookkeeping at R = 1 must stay below its updates (~0.3 ms)."""
-
-    heldout_every: int  # eval.every
-    heldout_curve: int  # eval.heldout_curve
-    checkpoint_every: int  # checkpoint.every
-
-    @classmethod
-    def of(cls, cfg: DictConfig) -> Cadence:
-        return cls(int(cfg.eval.every), int(cfg.eval.heldout_curve), int(cfg.checkpoint.every))
-
-
 def curve_point(engine, prob: Problem, cad: Cadence, ep: EpochPlan | None, loss, progress: Progress) -> dict:
     """One history record: where the job is, the training MSE, test-10 RMS and (when due) held-out RMS."""
     epoch = -1 if ep is None else ep.index
@@ -136,7 +126,7 @@ def final_scores(engine, prob: Problem) -> dict:
             per_joint = unit_sums.div(n).sqrt()
             scores[unit] = {
                 "overall": _rms(unit_sums, n),
-                **{joint: per_joint[:, k] for k, joint in enumerate(D.metric_names(sums.shape[1])[1:])},
+                **{joint: per_joint[:, k] for k, joint in enumerate(metric_names(sums.shape[1])[1:])},
             }
         scores["nmse"] = floor.nmse(sums * prob.nm2_per_scaled2, n, prob.tests[name][1])  # selpres.run.floor
         out[name] = scores
@@ -147,11 +137,10 @@ def final_scores(engine, prob: Problem) -> dict:
 class Job:
     """A job under way: its problem, engine, progress and where it writes (``out`` None: nowhere)."""
 
-    cfg: DictConfig
+    spec: JobSpec
     prob: Problem
-    engine: object
+    engine: Engine
     progress: Progress
-    chash: str
     out: Path | None
     ckpts: Checkpoints | None
     tracker: Tracker
@@ -162,41 +151,35 @@ class Job:
         largest = max(st.size if st.epochs else st.extra for st in self.prob.schedule.stages)
         return torch.empty(len(self.prob.seeds) * largest, dtype=torch.int64)
 
-    @functools.cached_property
-    def cadence(self) -> Cadence:
-        return Cadence.of(self.cfg)
-
     def checkpoint_due(self, ep: EpochPlan) -> bool:
-        every = self.cadence.checkpoint_every
+        every = self.spec.cadence.checkpoint_every
         every = every and (ep.index + 1) % every == 0
         last = ep.index == len(self.prob.plan) - 1
         return self.ckpts is not None and not last and (ep.index in self.prob.stage_ends or bool(every))
 
 
-def start(cfg: DictConfig, out_dir: str | Path | None, clock: Clock) -> Job:
-    """Validate and prepare; resume from this job's checkpoint if there is one (overwrite: start afresh)."""
-    check_seed(cfg)  # before seeding: seed=2^64 would overflow torch.manual_seed
-    seed_everything(cfg.seed)
-    if cfg.threads > 0:
-        torch.set_num_threads(cfg.threads)
-    prob = prepare(cfg)
-    engine = job_engine(cfg, prob)
+def start(spec: JobSpec, out_dir: str | Path | None, clock: Clock) -> Job:
+    """Prepare the resolved job; resume from its checkpoint if there is one (overwrite: start afresh)."""
+    seed_everything(spec.seed)
+    if spec.threads > 0:
+        torch.set_num_threads(spec.threads)
+    prob = prepare(spec)
+    engine = job_engine(spec, prob)
     if shuffle_implementation() != "native":
         log.warning("the per-epoch shuffles run in numpy (slower, the same permutations): %s", shuffle_implementation())
     out = Path(out_dir) if out_dir is not None else None
-    chash = results_json.job_hash(cfg)
     # a pruning job's scores are not checkpointed (recorded as results.json's pruning.checkpointed): it restarts
-    ckpts = Checkpoints(out, chash) if out is not None and cfg.checkpoint.enabled and not prob.pruning else None
-    if ckpts and cfg.overwrite:
+    ckpts = Checkpoints(out, spec.hash) if out is not None and spec.checkpoints and not prob.pruning else None
+    if ckpts and spec.overwrite:
         ckpts.discard()
     progress = ckpts.resume(engine, len(prob.seeds)) if ckpts else Progress.fresh(len(prob.seeds))
     clock.add(progress.seconds)
     # the event file goes into the job's own folder: TensorBoard names the run by it (the overrides), not '…/tb'
-    tracker = Tracker(out if out else Path("tb"), cfg.logging.tensorboard and out is not None, cfg.logging.per_replica)
+    tracker = Tracker(out if out else Path("tb"), spec.tensorboard and out is not None, spec.per_replica)
     tracker.replay(progress.history)
-    job = Job(cfg, prob, engine, progress, chash, out, ckpts, tracker)
+    job = Job(spec, prob, engine, progress, out, ckpts, tracker)
     if not progress.history:  # the untrained network: every curve starts at 0 presentations
-        record(job, {**curve_point(engine, prob, job.cadence, None, None, progress), "work_seconds": 0.0})
+        record(job, {**curve_point(engine, prob, job.spec.cadence, None, None, progress), "work_seconds": 0.0})
     return job
 
 
@@ -236,7 +219,7 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
     with clock("eval"):
         # a replica that presented nothing this epoch (its budget spent) has a NaN loss, not a diverged one
         mark_diverged(progress, job.engine, loss if pr is None else torch.nan_to_num(loss, nan=0.0), ep.index)
-        rec = curve_point(job.engine, prob, job.cadence, ep, loss, progress)
+        rec = curve_point(job.engine, prob, job.spec.cadence, ep, loss, progress)
     rec["work_seconds"] = clock.work()
     with clock("log"):
         record(job, rec)
@@ -244,21 +227,28 @@ def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
 
 
 def train(
-    cfg: DictConfig, out_dir: str | Path | None = None, on_stage_end: Callable[[dict, Problem], None] | None = None
+    cfg: DictConfig,
+    out_dir: str | Path | None = None,
+    on_stage_end: Callable[[dict, Problem], None] | None = None,
+    on_epoch: Callable[[dict, Problem], None] | None = None,
 ) -> dict:
-    """Train ``cfg.replicas`` replicas through the schedule; returns the results dict.
+    """Train ``cfg.replicas`` replicas through the schedule of the composed config ``cfg``; returns the results dict.
+    Its first step resolves ``cfg`` into a checked :class:`~selpres.run.resolve.JobSpec`: what follows reads that.
 
     With ``out_dir`` the job logs to TensorBoard, checkpoints and writes ``results.json`` and ``weights.pt``
     there, and resumes from a checkpoint of the same config (``overwrite=true``: starts afresh).
-    ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it).
+    ``on_stage_end(record, problem)`` is called at each stage's last epoch (the command line prints it);
+    ``on_epoch(record, problem)`` after every epoch, before ``on_stage_end`` (the command line's progress line).
     """
     with lock.holding(out_dir):  # one writer per job folder (selpres.run.lock)
         clock = Clock()
         with clock("prepare"):
-            job = start(cfg, out_dir, clock)
+            job = start(resolve(cfg), out_dir, clock)
         with clock("loop"), stop.loop():
             for ep in job.prob.plan[job.progress.epoch :]:
                 rec = run_epoch(job, ep, clock)
+                if on_epoch is not None:
+                    on_epoch(rec, job.prob)
                 spent = job.prob.pruning is not None and job.prob.pruning.exhausted  # every replica spent its budget
                 if on_stage_end is not None and (ep.index in job.prob.stage_ends or spent):
                     on_stage_end(rec, job.prob)
@@ -268,17 +258,16 @@ def train(
                 if spent:
                     break
                 due, more = job.checkpoint_due(ep), ep.index < len(job.prob.plan) - 1
-                stopping = more and (orphan.gone() or stop.requested() is not None)  # gone, or SIGTERM/SIGUSR1
+                stopping = stop.requested() is not None or (more and orphan.gone())  # a signal, or the sweep gone
                 if due or (stopping and job.ckpts is not None):
                     with clock("checkpoint"):
                         job.progress.seconds = clock.snapshot()
                         job.ckpts.save(job.engine, job.progress)
                         job.tracker.flush()
-                if stopping:
-                    kept = "checkpoint written" if job.ckpts is not None else "no checkpoint: the re-run starts afresh"
+                if stopping:  # what was kept is said by selpres.run.job
                     if stop.requested() is not None:
-                        raise stop.Terminated(stop.requested(), f"after epoch {ep.index + 1} ({kept})")
-                    raise orphan.SweepGone(f"after epoch {ep.index + 1} ({kept})")
+                        raise stop.Interrupted(stop.requested(), f"after epoch {ep.index + 1}")
+                    raise orphan.SweepGone(f"after epoch {ep.index + 1}")
         with clock("eval"):
             final = final_scores(job.engine, job.prob)
         return finish(job, final, clock.snapshot())
@@ -287,8 +276,8 @@ def train(
 def finish(job: Job, final: dict, seconds: dict) -> dict:
     """results.json, weights.pt (everything needed to use a trained net: load_into(BPN(topology), params, r)
     + the scaler) and the TensorBoard hparams; the checkpoint is no longer needed."""
-    cfg, prob = job.cfg, job.prob
-    results = results_json.build(cfg, job.chash, prob, job.engine, final, job.progress, seconds)
+    spec, prob = job.spec, job.prob
+    results = results_json.build(spec, prob, job.engine, final, job.progress, seconds)
     for line in results["floor_warnings"]:
         log.warning("%s", line)
     if job.out is None:
@@ -296,30 +285,14 @@ def finish(job: Job, final: dict, seconds: dict) -> dict:
     trained = {
         "params": job.engine.params(),
         "seeds": prob.seeds,
-        "topology": cfg.topology.layers,
-        "activation": cfg.model.activation,  # load_into(BPN(topology, activation=...), params, r)
+        "topology": spec.layers,
+        "activation": spec.activation,  # load_into(BPN(topology, activation=...), params, r)
         "scaler": dataclasses.asdict(prob.scaler),
-        "config_hash": job.chash,
+        "config_hash": spec.hash,
     }
     atomic_write(job.out / WEIGHTS, lambda f: torch.save(trained, f))
     write_json(job.out / RESULTS, results)
-    hp = {
-        "schedule": cfg.schedule.name,
-        "topology": cfg.topology.layers,
-        "seed": cfg.seed,
-        "replicas": len(prob.seeds),
-        "optim": cfg.optim._target_,
-        "lr": cfg.optim.get("lr"),
-        "momentum": cfg.optim.get("momentum"),
-        "batch_size": cfg.optim.batch_size,
-        "sizes": str(prob.schedule.sizes),
-        "epochs": str(prob.schedule.epochs),
-        "order": cfg.schedule.order,
-        "engine": results["engine"],
-        "engine_requested": results["engine_requested"],
-    }
-    floor_nm = {f"final/floor_{k}_nm_overall": v["nm"]["overall"] for k, v in results["floor"].items()}
-    job.tracker.close(hp, {**{f"final/{k}": v["mean"] for k, v in results["summary"].items()}, **floor_nm})
+    close_job(job.tracker, results, job.out)  # HParams, final metrics (selpres.run.tracking)
     if job.ckpts:
         job.ckpts.discard()
     return results

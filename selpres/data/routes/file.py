@@ -15,6 +15,7 @@ from selpres.data import paper as D
 from selpres.data.routes import DataRoute
 from selpres.data.spec import DataSpec
 from selpres.data.task import Shape, Task
+from selpres.patterns import ExemplarSet, Patterns, TestSets
 from selpres.registry import Choice
 from selpres.seeding import derive_seed
 
@@ -63,13 +64,13 @@ class File(DataRoute):
         )
         held, train = perm[:held_n].sort().values, perm[held_n:].sort().values
         X, Y = table[:, : len(ins)], table[:, len(ins) :]
-        exemplar = D.ExemplarSet(X[train].contiguous(), Y[train].contiguous(), n_candidates=rows)
+        exemplar = ExemplarSet(X[train].contiguous(), Y[train].contiguous(), n_candidates=rows)
         n = len(exemplar)
         gen = torch.Generator().manual_seed(int(data_cfg.test_seed))
         idx_ex = torch.randperm(n, generator=gen)[:n_ex]
         idx_out = held[torch.randperm(held_n, generator=gen)[: n_test - n_ex]]
-        test10 = D.Patterns(torch.cat((exemplar.X[idx_ex], X[idx_out])), torch.cat((exemplar.Y[idx_ex], Y[idx_out])))
-        tests = D.TestSets(test10, torch.arange(n_test) < n_ex, D.Patterns(X[held].contiguous(), Y[held].contiguous()))
+        test10 = Patterns(torch.cat((exemplar.X[idx_ex], X[idx_out])), torch.cat((exemplar.Y[idx_ex], Y[idx_out])))
+        tests = TestSets(test10, torch.arange(n_test) < n_ex, Patterns(X[held].contiguous(), Y[held].contiguous()))
         info = {
             "kind": "file",
             "source": f"data=file {path}",

@@ -17,6 +17,7 @@ from selpres.data.routes import DataRoute
 from selpres.data.spec import DataSpec
 from selpres.data.task import Shape, Task, check_test_split
 from selpres.errors import ConfigError
+from selpres.patterns import ExemplarSet, Patterns, TestSets
 from selpres.registry import Choice
 
 log = logging.getLogger("selpres")
@@ -71,15 +72,15 @@ class Sampled(DataRoute):
         route, draw, n = data_cfg.route, data_cfg.draw, int(data_cfg.n)
         log.info("%s", S.describe(box, route))
         drawn = S.sample(arm, box, route, S.stream(data_cfg, arm.dof, "exemplar"), n)
-        exemplar = D.ExemplarSet(drawn.X, drawn.tau, n_candidates=drawn.candidates)
+        exemplar = ExemplarSet(drawn.X, drawn.tau, n_candidates=drawn.candidates)
         n_test, n_ex = check_test_split(data_cfg, n)
         gen = torch.Generator().manual_seed(int(data_cfg.test_seed))
         idx = torch.randperm(n, generator=gen)[:n_ex]
         points = S.stream(data_cfg, arm.dof, "tests")
         outside = S.sample(arm, box, route, points, n_test - n_ex)
         heldout = S.sample(arm, box, route, points, D.heldout_count(data_cfg.heldout, n, f"n = {n}"))
-        test10 = D.Patterns(torch.cat((exemplar.X[idx], outside.X)), torch.cat((exemplar.Y[idx], outside.tau)))
-        tests = D.TestSets(test10, torch.arange(n_test) < n_ex, D.Patterns(heldout.X, heldout.tau))
+        test10 = Patterns(torch.cat((exemplar.X[idx], outside.X)), torch.cat((exemplar.Y[idx], outside.tau)))
+        tests = TestSets(test10, torch.arange(n_test) < n_ex, Patterns(heldout.X, heldout.tau))
         info = {
             "kind": "sampled",
             "source": f"robot={arm.name}, route {route}, {draw} points",

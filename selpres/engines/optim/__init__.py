@@ -15,7 +15,7 @@ them. Each is a ``torch.optim.Optimizer`` here (the definition of correct), step
 
 Each optimizer is one module here exporting ``OPTIMIZER`` (a ``torch.optim.Optimizer`` subclass): the registry
 :data:`OPTIMIZERS` lists the modules (``optim._target_: adam`` names ``adam.py``), so adding one is a module
-and a YAML in ``selpres/configs/optim/``. A user's own is named by its import path (``optim._target_:
+and a YAML in ``configs/optim/``. A user's own is named by its import path (``optim._target_:
 torch.optim.NAdam``, ``mylion.Lion``). A class takes the config's flat keys as keyword arguments (a built-in's
 ``hparams`` checks them, with their defaults, without building an optimizer: the first
 ``torch.optim.Optimizer`` of a process imports torch._dynamo, about 1.3 s, which a job on the native engine
@@ -62,6 +62,7 @@ __all__ = [
     "offset_sigmoid",
     "check_hparams",
     "make_optimizer",
+    "keyword_defaults",
     "modes",
     "with_defaults",
 ]
@@ -106,6 +107,12 @@ def keywords(cls: type) -> tuple[list[str], bool]:
     return named, any(p.kind == p.VAR_KEYWORD for p in ps)
 
 
+def keyword_defaults(cls: type) -> dict:
+    """The defaults of the keyword arguments a class takes from the config (those it has; see :func:`keywords`)."""
+    fn = cls.hparams if hasattr(cls, "hparams") else cls.__init__
+    return {p.name: p.default for p in inspect.signature(fn).parameters.values() if p.default is not p.empty}
+
+
 def with_defaults(target: str, hparams: dict | None = None) -> dict:
     """The optimizer's flat config keys with a built-in's defaults for the unset ones (a user's class: the keys
     given), what both mini-batch engines take, so an unset key (AdamW's weight_decay 0.01) is the same on either."""
@@ -129,8 +136,10 @@ def check_hparams(target: str, hparams: dict | None = None) -> dict:
     named, any_key = keywords(cls)
     for key in given:
         if key not in named and not any_key:
+            path = f"{cls.__module__}.{cls.__qualname__}"
+            where = target if target == path else f"{target} ({path})"
             raise ConfigError(
-                f"optim.{key}", given[key], f"no value: {target} does not take it (its keys: {', '.join(named)})"
+                f"optim.{key}", given[key], f"no value: {where} does not take it (its keys: {', '.join(named)})"
             )
     if hasattr(cls, "hparams"):
         try:

@@ -3,5 +3,6 @@ other method; ``time_to_target``: its tables; ``plots``: error and cost figures,
 marks), and the one generic section every report ends with (``runs``, ``section(ctx) -> Section``).
 
 A block takes what a study is about (the reference, the targets, the methods to draw) as arguments; the studies'
-sections are :mod:`selpres.studies`'. The order of the report lives in :mod:`selpres.report.build`.
+sections are the plug-ins' the report is given (:mod:`selpres.report.plugins`). The order of the report lives in
+:mod:`selpres.report.build`.
 """

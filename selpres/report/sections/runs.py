@@ -3,7 +3,12 @@
 A (topology, method) cell with no folder is listed only when the sweep is a grid: its ``multirun.yaml`` sweeps
 two or more keys (Table 1's ``schedule=... topology=...``; ``experiment=large``'s arm x n x schedule). One list of
 design points (each its own topology and schedule, e.g. ``experiment=modern``) is no grid: crossing it listed 24
-cells no job was meant to fill. Without a ``multirun.yaml`` (folders gathered by hand) every cell is expected."""
+cells no job was meant to fill. Without a ``multirun.yaml`` (folders gathered by hand) every cell is expected.
+
+Below the table, what the jobs ran on (results.json ``provenance``, :mod:`selpres.run.provenance`): one line when
+every job ran on the same versions and machine; a warning naming each version that differs (selpres's version,
+commit and uncommitted changes, Python, torch, numpy, the native kernels' build) with its jobs, and a note for
+machines that differ (platform, CPUs); jobs whose results.json records none are counted."""
 
 from __future__ import annotations
 
@@ -46,7 +51,7 @@ def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path, order: 
     rows = []
     for j in sorted(jobs, key=rank):
         row = {
-            "job": str(j.path.relative_to(sweep)) if j.path != sweep else ".",
+            "job": _name(j, sweep),
             "schedule": j.schedule,
             "topology": j.topology,
             "status": j.status,
@@ -62,6 +67,7 @@ def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path, order: 
                 seeds=f"{min(r['seed'] for r in reps)}..{max(r['seed'] for r in reps)}" if reps else "",
                 **j.engine,
                 wall_total_s=j.results["wall_seconds"]["total"],
+                provenance=_summary(j.results.get("provenance")),
             )
             diverged = [
                 f"seed {r['seed']} diverged at epoch {_diverged_epoch(r)}" for r in bad if "not_finite" not in r
@@ -82,6 +88,84 @@ def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path, order: 
                     }
                 )
     return rows
+
+
+def _name(j: Job, sweep: Path) -> str:
+    return str(j.path.relative_to(sweep)) if j.path != sweep else "."
+
+
+def _fields(p: dict) -> tuple[dict[str, str], dict[str, str]]:
+    """(versions, machine) of a provenance record, each field as the report prints it."""
+    src, native = p.get("selpres") or {}, p.get("native")
+    commit = src.get("commit")
+    where = f"commit {str(commit)[:12]}{', uncommitted changes' if src.get('dirty') else ''}" if commit else "no commit"
+    build = (
+        f"{native.get('compiler')} {' | '.join(native.get('flags') or [])} ({native.get('instruction_set')})"
+        if isinstance(native, dict)
+        else "none loaded"
+    )
+    versions = {
+        "selpres": f"{src.get('version')} ({where})",
+        "Python": str(p.get("python")),
+        "torch": str(p.get("torch")),
+        "numpy": str(p.get("numpy")),
+        "native kernels": build,
+    }
+    machine = {"platform": str(p.get("platform")), "CPUs": str(p.get("cpus"))}
+    return versions, machine
+
+
+def _summary(p) -> str:
+    """One job's provenance in one line (runs.csv)."""
+    if not isinstance(p, dict):
+        return "not recorded"
+    versions, machine = _fields(p)
+    return "; ".join(f"{k} {v}" for k, v in {**versions, **machine}.items())
+
+
+def _jobs(n: int) -> str:
+    return f"{n} job{'s' * (n != 1)}"
+
+
+def provenance_lines(jobs: list[Job], sweep: Path) -> list[str]:
+    """What the jobs ran on: one line if all agree, else a warning per version and a note per machine field that
+    differs, naming the jobs of every value but the most common."""
+    recorded = [
+        (j, j.results["provenance"]) for j in jobs if j.results and isinstance(j.results.get("provenance"), dict)
+    ]
+    lines = []
+    if recorded:
+        split = [(j, *_fields(p)) for j, p in recorded]
+        same, differ = {}, {"versions": [], "machines": []}
+        for kind, at in (("versions", 1), ("machines", 2)):
+            for key in split[0][at]:
+                by_value: dict[str, list[str]] = {}
+                for row in split:
+                    by_value.setdefault(row[at][key], []).append(_name(row[0], sweep))
+                if len(by_value) == 1:
+                    same[key] = next(iter(by_value))
+                    continue
+                ranked = sorted(by_value.items(), key=lambda kv: -len(kv[1]))
+                said = [f"{ranked[0][0]} ({_jobs(len(ranked[0][1]))})"] + [
+                    f"{v} ({_jobs(len(names))}: "
+                    + ", ".join(f"`{n}`" for n in names[:3])
+                    + (", …" if len(names) > 3 else "")
+                    + ")"
+                    for v, names in ranked[1:]
+                ]
+                differ[kind].append(f"{key}: {'; '.join(said)}")
+        common = ", ".join(f"{k} {v}" for k, v in same.items())
+        lines.append(
+            f"**What ran.** {len(recorded)} job{'s' * (len(recorded) > 1)}" + (f": {common}." if common else ".")
+        )
+        lines += [f"- warning: the jobs ran on different versions: {d}" for d in differ["versions"]]
+        lines += [f"- note: the jobs ran on different machines: {d}" for d in differ["machines"]]
+    unrecorded = sum(1 for j in jobs if j.results and not isinstance(j.results.get("provenance"), dict))
+    if unrecorded:
+        one = unrecorded == 1
+        lines.append(f"- {unrecorded} finished job{'' if one else 's'} record{'s' if one else ''} no provenance (a "
+                     "selpres before issue 39 wrote the results.json)")  # fmt: skip
+    return lines
 
 
 def runs_markdown(rows: list[dict], warnings: list[str]) -> str:
@@ -118,4 +202,6 @@ def runs_markdown(rows: list[dict], warnings: list[str]) -> str:
 
 def section(ctx: Context) -> Section:
     rows = runs_rows(ctx.jobs, ctx.groups, ctx.topologies, ctx.methods, ctx.sweep, ctx.order)
-    return Section("Runs", [runs_markdown(rows, ctx.warnings)], csv={"runs.csv": rows})
+    what_ran = provenance_lines(ctx.jobs, ctx.sweep)
+    return Section("Runs", [runs_markdown(rows, ctx.warnings), *(["\n".join(what_ran)] if what_ran else [])],
+                   csv={"runs.csv": rows})  # fmt: skip

@@ -1,3 +1,0 @@
-from selpres.bench.main import main
-
-raise SystemExit(main())

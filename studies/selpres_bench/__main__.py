@@ -1,0 +1,3 @@
+from selpres_bench.main import main
+
+raise SystemExit(main())
