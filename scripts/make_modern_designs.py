@@ -37,9 +37,9 @@ ACTIVATION = {"adam": "relu", "adam_leaky": "leaky_relu"}
 #   the paper's regime (its lr 0.15, not searched): the two-link curve moves its median by more than 10 % at every
 #     doubling up to 640 (-12.9 % at 160 -> 320): no N <= 640 passes the rule; it stays at 160, the earlier study's,
 #     a budget the rule rejects. The PUMA 560's passes at 80 (-3.3 % at 80 -> 160, 12 seeds); it runs at 50, a
-#     budget the rule rejects (40 -> 80 moves the median -14 %), with 2 x 12 seeds (below), so that
-#     experiment=modern fits its 30 minutes on 2 free cores: ~54 job-minutes measured per arm x regime, of which
-#     this cell 16 (at 60 epochs and 2 x 24 seeds it was 35 of 74, ~40 minutes; at 80, more).
+#     budget the rule rejects (40 -> 80 moves the median -15 %), with 2 x 12 seeds (below), so that
+#     experiment=modern fits its 30 minutes (at 60 epochs and 2 x 24 seeds this cell alone took 35 of the study's
+#     74 job-minutes, ~40 minutes on 2 cores; docs/studies/modern.md, "Time").
 EPOCHS = {("two_link", "paper"): 160, ("two_link", "adam"): 320, ("puma560", "paper"): 50, ("puma560", "adam"): 20}
 # arm -> the Adam rate (its remedy's too), chosen with the budget above
 ADAM_LR = {"two_link": 0.003, "puma560": 0.003}
