@@ -41,6 +41,10 @@ _EXPORTS = {
     # the network, to use what a job trained (weights.pt)
     "BPN": "selpres.engines.model",
     "load_into": "selpres.engines.model",
+    # a method of one's own (docs/extending.md): what decides each epoch's patterns, and what it is charged
+    "Selector": "selpres.presentation.selector",
+    "Presentation": "selpres.presentation.selector",
+    "Ledger": "selpres.presentation.selector",
     # the report of a sweep's job folders (what selpres-report writes)
     "write_report": "selpres.report.build",
     # errors a caller may catch

@@ -125,9 +125,8 @@ def circles(root: Path, replace: dict[str, str] | None = None) -> list[list[str]
 
 
 def test_no_import_circle_in_the_package():
-    """Fails today on one circle, through imports for types only: presentation/selection.py names StagewiseOrder and
-    orders/_stagewise.py names StageSelection. It is left to the rewrite of selection.py (issue 37 point 1), which
-    this test checks."""
+    """No circle, imports for types only counted (presentation/selection.py and orders/_stagewise.py once named each
+    other for types; the staged selector, issue 37 point 1, ended it)."""
     assert circles(REPO / "selpres") == []
 
 

@@ -135,6 +135,6 @@ def test_without_the_kernel_a_seta_job_says_so_and_has_the_same_numbers(monkeypa
         K.native_kmeans.cache_clear()
         runs[off] = train(cfg_of(*args))
     K.native_kmeans.cache_clear()
-    assert runs["1"]["pruning"]["kmeans"] == "numpy (disabled by SELPRES_NO_NATIVE)"
-    if runs["0"]["pruning"]["kmeans"] == "native":
+    assert runs["1"]["selector"]["kmeans"] == "numpy (disabled by SELPRES_NO_NATIVE)"
+    if runs["0"]["selector"]["kmeans"] == "native":
         assert numbers(runs["0"]) == numbers(runs["1"])

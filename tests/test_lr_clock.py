@@ -102,7 +102,7 @@ def test_a_pruned_job_runs_on_the_epochs_clock_and_its_numbers_differ(tmp_path):
     base = ["schedule=seta", "schedule.epochs=[4]", "replicas=2", "optim=adam_minibatch", "model.activation=relu"]
     runs = {s: train(cfg_of(*base, f"optim.lr_schedule={s}"), tmp_path / s) for s in ("cosine", "cosine_epochs")}
     assert runs["cosine_epochs"]["config"]["optim"]["lr_schedule"] == "cosine_epochs"
-    assert all(c < 4 * 1002 for c in runs["cosine_epochs"]["pruning"]["cost"])  # it pruned
+    assert all(c < 4 * 1002 for c in runs["cosine_epochs"]["cost"]["per_replica"]["spent"])  # it pruned
     assert numbers(runs["cosine"])["replica_results"] != numbers(runs["cosine_epochs"])["replica_results"]
     job = resolve(cfg_of(*base, "optim.lr_schedule=cosine_epochs"))
     eng = job_engine(job, prepare(job))

@@ -179,10 +179,10 @@ def test_a_paper_regime_pruning_job_runs_on_the_native_kernel_and_agrees_with_th
         runs[engine] = train(cfg)
     res = runs["native"]
     assert res["engine"] == "native" and res["engine_fallback"] is None
-    for cost in res["pruning"]["cost"]:
+    for cost in res["cost"]["per_replica"]["spent"]:
         assert 3000 - (1 + 1 / 3) < cost <= 3000 + 1e-9
     ref = runs["reference"]
     assert ref["engine"] == "reference"
-    assert res["pruning"]["trained_presentations"] == ref["pruning"]["trained_presentations"]
+    assert res["cost"]["per_replica"]["trained"] == ref["cost"]["per_replica"]["trained"]
     for k, v in res["summary"].items():
         assert v["mean"] == pytest.approx(ref["summary"][k]["mean"], rel=1e-9, abs=1e-12), k

@@ -66,18 +66,19 @@ def test_selective_backprop_selection_follows_the_percentile_rule():
     beta = 2.0
     P = backprop_probability(losses, beta)[0]
     assert P.tolist() == pytest.approx([f**beta for f in by_hand])
-    from selpres.presentation.pruning._job import Pruning
+    from selpres.presentation.pruning.selective_backprop import SelectiveBackprop
+    from selpres.presentation.selector import Ledger
 
-    pr = Pruning("selective_backprop", {"beta": beta}, 6, [7], None, 10, 1 / 3)
+    pr = SelectiveBackprop({"beta": beta}, Ledger(6, [7], None, 10, 1 / 3))
     draws, hits = 4000, torch.zeros(6)
     order = torch.arange(6).unsqueeze(0)
     for e in range(draws):
-        choice = pr.policy.choose(e, order, losses)
+        choice = pr.choose(e, order, losses)
         hits[choice.order[0, : int(choice.counts[0])]] += 1
     freq = hits / draws
     sd = (P * (1 - P) / draws).sqrt()
     assert ((freq - P).abs() <= 5 * sd + 1e-9).all()
-    assert float(pr.charged[0]) == pytest.approx(draws * 6 / 3)  # every candidate's forward pass charged
+    assert float(pr.ledger.charged[0]) == pytest.approx(draws * 6 / 3)  # every candidate's forward pass charged
 
 
 @pytest.mark.parametrize("schedule", ["infobatch", "selective_backprop", "seta"])
@@ -93,7 +94,7 @@ def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
         "replicas=3",
     )
     res = train(cfg)
-    pr = res["pruning"]
+    pr = res["cost"]["per_replica"]
     # Adam with ReLU: a mini-batch engine, the native kernel's where it builds (tests/test_native_pruning.py: the
     # paper's regime runs on the online native kernel)
     assert res["engine"] in ("minibatch-native", "minibatch")
@@ -102,13 +103,13 @@ def test_budget_form_stops_every_replica_at_the_budget_and_records_it(schedule):
         if res["engine"] == "minibatch-native"
         else "unavailable" in res["engine_fallback"]
     )
-    for cost in pr["cost"]:
+    for cost in pr["spent"]:
         assert 6000 - (1 + 1 / 3) < cost <= 6000 + 1e-9
     assert res["presentations_done"] == pytest.approx(6000, abs=2)
     if schedule == "selective_backprop":
-        assert all(c > 0 for c in pr["charged_presentations"])
+        assert all(c > 0 for c in pr["charged"])
     else:
-        assert all(c == 0 for c in pr["charged_presentations"]) and all(x > 0 for x in pr["left_out"])
+        assert all(c == 0 for c in pr["charged"]) and all(x > 0 for x in pr["left_out"])
 
 
 def test_a_finished_job_of_another_update_is_run_again(tmp_path, caplog, monkeypatch):
@@ -199,6 +200,6 @@ def test_results_record_the_policy_that_ran():
     from selpres.run.train import train
 
     res = train(cfg_of("schedule=infobatch", "schedule.epochs=[2]", "replicas=2"))
-    assert res["pruning"]["kind"] == "infobatch"
-    assert res["pruning"]["policy"] == "selpres.presentation.pruning.infobatch.InfoBatch"
-    assert res["pruning"]["prune_ratio"] == 0.5 and res["pruning"]["delta"] == 0.875
+    assert res["selector"]["name"] == "infobatch"
+    assert res["selector"]["class"] == "selpres.presentation.pruning.infobatch.InfoBatch"
+    assert res["selector"]["prune_ratio"] == 0.5 and res["selector"]["delta"] == 0.875

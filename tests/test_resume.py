@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -30,12 +31,39 @@ ENGINES = {
     "loss_high": ["engine=reference", "schedule.epochs=[1,1,2,3,3]", "replicas=2", "schedule.order=loss_high"],
     # the mini-batch engine: Adam's moments and per-replica step counts, and the cosine rate's clock
     "minibatch": ["optim=adam_minibatch", "model.activation=relu", "schedule.epochs=[2,2,4,6,60]", "replicas=4"],
-}
-EPOCHS = {"reference": 10, "native": 214, "loss_high": 10, "minibatch": 74}
+    # pruning jobs: the policy's scores, its annealing flags and each replica's ledger are the selector's state
+    # (InfoBatch and Selective Backprop stopped at a budget: the last epoch cut per replica, annealing by budget;
+    # SeTa's scores choose its k-means groups; a user's policy by import path, its Annealing found by the
+    # selector's state_dict; InfoBatch under mini-batch Adam: the moments and the cosine rate's clock too)
+    "infobatch": [
+        "engine=reference", "schedule=infobatch", "schedule.epochs=null", "schedule.budget=9000", "replicas=2"
+    ],
+    "selective_backprop": [
+        "engine=reference", "schedule=selective_backprop", "schedule.epochs=null", "schedule.budget=7000"
+    ],
+    "seta": ["engine=reference", "schedule=seta", "schedule.epochs=[12]", "replicas=2"],
+    "user_policy": [
+        "engine=reference",
+        "schedule=infobatch",
+        "schedule.pruning._target_=my_pruning.UniformPruning",
+        "schedule.epochs=null",
+        "schedule.budget=9000",
+    ],
+    # a user's own selector (examples/extending/my_selector.py) on the paper's stages: its scores are its state
+    "user_selector": [
+        "engine=reference", "schedule.pruning={_target_:my_selector.LossWeighted}", "schedule.epochs=[1,1,2,3,3]"
+    ],
+    "infobatch_adam": [
+        "optim=adam_minibatch", "model.activation=relu", "schedule=infobatch", "schedule.epochs=[150]", "replicas=4"
+    ],
+}  # fmt: skip
+EPOCHS = {"reference": 10, "native": 214, "loss_high": 10, "minibatch": 74, "infobatch": 19, "seta": 12}
+EPOCHS.update(selective_backprop=math.ceil(7000 / (1002 / 3)) + 1, user_policy=19, infobatch_adam=150, user_selector=10)
 
 
 def run(out: Path, args: list[str], wait: bool = True) -> subprocess.Popen:
     env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT / "examples" / "extending"), env.get("PYTHONPATH")]))
     p = subprocess.Popen(
         [sys.executable, "train.py", *COMMON, *args, f"hydra.run.dir={out}"],
         cwd=ROOT,
@@ -70,6 +98,12 @@ def newest_checkpoint(folder: Path) -> tuple[Path | None, int]:
         pytest.param("native", marks=requires_native),
         pytest.param("loss_high"),
         pytest.param("minibatch"),
+        pytest.param("infobatch"),
+        pytest.param("selective_backprop"),
+        pytest.param("seta"),
+        pytest.param("user_policy"),
+        pytest.param("user_selector"),
+        pytest.param("infobatch_adam"),
     ],
 )
 def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
@@ -96,8 +130,9 @@ def test_sigkill_then_same_command_resumes_exactly(tmp_path, engine):
     a = json.loads((killed / "results.json").read_text())
     b = json.loads((straight / "results.json").read_text())
     assert numbers(a) == numbers(b)  # the curves without their wall seconds
-    for key in ("presentations_done", "selection_presentations"):
+    for key in ("presentations_done", "selection_presentations", "cost", "selector"):
         assert a[key] == b[key], key
+    assert a["resumed_from_epoch"] == epoch_at_kill and b["resumed_from_epoch"] is None
     wa = torch.load(killed / "weights.pt")["params"]
     wb = torch.load(straight / "weights.pt")["params"]
     assert all(torch.equal(x, y) for x, y in zip(wa, wb))

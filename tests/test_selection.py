@@ -231,10 +231,13 @@ def test_default_charge_is_a_third_and_fixed_orders_are_charged_nothing():
     """1/3 of 952, 902, 602, 202 candidates: 317.3, 300.7, 200.7, 67.3, charged 318 + 301 + 201 + 68."""
     lh = train(cfg_of("schedule.order=loss_high", "replicas=1", "schedule.epochs=[1,1,1,1,1]"))
     assert lh["selection_presentations"] == 888 and lh["presentations_done"] == 2352 + 888
+    # the cost ratio is what was presented and charged over conventional training's 5 epochs of all 1002
+    assert lh["cost"]["charged_presentations"] == 888 and lh["schedule"]["cost_ratio"] == (2352 + 888) / 5010
     for kind in ("stratified", "random", "coverage"):
         res = train(cfg_of(f"schedule.order={kind}", "replicas=1", "schedule.epochs=[1,1,1,1,1]"))
         assert res["selection_presentations"] == 0 and res["presentations_done"] == 2352
-        assert isinstance(res["presentations_done"], int) and "select" not in res["wall_seconds"]
+        assert isinstance(res["presentations_done"], int) and res["cost"]["per_replica"]["charged"] == [0.0]
+        assert res["schedule"]["cost_ratio"] == 2352 / 5010 and res["selector"]["order_name"] == kind
 
 
 def test_charge_rounds_up_to_whole_presentations_without_float_noise():

@@ -111,7 +111,8 @@ def test_each_point_validates_and_costs_what_its_file_says(point):
     if len(sch.sizes) > 1:
         assert sch.sizes == [50, 100, 400, 800, 1002] and len(set(sch.epochs)) == 1
         assert order == kind(point)
-        assert (prob.selection is not None) == (order in ("loss_high", "loss_low", "reselect"))
+        assert prob.selector.describe()["stagewise"] == (order in ("loss_high", "loss_low", "reselect"))
+        assert prob.selector.planned_charge(sch) == planned_charge(order, sch.sizes, cfg.schedule.selection_cost)
 
 
 def _outside_schedule(cfg) -> dict:

@@ -10,19 +10,20 @@ import numpy as np
 import pytest
 import torch
 
-from selpres.presentation.pruning._job import Pruning
-from selpres.presentation.pruning.seta import kmeans_1d, score_groups
+from selpres.presentation.pruning.seta import SeTa, kmeans_1d, score_groups
+from selpres.presentation.selector import Ledger
 
 from conftest import cfg_of
 
 
 def _seta(n, *, prune_ratio=0.0, groups=5, window_scale=0.9, delta=1.0, epochs=100, seeds=(3,), budget=None):
     params = {"prune_ratio": prune_ratio, "groups": groups, "window_scale": window_scale, "delta": delta}
-    return Pruning("seta", params, n, list(seeds), budget, None if budget else epochs, 1 / 3)
+    ledger = Ledger(n, list(seeds), budget, None if budget else epochs, 1 / 3)
+    return SeTa(SeTa.check(params, budget=budget, selection_cost=1 / 3), ledger)
 
 
-def _presented(pr: Pruning, epoch: int, order: torch.Tensor) -> list[set[int]]:
-    c = pr.choose(epoch, order, None, None, None)
+def _presented(pr: SeTa, epoch: int, order: torch.Tensor) -> list[set[int]]:
+    c = pr.choose(epoch, order, None)
     return [set(c.order[r, : int(c.counts[r])].tolist()) for r in range(len(c.counts))]
 
 
@@ -46,12 +47,12 @@ def test_the_window_slides_from_easy_to_hard_as_worked_out_by_hand(G, scale):
     n = len(cluster)
     pr = _seta(n, groups=G, window_scale=scale)
     noise = torch.rand(n, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
-    pr.policy.scores[0] = 10.0 * cluster + noise
+    pr.scores[0] = 10.0 * cluster + noise
     order = torch.randperm(n, generator=torch.Generator().manual_seed(1)).unsqueeze(0)
     for epoch, window in enumerate(BY_HAND[(G, scale)]):
         want = {i for i in range(n) if int(cluster[i]) in window}
         assert _presented(pr, epoch, order) == [want], epoch
-    c = pr.choose(1, order, None, None, None)
+    c = pr.choose(1, order, None)
     assert c.weights is None  # no loss reweighting
     assert c.order[0, : int(c.counts[0])].tolist() == [
         i for i in order[0].tolist() if int(cluster[i]) in BY_HAND[(G, scale)][1]
@@ -63,8 +64,8 @@ def test_a_replica_whose_scores_are_not_finite_goes_on_as_if_they_were_equal():
     # epoch is the one of equal scores, the groups torch.chunk pieces in drawn order, and the other replica's is its own
     n = 20
     pr, alone = _seta(n, seeds=(3, 4)), _seta(n, seeds=(4,))
-    pr.policy.scores[0] = torch.tensor([float("nan"), float("inf")] + [1.0] * (n - 2), dtype=torch.float64)
-    pr.policy.scores[1] = alone.policy.scores[0] = torch.arange(n, dtype=torch.float64)
+    pr.scores[0] = torch.tensor([float("nan"), float("inf")] + [1.0] * (n - 2), dtype=torch.float64)
+    pr.scores[1] = alone.scores[0] = torch.arange(n, dtype=torch.float64)
     equal = _seta(n, seeds=(3,))  # every score 3.0, as on the first epoch
     order = torch.stack([torch.randperm(n, generator=torch.Generator().manual_seed(s)) for s in (1, 2)])
     for epoch in range(3):
@@ -111,7 +112,7 @@ def test_groups_are_contiguous_in_sorted_order_with_increasing_centres():
 def test_after_delta_a_fresh_random_share_each_epoch():
     n, E, delta, r = 200, 10, 0.6, 0.25
     pr = _seta(n, prune_ratio=r, groups=5, window_scale=0.4, delta=delta, epochs=E, seeds=(0, 1))
-    pr.policy.scores[:] = torch.rand(2, n, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+    pr.scores[:] = torch.rand(2, n, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
     order = torch.stack([torch.randperm(n, generator=torch.Generator().manual_seed(s)) for s in (7, 8)])
     seen = []
     for epoch in range(E):
@@ -131,14 +132,14 @@ def test_prune_ratio_0_with_one_group_is_conventional_training():
     pr = _seta(n, groups=1, window_scale=1.0)
     order = torch.randperm(n, generator=torch.Generator().manual_seed(4)).unsqueeze(0)
     for epoch in range(4):
-        c = pr.choose(epoch, order, None, None, None)
+        c = pr.choose(epoch, order, None)
         assert c.order[0].tolist() == order[0].tolist() and int(c.counts[0]) == n and c.weights is None
     from selpres.run.train import train
 
     common = ("schedule.epochs=[3]", "replicas=2", "schedule.order=random")
     plain = train(cfg_of("schedule=conventional", *common))
     seta = train(cfg_of("schedule=seta_random", "schedule.pruning.prune_ratio=0", *common))
-    assert seta["pruning"]["left_out"] == [0.0, 0.0]
+    assert seta["cost"]["per_replica"]["left_out"] == [0.0, 0.0]
     assert seta["replica_results"] == plain["replica_results"]
     assert seta["summary"] == plain["summary"]
 
@@ -147,11 +148,11 @@ def test_a_budget_run_stops_at_it_and_is_charged_like_infobatch():
     from selpres.run.train import train
 
     res = train(cfg_of("schedule=seta", "schedule.epochs=null", "schedule.budget=5000", "replicas=2"))
-    pr = res["pruning"]
-    assert pr["policy"] == "selpres.presentation.pruning.seta.SeTa"
-    for cost, trained in zip(pr["cost"], pr["trained_presentations"]):
+    pr = res["cost"]["per_replica"]
+    assert res["selector"]["class"] == "selpres.presentation.pruning.seta.SeTa"
+    for cost, trained in zip(pr["spent"], pr["trained"]):
         assert 5000 - 1 < cost <= 5000 + 1e-9 and cost == trained  # choosing is not charged: scores are free
-    assert pr["charged_presentations"] == [0.0, 0.0] and all(x > 0 for x in pr["left_out"])
+    assert pr["charged"] == [0.0, 0.0] and all(x > 0 for x in pr["left_out"])
 
 
 def test_a_sweep_over_seta_and_its_dynamic_random_control_from_the_command_line(tmp_path):
@@ -174,5 +175,5 @@ def test_a_sweep_over_seta_and_its_dynamic_random_control_from_the_command_line(
     }
     assert set(runs) == {"seta", "seta_random"}
     for res in runs.values():
-        assert res["status"] == "complete" and res["pruning"]["policy"] == "selpres.presentation.pruning.seta.SeTa"
-    assert runs["seta_random"]["pruning"]["groups"] == 1
+        assert res["status"] == "complete" and res["selector"]["class"] == "selpres.presentation.pruning.seta.SeTa"
+    assert runs["seta_random"]["selector"]["groups"] == 1

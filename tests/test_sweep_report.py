@@ -162,6 +162,23 @@ def test_the_sweeps_line_counts_jobs_and_estimates_the_rest(tmp_path):
     assert sweep_line(f, now=1030.0) == "sweep: 2/12 jobs done (1 failed), 30 s elapsed, about 2 min 30 s left"
 
 
+@pytest.mark.parametrize(
+    "params, task, jobs",
+    [
+        ({"seed": "0,1000"}, ["replicas=1,2,3"], 6),  # disjoint keys: the product, 2 x 3
+        ({"seed": "0,1000", "replicas": "1,2,3"}, ["replicas=4,5", "seed=0"], 2),  # the command line's value wins
+        ({"seed": "0,1000"}, ["seed=0"], 1),  # one value given: one job (Hydra launched 1, the count said 2)
+    ],
+)
+def test_the_sweeps_count_is_hydras_own(params, task, jobs):
+    """The count takes each key once, the command line's value over the experiment's, as Hydra's basic sweeper
+    merges them (an experiment's list narrowed on the command line was once counted as the product of both)."""
+    from selpres.run.progress import sweep_size
+
+    cfg = OmegaConf.create({"hydra": {"sweeper": {"params": params}, "overrides": {"task": task}}})
+    assert sweep_size(cfg) == jobs
+
+
 class Tty(io.StringIO):
     def isatty(self):
         return True

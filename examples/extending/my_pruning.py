@@ -7,7 +7,8 @@ It takes InfoBatch's parameters, so InfoBatch's schedule file runs it with one o
 
     PYTHONPATH=examples/extending python train.py schedule=infobatch schedule.pruning._target_=my_pruning.UniformPruning
 
-results.json's ``pruning.policy`` records ``my_pruning.UniformPruning``. A policy subclasses
+results.json's ``selector.name`` (and ``pruning.policy``) records ``my_pruning.UniformPruning``; the report keys it as
+``infobatch[my_pruning.UniformPruning]``, apart from InfoBatch. A policy subclasses
 ``selpres.presentation.pruning.Policy``: it lists its parameters (checked for it, errors naming
 ``schedule.pruning.<key>``), says how cheap an epoch can be (the budget form's plan) and chooses each epoch's
 patterns from the samplers' shuffles of U, counting what it leaves out in the ledger.

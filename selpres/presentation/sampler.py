@@ -4,8 +4,8 @@
 
 The nested training sets A1 ⊂ A2 ⊂ … ⊂ A_{p+1} = U are the prefixes of one *priority order* of the
 exemplar set (``selpres.presentation.orders``: stratified, random, coverage), so nesting holds by construction. The
-stage-wise orders of ``selpres.presentation.selection`` (loss_high, loss_low, reselect) replace a sampler's ``order`` at
-each stage start; the sampler itself never changes it.
+stage-wise orders (loss_high, loss_low, reselect), run by the ``staged`` selector (``selpres.presentation.staged``),
+replace a sampler's ``order`` at each stage start; the sampler itself never changes it.
 
 Within an epoch the current set is reshuffled; ``set_epoch(e)`` picks the epoch (and so the stage),
 following ``DistributedSampler``'s convention. The shuffle of epoch e is a counter-based hash of

@@ -17,7 +17,10 @@ The block API (imported on first use, so ``import selpres.report`` loads nothing
   sweep loaded once: its jobs, groups, topologies, methods, options, the experiment it ran), ``Section`` (title,
   Markdown blocks, CSV rows, figures, a README block), ``built`` (a section made, or one line saying why not),
   ``load_jobs``, ``aggregate``, ``Group`` (one method's replicas on one topology, pooled by seed);
-- what the groups are: ``optim_target``, ``settings``, ``setting_text``, ``varying``, ``base``, ``SETS``, ``UNITS``;
+- what the groups are: ``method_of`` (a job's method as it ran), ``method_labels`` (the one labelling of methods
+  every section and study uses), ``job_cost`` and ``replica_costs`` (a job's measured cost: its mean, per replica),
+  ``presents_all`` (whether a job was conventional training), ``optim_target``, ``settings``, ``setting_text``,
+  ``varying``, ``base``, ``SETS``, ``UNITS``;
 - comparisons: ``Options`` and ``Margin`` (the equivalence margin, Holm), ``paired``, ``paired_columns``,
   ``outcome``, ``reading``, ``adjust_family``, ``comparisons``, ``mean_curve``, ``reach``, ``time_to_target_rows``,
   ``ALPHA``, and the statistics ``summarize``, ``median``, ``tost``, ``trimmed``, ``holm``, ``clopper_pearson``,
@@ -42,8 +45,9 @@ difference*, three different things. Nothing here names a study's arms or method
 or reads them from the jobs' results.json.
 
 The last stage of arm -> data -> presentation -> engine -> loop -> results -> report: it reads job folders, never
-trains. May import: ``selpres.run`` (stats, the names of a job folder's files) and the foundation; never a study
-(it is given them); matplotlib only inside the plotting blocks, so the command line starts without it.
+trains. May import: ``selpres.run`` (stats, older results.json read as today's, the names of a job folder's files)
+and the foundation; never a study (it is given them); matplotlib only inside the plotting blocks, so the command
+line starts without it.
 """
 
 from __future__ import annotations
@@ -58,9 +62,14 @@ _EXPORTS = {
     "Context": "selpres.report.context",
     "Section": "selpres.report.context",
     "load_jobs": "selpres.report.jobs",
+    "method_of": "selpres.report.jobs",
     "aggregate": "selpres.report.groups",
     "Group": "selpres.report.groups",
     "optim_target": "selpres.report.groups",
+    "method_labels": "selpres.report.groups",
+    "job_cost": "selpres.report.groups",
+    "replica_costs": "selpres.report.groups",
+    "presents_all": "selpres.report.groups",
     "settings": "selpres.report.groups",
     "setting_text": "selpres.report.groups",
     "varying": "selpres.report.groups",

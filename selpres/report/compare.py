@@ -155,7 +155,7 @@ def verdict_rows(groups, topologies, methods, reference: str, options: Options =
                 missing = a if ga is None or ga.sched is None else b
                 row["reading_heldout"] = f"no results for {missing}"
                 continue
-            row["cost_ratio"] = ga.sched["presentations"] / gb.sched["presentations"]
+            row["cost_ratio"] = ga.cost / gb.cost  # measured: presented and charged, each side
             for set_, _ in SETS:
                 v = paired(ga.values(set_), gb.values(set_), options.margin)
                 row.update(paired_columns(set_, v))

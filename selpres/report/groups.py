@@ -1,8 +1,11 @@
 """Grouping: a method label per job, and the replicas of each (topology, method) pooled by seed.
 
-Replica r of a job with seed s is the run with seed s + r, so jobs of one method pool by seed: the union
-of their seeds, each seed once (a seed seen twice must give the same numbers, else it is a warning). No method
-is named here: a label is what the job recorded, and the order of rows is a study's (its ``ORDER``, handed in).
+A method is named one way in every section and study (``jobs.method_of``, :func:`method_labels`): the schedule's
+name the job recorded, a user's class that ran (its selector or order, by import path) in brackets after it, and
+the settings that differ between jobs of that name. Replica r of a job with seed s is the run with seed s + r, so
+jobs of one method pool by seed: the union of their seeds, each seed once (a seed seen twice must give the same
+numbers, else it is a warning). No method is named here: a label is what the job recorded, and the order of rows is
+a study's (its ``ORDER``, handed in).
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ import math
 from dataclasses import dataclass, field
 
 from selpres.report.jobs import Job
+from selpres.run.legacy import selector_and_cost
 from selpres.storage import flatten
 
 SETS = (("test10", "test-10"), ("heldout", "held-out"))  # results.json key, name in the report
@@ -50,12 +54,10 @@ class Group:
         return self.used[0].results["schedule"] if self.used else None
 
     @property
-    def cost(self) -> int | None:
-        """Presentations charged in all: training plus the forward passes spent choosing A_i
-        (selpres.presentation.selection)."""
-        if self.sched is None:
-            return None
-        return self.sched["presentations"] + (self.used[0].results.get("selection_presentations") or 0)
+    def cost(self) -> int | float | None:
+        """Presentations charged in all, per replica: training plus the forward passes spent choosing (the job's
+        measured cost, :func:`job_cost`)."""
+        return job_cost(self.used[0].results) if self.used else None
 
     @property
     def complete_seeds(self) -> list[int]:
@@ -90,6 +92,24 @@ class Group:
         total = sum(j.results["wall_seconds"]["total"] for j in self.used)
         reps = sum(j.results["replicas"] for j in self.used)
         return {"train": train, "total": total, "per_replica": train / reps if reps else None}
+
+
+def job_cost(res: dict) -> int | float:
+    """A job's total cost per replica, in presentations: back-propagated plus charged for choosing, the mean over
+    its replicas as its ledger measured it (``cost.presentations``; an older file's as
+    ``selpres.run.legacy.selector_and_cost`` reads it)."""
+    return selector_and_cost(res)[1]["presentations"]
+
+
+def presents_all(res: dict) -> bool:
+    """Whether a finished job's results are conventional training: one stage of all of U, each epoch's every pattern
+    presented by the staged selector (a compute-matched run's cut last epoch too)."""
+    return len(res["schedule"]["sizes"]) == 1 and selector_and_cost(res)[0].get("name") == "staged"
+
+
+def replica_costs(res: dict) -> list[float]:
+    """Each replica's measured cost in presentations (trained and charged), from a job's results."""
+    return selector_and_cost(res)[1]["per_replica"]["spent"]
 
 
 def _sched_key(s: dict) -> tuple:
@@ -212,21 +232,33 @@ def arm_label(members: list[tuple[Job, dict[str, str]]], keys: list[str]) -> dic
     return labels
 
 
-def label_methods(jobs: list[Job]) -> None:
-    """A job's method is its schedule's name; when jobs of one name differ in other settings (a sweep over
-    stage sizes, epochs, lr, ...), the settings that differ are added to the name, so they are not pooled
-    (an arm by its name: :func:`arm_label`)."""
-    by_name: dict[str, list[tuple[Job, dict]]] = {}
+def method_labels(jobs: list[Job], within=None) -> dict[int, str]:
+    """id(job) -> its method's label, for every job with results: the method it ran (``Job.method``), and when jobs
+    of that name differ in other settings (a sweep over stage sizes, epochs, lr, ...), the settings that differ, so
+    they are not pooled (an arm by its name: :func:`arm_label`). ``within(job)`` -> a key: compare only jobs of one
+    key (a study whose rows are split by arm and regime already), by default the whole sweep."""
+    by_name: dict[tuple, list[tuple[Job, dict]]] = {}
     for j in jobs:
         if j.results and "config" in j.results:
-            by_name.setdefault(j.schedule, []).append((j, settings(j)))
-    for name, members in by_name.items():
+            key = (within(j) if within else None, j.method)
+            by_name.setdefault(key, []).append((j, settings(j)))
+    labels = {}
+    for (_, name), members in by_name.items():
         keys = varying([f for _, f in members])
         arms = arm_label(members, keys)
         others = [k for k in keys if not k.startswith(ROBOT)]
         for j, f in members:
-            if text := " ".join(filter(None, [setting_text(f, others), arms.get(id(j), "")])):
-                j.schedule = name + " " + text
+            text = " ".join(filter(None, [setting_text(f, others), arms.get(id(j), "")]))
+            labels[id(j)] = name + " " + text if text else name
+    return labels
+
+
+def label_methods(jobs: list[Job]) -> None:
+    """Every job with results labelled by its method (:func:`method_labels` over the whole sweep)."""
+    labels = method_labels(jobs)
+    for j in jobs:
+        if id(j) in labels:
+            j.schedule = labels[id(j)]
 
 
 def aggregate(

@@ -21,11 +21,16 @@ class Job:
 
     path: Path  # the job folder
     status: str  # complete | diverged | failed | missing | unreadable
-    schedule: str | None
+    schedule: str | None  # its method's label: :attr:`method`, told apart by settings (selpres.report.groups)
     topology: str | None
     results: dict | None = None  # the full results.json of a complete/diverged job
     error: str | None = None
     notes: list[str] = field(default_factory=list)  # what was read as missing or not complete (selpres.report.validate)
+    method: str | None = None  # the method that ran (:func:`method_of`), before any label; None: ``schedule``
+
+    def __post_init__(self):
+        if self.method is None:
+            self.method = self.schedule
 
     @property
     def replicas(self) -> list[dict]:
@@ -45,16 +50,39 @@ class Job:
         }
 
 
+def method_of(res: dict) -> str:
+    """A job's method as it ran: its schedule's recorded name, and the import paths of a user's classes that ran
+    (``selector.user_classes``: its selector or order), ``infobatch[my_pruning.UniformPruning]``, so a user's
+    policy run from InfoBatch's schedule file is not InfoBatch. Results written before the selector was recorded:
+    the import paths the config names (a built-in is a plain name or a path into ``selpres``)."""
+    name = res["schedule"]["name"]
+    sel = res.get("selector")
+    own = sel.get("user_classes", []) if isinstance(sel, dict) else user_classes(res.get("config") or {})
+    return f"{name}[{', '.join(own)}]" if own else name
+
+
+def user_classes(cfg: dict) -> list[str]:
+    """The import paths of a user's classes a config names for its method (``schedule.pruning._target_``,
+    ``schedule.order``)."""
+    s = cfg.get("schedule") or {}
+    named = [(s.get("pruning") or {}).get("_target_"), s.get("order")]
+    return [v for v in named if isinstance(v, str) and "." in v and not v.startswith("selpres.")]
+
+
 def _hydra_identity(folder: Path) -> tuple[str | None, str | None]:
-    """(schedule name, topology) of a job without usable results: from .hydra/config.yaml, else the
-    folder name (Hydra names a job folder by its overrides)."""
+    """(method, topology) of a job without usable results: from .hydra/config.yaml (the method as
+    :func:`method_of` names it from a config), else the folder name (Hydra names a job folder
+    by its overrides)."""
     cfg = folder / ".hydra" / "config.yaml"
     if cfg.exists():
         try:
             import yaml
 
             c = yaml.safe_load(cfg.read_text()) or {}
-            return (c.get("schedule") or {}).get("name"), (c.get("topology") or {}).get("layers")
+            name = (c.get("schedule") or {}).get("name")
+            own = user_classes(c)
+            method = f"{name}[{', '.join(own)}]" if own and name else name
+            return method, (c.get("topology") or {}).get("layers")
         except Exception:  # fall back to the folder name
             pass
     m_s = re.search(r"(?:^|,)schedule=([^,]+)", folder.name)
@@ -89,7 +117,7 @@ def load_job(folder: Path) -> Job:
         notes = validate.finite_replicas(res)
         if n := validate.finite_curves(res):
             notes.append(f"{n:,} curve values not finite (read as missing)")
-        return Job(folder, status, res["schedule"]["name"], res["topology"], results=res, notes=notes)
+        return Job(folder, status, method_of(res), res["topology"], results=res, notes=notes)
     s, t = _hydra_identity(folder)
     err = res.get("error", "no error recorded")
     if res.get("kind"):

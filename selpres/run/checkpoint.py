@@ -1,9 +1,10 @@
 """Checkpoints: what a killed job needs to resume exactly, written so that its cost stays flat.
 
 A checkpoint is the engine's state (weights, momentum buffers), the epoch reached (shuffles are
-counter-based, so a fixed priority order needs nothing more), the samplers' orders where they were chosen
-during training (``loss_high``/``loss_low`` ask the network at each enlargement, ``reselect`` redraws;
-None otherwise), the presentations (selection's share too) and seconds so far, and which replicas diverged.
+counter-based, so a fixed priority order needs nothing more), the state of every other part the job names: the
+selector's (``selpres.presentation.selector``: the orders a stage-wise order chose, a pruning policy's scores and
+annealing flags) and the ledger's (each replica's cost so far), for every job alike; the presentations (selection's
+share too) and seconds so far, and which replicas diverged.
 The logged history is not re-encoded each time: its records are appended once to ``history.jsonl``, one JSON
 record a line (orjson: the shortest float text that reads back exactly; a file a resume reads must not be able
 to run code, as a pickle can: 0.8 ms a record at R = 1000 where pickle took 0.08, one-off timing, each record
@@ -139,8 +140,7 @@ class Progress:
     diverged_at: list[dict | None]  # per replica: None, or the epoch/presentations where it diverged
     epoch: int = 0  # epochs done
     presentations: int = 0  # the cost axis: training presentations plus selection's charge
-    selection_presentations: int = 0  # selection's charge (selpres.presentation.selection), per replica
-    orders: torch.Tensor | None = None  # [R, n] the samplers' orders once chosen during training
+    selection_presentations: int = 0  # forward passes charged for choosing, per replica (rounded mean)
     seconds: dict = field(default_factory=dict)  # accumulated seconds per phase of the loop
     resumed_from: int | None = None  # the epoch a resume started from
     stale_checkpoint: str | None = None  # where a checkpoint of another config was moved
@@ -183,7 +183,8 @@ class Checkpoints:
     ext4 disk (one-off timings), where an R = 1 job checkpoints every 2.7 ms; onto a free name ~0.01 ms.
     """
 
-    def __init__(self, folder: Path, config_hash: str):
+    def __init__(self, folder: Path, config_hash: str, parts: dict | None = None):
+        self.parts = dict(parts or {})  # name -> an object with state_dict/load_state_dict, saved with the engine
         self.paths, self.history_path, self.hash = (
             (folder / CHECKPOINT, folder / CHECKPOINT_ALT),
             folder / HISTORY,
@@ -272,13 +273,16 @@ class Checkpoints:
         slot, ck, history = chosen
         if unreadable:
             log.warning("%s: %s; resumed the checkpoint of epoch %d", self.paths[0].parent, unreadable[0], ck["epoch"])
-        fresh = dumps(engine.state_dict())  # a copy to put back if the saved state does not fit
+        fresh = dumps(self._states(engine))  # a copy to put back if the saved state does not fit
         try:
             if why := _layout_differs(engine.state_dict(), ck["engine"]):
                 raise ValueError(why)
-            engine.load_state_dict(ck["engine"])
+            saved = ck.get("parts", {})  # (none: a checkpoint of a selpres before the selector's state was kept)
+            if set(saved) != set(self.parts):
+                raise ValueError(f"it holds the states of {sorted(saved) or 'no part'}, this job {sorted(self.parts)}")
+            self._load(engine, {"engine": ck["engine"], "parts": saved})
         except Exception as e:  # a hand-edited file with this job's hash: set aside, never a crash on every re-run
-            engine.load_state_dict(torch.load(io.BytesIO(fresh), weights_only=True))
+            self._load(engine, torch.load(io.BytesIO(fresh), weights_only=True))
             moved = self.move_aside([*self.paths, *self.logs])
             where = ", ".join(p.name for p in moved.values())
             log.warning("%s: its engine state does not fit this job (%s: %s); moved the job's files aside (%s), "
@@ -299,7 +303,6 @@ class Checkpoints:
             epoch=ck["epoch"],
             presentations=ck["presentations"],
             selection_presentations=ck["selection_presentations"],
-            orders=ck.get("orders"),
             seconds=ck["seconds"],
             resumed_from=ck["epoch"],
             stale_checkpoint=stale,
@@ -322,13 +325,21 @@ class Checkpoints:
             "history_bytes": size,
             "history_format": HISTORY_FORMAT,
             "selection_presentations": progress.selection_presentations,
-            "orders": progress.orders,
+            "parts": {name: part.state_dict() for name, part in self.parts.items()},
         }
         data = dumps(state)
         target = self.paths[self._next]
         target.unlink(missing_ok=True)  # the older of the two: the other name holds the newest checkpoint
         atomic_write(target, lambda f: f.write(data))
         self._next = 1 - self._next
+
+    def _states(self, engine) -> dict:
+        return {"engine": engine.state_dict(), "parts": {name: p.state_dict() for name, p in self.parts.items()}}
+
+    def _load(self, engine, states: dict) -> None:
+        engine.load_state_dict(states["engine"])
+        for name, part in self.parts.items():
+            part.load_state_dict(states["parts"][name])
 
     def move_aside(self, paths: list[Path]) -> dict[Path, Path]:
         """Rename those of ``paths`` that exist to ``<name>.stale-<time>.<suffix>``; returns old -> new."""

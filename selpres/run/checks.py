@@ -69,22 +69,23 @@ def check(job: JobSpec) -> tuple[int, ...]:
 
 
 def check_schedule(s: ScheduleSpec, optim: OptimSpec) -> None:
-    """The order, the pruning policy around the schedule and the optimizer, the strata and the choosing charge."""
-    make_order(s.order)  # a built-in or an importable Order: ConfigError naming schedule.order
+    """The order, the selector around the schedule and the optimizer, the strata and the choosing charge."""
+    sel = s.selector
+    make_order(sel.order)  # a built-in or an importable Order: ConfigError naming schedule.order
     check_form(s.node)  # listed sizes or the parametric keys, not both (selpres.presentation.proportions)
     check_epoch_clock(optim.lr_schedule, s.sizes, s.epochs, s.budget)  # cosine_epochs: one stage of U for N epochs
-    if s.pruning is not None:
-        kw = dict(sizes=s.sizes, order=s.order, budget=s.budget, epochs=s.epochs, selection_cost=s.selection_cost)
-        check_pruning(*s.pruning, **kw)
+    if sel.target is not None:
+        kw = dict(sizes=s.sizes, order=sel.order, budget=s.budget, epochs=s.epochs, selection_cost=sel.selection_cost)
+        check_pruning(sel.target, dict(sel.params), **kw)
         if optim.batch:
-            why = f"a mini-batch >= 1 with schedule.pruning._target_={s.pruning[0]}"
+            why = f"a mini-batch >= 1 with schedule.pruning._target_={sel.target}"
             raise ConfigError("optim.batch_size", optim.batch_size, why)
-    if s.strata_bins < 1:
-        raise ConfigError("schedule.strata_bins", s.strata_bins, "a whole number >= 1")
-    if not 0 <= s.selection_cost <= 1:
+    if sel.strata_bins < 1:
+        raise ConfigError("schedule.strata_bins", sel.strata_bins, "a whole number >= 1")
+    if not 0 <= sel.selection_cost <= 1:
         raise ConfigError(
             "schedule.selection_cost",
-            s.selection_cost,
+            sel.selection_cost,
             "a fraction of a training presentation in [0, 1] charged per candidate scored "
             "(0 = choosing is free; default 1/3, a forward pass of forward + backward)",
         )

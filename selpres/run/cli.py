@@ -44,8 +44,9 @@ def hydra_line(e: BaseException, overrides: list[str]) -> str | None:
             value = given.partition("=")[2] if given else getattr(cause, "value", None)
             return f"{key}={value!r} is not allowed: expected {_expected(cause)}"
         if type(cause).__name__ == "MissingMandatoryValue" and key:
-            group = key.partition(".")[0]
-            return f"{key} has no value (???): expected {key}=<value>, or a {group}= option that sets it"
+            group, dot, _ = key.partition(".")
+            option = f", or a {group}= option that sets it" if dot else ""  # a top-level key belongs to no group
+            return f"{key} has no value (???): expected {key}=<value>{option}"
         msg = str(getattr(cause, "msg", "") or text).strip().splitlines()[0]
         return f"{key}: {msg}" if key and key not in msg else msg
     if isinstance(e, ConfigCompositionException):
@@ -176,10 +177,10 @@ def summary_table(results: dict) -> str:
         ),
         (
             "cost T/t",
-            f"{sch['presentations']:,} presentations  (T_con/t at equal epochs "
-            f"{sch['conventional_presentations']:,}; ratio {sch['cost_ratio']:.3f})"
+            f"{_count(sch['presentations'])} presentations  (T_con/t at equal epochs "
+            f"{_count(sch['conventional_presentations'])}; ratio {sch['cost_ratio']:.3f})"
             + (
-                f" + {results['selection_presentations']:,} charged for choosing A_i"
+                f" + {_count(results['selection_presentations'])} charged for choosing A_i"
                 if results.get("selection_presentations")
                 else ""
             ),
@@ -194,3 +195,8 @@ def summary_table(results: dict) -> str:
         rows.append(("held-out nMSE", f"{fmt('heldout_rms_nmse_overall')}   (predicting the mean: {base:.4f} Nm)"))
     w = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)
+
+
+def _count(x: float) -> str:
+    """Presentations as the summary says them: whole ones with thousands separators, a mean over replicas to 0.1."""
+    return f"{int(x):,}" if float(x).is_integer() else f"{x:,.1f}"

@@ -69,6 +69,7 @@ def job_hparams(results: dict, folder: Path | None) -> dict:
     optim = cfg.get("optim") or {}
     hp = {
         "schedule": sch["name"],
+        "selector": (results.get("selector") or {}).get("name"),  # what chose the epochs (a user's: its import path)
         "order": sch.get("order"),
         "p": sch.get("p"),
         "n1": sch.get("n1"),

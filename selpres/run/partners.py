@@ -29,6 +29,8 @@ from typing import Any
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf
 
+from selpres.run.legacy import selector_and_cost
+
 FULL_EPOCHS = 150  # the conventional preset's N (configs/schedule/conventional.yaml)
 
 
@@ -38,18 +40,19 @@ def _schedule_override(item: str) -> bool:
 
 
 def costs(sweep: Path) -> list[int]:
-    """The budgets of the sweep's partners, sorted: the cost of each of its staged settings, and n·N of its full
-    conventional run; read from its finished jobs."""
+    """The budgets of the sweep's partners, sorted: the cost of each of its staged settings (more than one stage,
+    every replica's measured cost the same), and n·N of its full conventional run; read from its finished jobs."""
     budgets, totals, n = set(), set(), None
     for path in sweep.rglob("results.json"):
         try:
             res = json.loads(path.read_bytes())
             sch = res["schedule"]
             n = sch["sizes"][-1]
+            spent = selector_and_cost(res)[1]["per_replica"]["spent"]  # each replica's measured cost
         except (OSError, ValueError, KeyError, TypeError, IndexError):
             continue
-        if res.get("status") != "complete" or res.get("pruning") or len(sch["sizes"]) < 2:
-            continue
+        if res.get("status") != "complete" or len(sch["sizes"]) < 2 or len(set(spent)) != 1:
+            continue  # one stage, or replicas that cost differently (one seed's choices): no one budget to match
         budgets.add(int(res["presentations_done"]))
         if not any(sch.get("extra_presentations") or []) and sch.get("budget") is None:
             totals.add(sum(sch["epochs"]))

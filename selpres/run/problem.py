@@ -1,7 +1,7 @@
-"""The problem a resolved job determines before the first update: validated data, schedule, samplers, initial
-weights (``prepare``, which writes nothing), and the engine that will train it (``job_engine``, through
-``selpres.engines.factory.build_engine``). It reads the job's specs (``selpres.run.resolve.JobSpec``), never the
-config. The loop that runs it is ``selpres.run.train``.
+"""The problem a resolved job determines before the first update: validated data, schedule, the selector and its
+ledger, initial weights (``prepare``, which writes nothing), and the engine that will train it (``job_engine``,
+through ``selpres.engines.factory.build_engine``). It reads the job's specs (``selpres.run.specs.JobSpec``), never
+the config. The loop that runs it is ``selpres.run.train``.
 """
 
 from __future__ import annotations
@@ -18,23 +18,21 @@ from selpres.engines.factory import ONLINE, Engine, build_engine
 from selpres.engines.model import init_replica_params
 from selpres.errors import ConfigError
 from selpres.patterns import Scaler
-from selpres.presentation.orders import make_order
-from selpres.presentation.proportions import fit_schedule, schedule_of
-from selpres.presentation.pruning._job import Pruning, pruning_plan
+from selpres.presentation.build import build_selector, plan
 from selpres.presentation.sampler import SelectivePresentation
 from selpres.presentation.schedule import EpochPlan, Schedule
-from selpres.presentation.selection import StageSelection, stage_selection
+from selpres.presentation.selector import Ledger, Selector
 from selpres.run.estimate import Work, refuse_job
 from selpres.run.resolve import engine_kind, kind_of
 from selpres.run.specs import JobSpec, ScheduleSpec
-from selpres.seeding import derive_seed, generator
+from selpres.seeding import derive_seed
 
 log = logging.getLogger("selpres")
 
 
 @dataclass
 class Problem:
-    """Everything a config determines before the first update."""
+    """Everything a job determines before the first update."""
 
     sizes: tuple[int, ...]
     schedule: Schedule
@@ -43,13 +41,17 @@ class Problem:
     X: torch.Tensor  # exemplar inputs, scaled
     Y: torch.Tensor  # exemplar targets, scaled
     tests: dict  # name -> (X scaled, Y in Nm)
-    samplers: list[SelectivePresentation]
     init_params: list[torch.Tensor]
-    selection: StageSelection | None = None  # a stage-wise order (loss_high, reselect, ...): A_k chosen per stage
+    selector: Selector  # what decides every epoch's presentations (selpres.presentation.selector)
+    ledger: Ledger  # what the replicas have cost so far: charged by the selector and the loop, checkpointed
     task: Task | None = None  # names of the columns, and task.info: what data was made, how (for results)
     schedule_note: str | None = None  # how a named schedule's counts were applied to this n (None: as given)
-    pruning: Pruning | None = None  # a pruning policy (schedule.pruning): each epoch's patterns chosen by loss
     budget: float | None = None  # the run's own planned cost (presentations): the cosine schedule's horizon
+
+    @property
+    def samplers(self) -> list[SelectivePresentation]:
+        """Each replica's sampler of the schedule's nested sets (whose shuffles every selector presents from)."""
+        return self.selector.source.samplers
 
     @functools.cached_property
     def plan(self) -> list[EpochPlan]:
@@ -79,24 +81,15 @@ def prepare(job: JobSpec) -> Problem:
     """The resolved job against the exemplar set; raises ConfigError, writes nothing."""
     task = load_task(job.robot, job.data)
     sch = job.schedule
-    schedule, note = task_schedule(sch, task)
+    schedule, note, budget = task_schedule(sch, task)
     # scored in torch: batch methods, the mini-batch engine (what the native kernel cannot run), torch/reference
     torch_eval = job.engine.mode != ONLINE or job.engine.requested in ("torch", "reference")
     largest_test = max(len(task.tests.heldout.X), len(task.tests.test10.X))
     work = Work(job.replicas, job.sizes, sch, schedule, task.n, largest_test, job.cadence.heldout_every, torch_eval)
     refuse_job(work)  # before any replica's state is made
-    seeds = job.seeds
-    order = make_order(sch.order, sch.strata_bins)
-    orders = order.orders(task.exemplar.X, [generator(s, "subset") for s in seeds])
-    samplers = [SelectivePresentation(order=order, schedule=schedule, seed=s) for order, s in zip(orders, seeds)]
+    seeds, sizes = job.seeds, job.sizes
     X, Y = task.scaler.transform_x(task.exemplar.X), task.scaler.transform_y(task.exemplar.Y)
-    pruning, budget = None, schedule.presentations + order.planned_charge(schedule.sizes, sch.selection_cost)
-    if sch.pruning is not None:
-        fitted = fit_schedule(sch.sizes, sch.budget, task.n)[1]
-        epochs = None if sch.epochs is None else int(sch.epochs[0])
-        pruning = Pruning(*sch.pruning, task.n, seeds, fitted, epochs, float(sch.selection_cost))
-        budget = fitted if fitted is not None else task.n * epochs
-    sizes = job.sizes
+    selector, ledger = build_selector(sch.selector, schedule, seeds, task.exemplar.X, X, Y, budget)
     return Problem(
         sizes=sizes,
         schedule=schedule,
@@ -105,31 +98,25 @@ def prepare(job: JobSpec) -> Problem:
         X=X,
         Y=Y,
         tests=task.scaled_tests(),
-        samplers=samplers,
         init_params=init_replica_params(sizes, [derive_seed(s, "init") for s in seeds]),
-        selection=stage_selection(order, schedule, seeds, task.exemplar.X, X, Y, sch.selection_cost, samplers),
+        selector=selector,
+        ledger=ledger,
         task=task,
         schedule_note=note,
-        pruning=pruning,
-        budget=budget,
+        budget=budget if budget is not None else schedule.presentations + selector.planned_charge(schedule),
     )
 
 
-def task_schedule(sch: ScheduleSpec, task: Task) -> tuple[Schedule, str | None]:
-    """The schedule on the task's n: the paper's counts by their proportions when n is not 1002
-    (``selpres.presentation.proportions``, logged), refusals with the fraction form, and a data file too short for
-    the schedule named as such."""
-    if sch.pruning is not None:  # checked in resolve: sizes [1.0], a budget or one epoch count
-        sizes, budget, note = fit_schedule(sch.sizes, sch.budget, task.n)
-        if note:
-            log.info(note)
-        epochs = None if sch.epochs is None else int(sch.epochs[0])
-        return pruning_plan(*sch.pruning, task.n, budget, epochs, float(sch.selection_cost)), note
+def task_schedule(sch: ScheduleSpec, task: Task) -> tuple[Schedule, str | None, int | None]:
+    """The schedule on the task's n as the job's selector plans it (listed or parametric, the paper's counts by their
+    proportions when n is not 1002: ``selpres.presentation.proportions``, logged; a pruning policy's one stage),
+    how named counts were applied, and the budget the selector runs against (None: the plan's epochs); a data file
+    too short for the schedule named as such."""
     try:
-        schedule, note = schedule_of(sch.node, task.n)  # listed or parametric (selpres.presentation.proportions)
+        schedule, note, budget = plan(sch.selector, sch.node, task.n)
         if note:
             log.info(note)
-        return schedule, note
+        return schedule, note, budget
     except ConfigError as e:
         if e.key == "schedule.sizes" and task.info.get("kind") == "file":
             i = task.info

@@ -19,6 +19,7 @@ share one terminal, where their lines would overwrite each other (the sweep's co
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import time
@@ -45,8 +46,8 @@ def duration(seconds: float) -> str:
 
 def sweep_size(config: DictConfig) -> int | None:
     """How many jobs the sweep of ``config`` launches: an Optuna sweep's ``n_trials``, else the basic sweeper's product
-    of values (its ``params`` and the command line's; partners=on adds its own when it knows them); None where it
-    cannot be told."""
+    of values (its ``params``, each replaced by the command line's value of the same key; partners=on adds its own
+    when it knows them); None where it cannot be told."""
     trials = OmegaConf.select(config, "hydra.sweeper.n_trials")  # an Optuna sweep (experiment=search)
     if trials is not None:
         return int(trials) if isinstance(trials, int) else None
@@ -60,11 +61,10 @@ def sweep_size(config: DictConfig) -> int | None:
         params = OmegaConf.select(config, "hydra.sweeper.params") or {}
         given = [f"{k}={v}" for k, v in params.items()] + list(config.hydra.overrides.task)
         loader = ConfigLoaderImpl(config_search_path=create_config_search_path(str(CONFIG_DIR)))
-        total = 1
+        counts: dict[str, int] = {}  # by key, the later one winning, as Hydra's basic sweeper merges them
         for o in OverridesParser.create(config_loader=loader).parse_overrides(given):
-            if o.is_sweep_override():
-                total *= len(list(o.sweep_string_iterator()))
-        return total
+            counts[o.get_key_element()] = len(list(o.sweep_string_iterator())) if o.is_sweep_override() else 1
+        return math.prod(counts.values())
     except Exception:  # a sweeper or syntax this count does not know: the lines say "k jobs done"
         return None
 

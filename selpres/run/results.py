@@ -1,5 +1,11 @@
 """What a job reports: ``results.json`` (identity, cost, timing, per-replica and summary metrics, curves).
 
+The method is named by what ran (``selector``: the class that chose every epoch and the order it grew the sets by,
+a user's by its import path) and its cost is what the job's ledger measured (``cost``: per replica, back-propagated
+presentations and forward passes charged for choosing, over conventional training's presentations in the same
+epochs), read the same way for every method; the ``schedule`` node's presentations, epochs and cost ratio are
+those measured ones beside the plan's (``planned_epochs``).
+
 A job's identity is the hash of everything that can change its numbers (``job_hash`` of a composed config; a
 resolved job holds it as ``JobSpec.hash``, both ``selpres.run.specs.identity``); the knobs that cannot (logging,
 threads, checkpoints, the sweep's name, overwrite) are left out, so changing them finds the same finished job.
@@ -15,7 +21,6 @@ from omegaconf import DictConfig
 
 from selpres.engines.activations import ACTIVATIONS
 from selpres.engines.factory import Engine
-from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.sampler import shuffle_implementation
 from selpres.run import floor, provenance, stalls
 from selpres.run.specs import JobSpec, identity, recorded, task_specs
@@ -91,23 +96,31 @@ def build(job: JobSpec, prob, engine: Engine, final: dict, progress, seconds: di
     reps = replica_results(prob.seeds, final, progress.diverged_at, progress.history[-1]["train_mse"])
     n_div = sum(d is not None for d in progress.diverged_at)
     heldout_n = int(prob.tests["heldout"][0].shape[0])
-    training = sum(ep.presentations for ep in prob.plan[: progress.epoch])
     train_Y = prob.task.exemplar.Y if prob.task is not None else prob.scaler.inverse_y(prob.Y)
     task_floor = floor.task_floor(train_Y, prob.tests)
     stats = summary(reps)
-    pruning = prob.pruning.describe() if getattr(prob, "pruning", None) is not None else None
-    sch = job.schedule
-    order = {"order": sch.order, "order_class": ORDERS.path_of(sch.order)}  # the class that ran
-    schedule = {"name": sch.name, **order, **prob.schedule.describe()}
-    if pruning is not None:  # what ran, not the plan's upper bound: mean over replicas (each in pruning)
-        training = sum(pruning["trained_presentations"]) / R
-        schedule.update(presentations=training, epochs=[max(pruning["epochs"])], planned_epochs=schedule["epochs"])
+    cost = prob.ledger.describe()
+    training = cost["trained_presentations"]  # what ran: mean over replicas (each in cost.per_replica)
+    sel = prob.selector
+    selector = {**sel.identity, **sel.describe(), "checkpointed": job.checkpoints}
+    schedule = {
+        "name": job.schedule.name,
+        "order": job.schedule.selector.order,
+        "order_class": sel.identity["order_class"],  # the class that ran
+        **prob.schedule.describe(),
+        "presentations": training,
+        "epochs": epochs_run(prob.schedule, max(cost["per_replica"]["epochs"], default=0)),
+        "planned_epochs": prob.schedule.epochs,
+        "conventional_presentations": cost["conventional_presentations"],
+        "cost_ratio": cost["cost_ratio"],  # measured: presented and charged over conventional's
+    }
     return {
         "status": "diverged" if n_div == R else "complete",
         "diverged_replicas": n_div,
         "config_hash": job.hash,
         "schedule": schedule,
-        "pruning": pruning,  # infobatch / selective_backprop: parameters, per-replica cost, patterns left out
+        "selector": selector,  # what chose every epoch's patterns: its name, class, parameters
+        "cost": cost,  # the ledger: per replica and mean, presentations trained and charged, the cost ratio
         "topology": job.layers,
         "engine": engine.name,  # what ran
         "optimizer": job.optim.path,  # the class whose rule ran (selpres.engines.optim, or the user's own)
@@ -121,7 +134,7 @@ def build(job: JobSpec, prob, engine: Engine, final: dict, progress, seconds: di
         "presentations_done": progress.presentations,  # the cost: training + selection presentations
         "training_presentations": training,
         "selection_presentations": progress.selection_presentations,  # forward passes (selpres.presentation.selection)
-        "selection_cost": sch.selection_cost,  # the charge per candidate scored
+        "selection_cost": job.schedule.selector.selection_cost,  # the charge per candidate scored
         "tests": {
             "test10": {"n": int(prob.tests["test10"][0].shape[0])},
             "heldout": {"n": heldout_n, "curve_n": min(job.cadence.heldout_curve, heldout_n)},
@@ -145,3 +158,14 @@ def build(job: JobSpec, prob, engine: Engine, final: dict, progress, seconds: di
         "curves": progress.history,
         "config": job.config,
     }
+
+
+def epochs_run(schedule, epochs: int) -> list[int]:
+    """The full epochs run in each stage when ``epochs`` epochs of the plan ran (a partial epoch is the stage's
+    ``extra``, not an epoch)."""
+    out = []
+    for st in schedule.stages:
+        full = min(st.epochs, epochs)
+        out.append(full)
+        epochs -= full + (1 if st.extra and epochs > st.epochs else 0)
+    return out

@@ -37,6 +37,7 @@ from selpres.engines.minibatch import LR_SCHEDULES
 from selpres.engines.optim import KEY, OPTIMIZERS, modes
 from selpres.engines.optim._base import MINIBATCH, ONLINE
 from selpres.errors import ConfigError
+from selpres.presentation.build import SelectorSpec
 from selpres.presentation.orders import REGISTRY as ORDERS
 from selpres.presentation.proportions import RULE_KEYS
 from selpres.presentation.pruning import REGISTRY as PRUNING
@@ -55,7 +56,7 @@ NOT_IDENTITY = ("logging", "overwrite", "threads", "checkpoint", "name")  # knob
 def plain(node: Any) -> Any:
     """Plain, resolved values of a config node (or of a container holding nodes): dicts, lists, scalars."""
     if isinstance(node, (DictConfig, ListConfig)):
-        return OmegaConf.to_container(node, resolve=True, enum_to_str=True)
+        return OmegaConf.to_container(node, resolve=True, enum_to_str=True, throw_on_missing=True)
     if isinstance(node, Mapping):
         return {k: plain(v) for k, v in node.items()}
     if isinstance(node, (list, tuple)):
@@ -87,19 +88,17 @@ def data_spec(node: Any) -> DataSpec:
 @dataclass(frozen=True)
 class ScheduleSpec:
     """The schedule node: the stages as written (``sizes``: counts or fractions of n, None in the parametric form;
-    ``epochs`` per stage, or a ``budget`` of presentations), the order that grows A_i (a built-in's alias or an import
-    path), its strata, the charge per candidate scored, and the pruning policy (its alias or import path, its
-    parameters) or None. ``node``: the whole node as plain values, the parametric form's keys included
+    ``epochs`` per stage, or a ``budget`` of presentations) and what chooses each epoch's patterns, ``selector``
+    (``selpres.presentation.build.SelectorSpec``: the order that grows A_i, its strata, the charge per candidate
+    scored, and the ``schedule.pruning`` node's class, a built-in's alias or an import path, and its parameters).
+    ``node``: the whole node as plain values, the parametric form's keys included
     (``selpres.presentation.proportions.schedule_of`` reads them)."""
 
     name: str
     sizes: list | None
     epochs: list[int] | None
     budget: int | None
-    order: str
-    strata_bins: int
-    selection_cost: float
-    pruning: tuple[str, dict] | None
+    selector: SelectorSpec
     node: Mapping[str, Any]
 
 
@@ -107,16 +106,19 @@ def schedule_spec(node: Any) -> ScheduleSpec:
     s = plain(node)
     sizes = None if s.get("sizes") is None else list(s["sizes"])  # None: the parametric form (p, first, growth, ...)
     epochs = None if s.get("epochs") is None else list(s["epochs"])
+    return ScheduleSpec(s["name"], sizes, epochs, s.get("budget"), selector_spec(s), node=s)
+
+
+def selector_spec(s: Mapping[str, Any]) -> SelectorSpec:
+    """The plain schedule node's choice of selector: ``schedule.order`` (an order's alias or import path), its
+    strata, the charge per candidate scored, and ``schedule.pruning`` (null: the staged presentation of the order;
+    else a node ``{_target_: <a selector's alias or import path>, <its parameters>}``). The old spelling
+    ``schedule.pruning=infobatch`` is refused naming the new."""
     order = ORDERS.canonical(s["order"])
-    args = (s["name"], sizes, epochs, s.get("budget"), order, s["strata_bins"], s["selection_cost"])
-    return ScheduleSpec(*args, pruning=pruning_spec(s.get("pruning")), node=s)
-
-
-def pruning_spec(node: Any) -> tuple[str, dict] | None:
-    """``schedule.pruning`` as the plain spec the pruning room takes: (the policy's alias or import path, its
-    parameters), or None (no pruning). The old spelling ``schedule.pruning=infobatch`` is refused naming the new."""
+    common = (order, s["strata_bins"], s["selection_cost"])
+    node = s.get("pruning")
     if node is None:
-        return None
+        return SelectorSpec(*common)
     if not isinstance(node, Mapping):
         raise ConfigError(
             "schedule.pruning",
@@ -128,7 +130,7 @@ def pruning_spec(node: Any) -> tuple[str, dict] | None:
     target = params.pop("_target_", None)
     if target is None:
         raise ConfigError("schedule.pruning._target_", None, PRUNING.allowed())
-    return PRUNING.canonical(PRUNING.check(target)), params
+    return SelectorSpec(*common, target=PRUNING.canonical(PRUNING.check(target)), params=params)
 
 
 @dataclass(frozen=True)

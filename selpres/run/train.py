@@ -1,22 +1,21 @@
 """The training loop: one job trains R replicas of one (schedule, topology) through every stage.
 
 Read top to bottom: ``train`` resolves the config into a checked job (``selpres.run.resolve``: read once, never
-again), ``prepare`` (``selpres.run.problem``) turns that into a validated problem (data, schedule, samplers,
-initial weights) without writing anything; the loop runs the epochs of the schedule's plan, asking each replica's
-sampler for its presentation order and the engine for the updates, scores the test sets, logs, checkpoints, and
-returns the results that ``results.json`` holds.
+again), ``prepare`` (``selpres.run.problem``) turns that into a validated problem (data, schedule, the selector and
+its ledger, initial weights) without writing anything; the loop runs the epochs of the schedule's plan, asking the
+selector what each replica presents (``selpres.presentation.selector``: the same question of every method) and the
+engine for the updates, charges the ledger, scores the test sets, logs, checkpoints, and returns the results that
+``results.json`` holds.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import logging
 import math
 import time
 from collections import defaultdict
 from collections.abc import Callable
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,8 +24,9 @@ from omegaconf import DictConfig
 
 from selpres.engines.factory import Engine
 from selpres.patterns import metric_names
-from selpres.presentation.sampler import epoch_orders, shuffle_implementation
+from selpres.presentation.sampler import shuffle_implementation
 from selpres.presentation.schedule import EpochPlan
+from selpres.presentation.selector import Network
 from selpres.run import floor, lock, orphan, stop
 from selpres.run import results as results_json
 from selpres.run.checkpoint import Checkpoints, Progress
@@ -41,23 +41,41 @@ from selpres.storage import RESULTS, WEIGHTS, atomic_write, write_json
 log = logging.getLogger("selpres")
 
 
-WORK = ("select", "shuffle", "train")  # a method's own phases (Clock.work)
+WORK = frozenset(("select", "shuffle", "train"))  # a method's own phases (Clock.work)
+
+
+class _Phase:
+    """One timed phase: a plain context manager, since the loop opens several every epoch."""
+
+    __slots__ = ("clock", "name", "t0", "inner0")
+
+    def __init__(self, clock: Clock, name: str):
+        self.clock, self.name = clock, name
+
+    def __enter__(self):
+        self.t0, self.inner0 = time.perf_counter(), self.clock._inner
+
+    def __exit__(self, *exc):
+        c, dt = self.clock, time.perf_counter() - self.t0
+        if self.name in WORK:  # less the work phases closed inside it; then all of it is closed work
+            c.seconds[self.name] += dt - (c._inner - self.inner0)
+            c._inner = self.inner0 + dt
+        else:
+            c.seconds[self.name] += dt
 
 
 class Clock:
-    """Seconds per named phase of a job (``with clock("eval"): ...``), accumulated over resumes."""
+    """Seconds per named phase of a job (``with clock("eval"): ...``), accumulated over resumes. A method's own
+    phases (``WORK``) nest: one opened inside another (the shuffles inside choosing) takes its seconds from the
+    outer one, so each second is counted once."""
 
     def __init__(self):
         self.seconds: dict[str, float] = defaultdict(float)
         self._t0 = time.perf_counter()
+        self._inner = 0.0  # seconds of work phases closed so far
 
-    @contextmanager
-    def __call__(self, phase: str):
-        t0 = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.seconds[phase] += time.perf_counter() - t0
+    def __call__(self, phase: str) -> _Phase:
+        return _Phase(self, phase)
 
     def add(self, earlier: dict) -> None:
         """Count the seconds of an earlier process of this job (from its checkpoint)."""
@@ -144,12 +162,7 @@ class Job:
     out: Path | None
     ckpts: Checkpoints | None
     tracker: Tracker
-
-    @functools.cached_property
-    def orders_buffer(self) -> torch.Tensor:
-        """Where every epoch's presentation orders are written ([R * the largest epoch], reused)."""
-        largest = max(st.size if st.epochs else st.extra for st in self.prob.schedule.stages)
-        return torch.empty(len(self.prob.seeds) * largest, dtype=torch.int64)
+    net: Network  # the replicas' networks as the selector may ask them, and the clock
 
     def checkpoint_due(self, ep: EpochPlan) -> bool:
         every = self.spec.cadence.checkpoint_every
@@ -168,8 +181,8 @@ def start(spec: JobSpec, out_dir: str | Path | None, clock: Clock) -> Job:
     if shuffle_implementation() != "native":
         log.warning("the per-epoch shuffles run in numpy (slower, the same permutations): %s", shuffle_implementation())
     out = Path(out_dir) if out_dir is not None else None
-    # a pruning job's scores are not checkpointed (recorded as results.json's pruning.checkpointed): it restarts
-    ckpts = Checkpoints(out, spec.hash) if out is not None and spec.checkpoints and not prob.pruning else None
+    parts = {"selector": prob.selector, "ledger": prob.ledger}  # every method's state: every job resumes exactly
+    ckpts = Checkpoints(out, spec.hash, parts) if out is not None and spec.checkpoints else None
     if ckpts and spec.overwrite:
         ckpts.discard()
     progress = ckpts.resume(engine, len(prob.seeds)) if ckpts else Progress.fresh(len(prob.seeds))
@@ -177,7 +190,7 @@ def start(spec: JobSpec, out_dir: str | Path | None, clock: Clock) -> Job:
     # the event file goes into the job's own folder: TensorBoard names the run by it (the overrides), not '…/tb'
     tracker = Tracker(out if out else Path("tb"), spec.tensorboard and out is not None, spec.per_replica)
     tracker.replay(progress.history)
-    job = Job(spec, prob, engine, progress, out, ckpts, tracker)
+    job = Job(spec, prob, engine, progress, out, ckpts, tracker, Network(engine, prob.X, prob.Y, clock))
     if not progress.history:  # the untrained network: every curve starts at 0 presentations
         record(job, {**curve_point(engine, prob, job.spec.cadence, None, None, progress), "work_seconds": 0.0})
     return job
@@ -189,36 +202,24 @@ def record(job: Job, rec: dict) -> None:
 
 
 def run_epoch(job: Job, ep: EpochPlan, clock: Clock) -> dict:
-    """One epoch, of every schedule: (at a stage start of a stage-wise order) the choice of A_i, every replica's
-    shuffle of its current A_i, (a pruning policy, selpres.presentation.pruning) the patterns each replica presents
-    and their weights, the engine's one epoch call, then the costs and scoring."""
-    prob, progress, pr = job.prob, job.progress, job.prob.pruning
-    if prob.selection is not None:
-        with clock("select"):
-            prob.selection.begin_epoch(ep, job.engine, progress)
-    with clock("shuffle"):
-        for s in prob.samplers:
-            s.set_epoch(ep.index)
-        order = epoch_orders(prob.samplers, job.orders_buffer)
-    weights = counts = None
-    spent = float(progress.presentations)  # the job's cost so far: a rate schedule's clock
-    if pr is not None:
-        with clock("select"):
-            choice = pr.choose(ep.index, order, job.engine, prob.X, prob.Y)
-        order, weights, counts, spent = choice.order, choice.weights, choice.counts, pr.spent
+    """One epoch, of every method: the selector's presentations (each replica's patterns and weights; what
+    choosing them cost is charged to the ledger), the engine's one epoch call, the ledger charged with what was
+    presented, the selector shown the losses, then scoring."""
+    prob, progress, ledger = job.prob, job.progress, job.prob.ledger
+    with clock("select"):
+        shown = prob.selector.select(ep, ledger, job.net)
     with clock("train"):
-        loss = job.engine.train_epoch(prob.X, prob.Y, order, weights=weights, counts=counts, spent=spent)
+        loss = job.engine.train_epoch(
+            prob.X, prob.Y, shown.order, weights=shown.weights, counts=shown.counts, spent=ledger.clock()
+        )
+    ledger.record(shown, ep)
+    prob.selector.observe(shown, job.engine.last_losses)  # [R, m] after a pruned epoch, else [R, 0]
     progress.epoch = ep.index + 1
-    if pr is None:
-        progress.presentations += ep.presentations
-    else:
-        pr.finish(choice, job.engine.last_losses)
-        # whole presentations on the curve, as for every schedule (each replica's exact cost: results' pruning)
-        progress.presentations = round(float(pr.spent.mean()))
-        progress.selection_presentations = round(float(pr.charged.mean()))
+    # whole presentations on the curve (each replica's exact cost: results.json's cost)
+    progress.presentations = round(ledger.mean("spent"))
+    progress.selection_presentations = round(ledger.mean("charged"))
     with clock("eval"):
-        # a replica that presented nothing this epoch (its budget spent) has a NaN loss, not a diverged one
-        mark_diverged(progress, job.engine, loss if pr is None else torch.nan_to_num(loss, nan=0.0), ep.index)
+        mark_diverged(progress, job.engine, shown.presented(loss), ep.index)
         rec = curve_point(job.engine, prob, job.spec.cadence, ep, loss, progress)
     rec["work_seconds"] = clock.work()
     with clock("log"):
@@ -249,7 +250,7 @@ def train(
                 rec = run_epoch(job, ep, clock)
                 if on_epoch is not None:
                     on_epoch(rec, job.prob)
-                spent = job.prob.pruning is not None and job.prob.pruning.exhausted  # every replica spent its budget
+                spent = job.prob.ledger.exhausted  # every replica spent its budget
                 if on_stage_end is not None and (ep.index in job.prob.stage_ends or spent):
                     on_stage_end(rec, job.prob)
                 if job.progress.all_diverged:  # nothing left to train: stop the job here

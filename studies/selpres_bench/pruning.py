@@ -143,8 +143,8 @@ def job_rows(quick: bool, configs=None):
         for way in ("C", "numpy"):
             with numpy_kmeans() if way == "numpy" else contextlib.nullcontext():
                 res, cpu = run_seta(overrides, configs)
-            if way == "C" and res["pruning"]["kmeans"] != "native":
-                yield f"{name}: the C k-means is unavailable here ({res['pruning']['kmeans']})"
+            if way == "C" and res["selector"]["kmeans"] != "native":
+                yield f"{name}: the C k-means is unavailable here ({res['selector']['kmeans']})"
                 break
             runs[way] = (res, cpu)
             wall = res["wall_seconds"]

@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
-from selpres.report import Group, optim_target, setting_text, settings, varying
+from selpres.report import Group, optim_target, presents_all, setting_text, settings, varying
 from selpres_studies._paper import DESIGN
 
 PAPER, PAPER_OPTIM = DESIGN.published, DESIGN.paper["optim"]
@@ -75,7 +75,12 @@ def same_cost(a: float, b: float) -> bool:
 
 def pruned(g: Group) -> bool:
     """A data-pruning run (InfoBatch, Selective Backprop): one stage, but not conventional training."""
-    return bool(g.used and g.used[0].results.get("pruning"))
+    return bool(g.used) and pruned_job(g.used[0].results)
+
+
+def pruned_job(res: dict) -> bool:
+    """A job that chose within its one stage (a pruning policy, a user's selector): not conventional training."""
+    return len(res["schedule"]["sizes"]) == 1 and not presents_all(res)
 
 
 def matched_partner(groups: dict[tuple[str, str], Group], g: Group) -> Group | None:

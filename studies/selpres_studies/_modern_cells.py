@@ -1,6 +1,7 @@
 """The modern study's cells (:mod:`selpres_studies.modern`): its design file (roles, claims, the stall rule and the
-statistic, display names), how a job's arm, regime and method are read from its results.json, and each (arm, regime,
-method) cell's seeds, costs, wall seconds, held-out curves, stalls and hidden units."""
+statistic, display names), how a job's arm, regime and method are read from its results.json (the method as every
+report section names it, ``selpres.report.method_labels``, within its arm and regime), and each (arm, regime, method)
+cell's seeds, costs, wall seconds, held-out curves, stalls and hidden units."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from selpres.report import Context, is_stalled, optim_target
+from selpres.report import Context, is_stalled, method_labels, optim_target
+from selpres.report import job_cost as _job_cost
 
 METRICS = (("rms", "held-out RMS", "Nm"), ("nmse", "held-out nMSE", ""))
 DESIGN_FILE = Path(__file__).with_name("modern.yaml")  # modern.yaml: the study's roles and display names
@@ -140,12 +142,9 @@ class Cell:
 
 
 def job_cost(res: dict) -> float:
-    """Total cost in presentations: training plus forward passes charged for choosing (pruning: each replica's
-    exact cost, averaged)."""
-    if res.get("pruning"):
-        c = res["pruning"]["cost"]
-        return sum(c) / len(c)
-    return res["schedule"]["presentations"] + (res.get("selection_presentations") or 0)
+    """Total cost in presentations: training plus forward passes charged for choosing, each replica's as measured,
+    averaged (``selpres.report.groups.job_cost``)."""
+    return _job_cost(res)
 
 
 def job_work(res: dict) -> float | None:
@@ -171,42 +170,49 @@ def job_curves(res: dict) -> dict[int, list[tuple[float, float, float]]]:
 
 
 def cells(ctx: Context, design: Design = DESIGN) -> dict[tuple[str, str, str], Cell]:
-    """Every finished job's replicas in its (arm, regime, method) cell; the method is the schedule's recorded name."""
+    """Every finished job's replicas in its (arm, regime, method) cell, the method labelled as in every section
+    (jobs of one name that differ in another setting within an arm and regime are apart). A seed seen in two jobs
+    of one cell keeps the first job's numbers (jobs in folder order, as the report's groups pool them)."""
+    done = sorted(
+        (j for j in ctx.jobs if j.status in ("complete", "diverged") and j.results), key=lambda j: str(j.path)
+    )
+    axes = {id(j): (arm_of(j.results["config"], design), regime_of(j.results["config"], design)) for j in done}
+    labels = method_labels(done, within=lambda j: axes[id(j)])
     out: dict[tuple[str, str, str], Cell] = {}
-    for job in ctx.jobs:
-        res = job.results
-        if job.status not in ("complete", "diverged") or not res:
-            continue
-        cfg = res["config"]
-        key = (arm_of(cfg, design), regime_of(cfg, design), res["schedule"]["name"])
+    for job in done:
+        res, cfg = job.results, job.results["config"]
+        key = (*axes[id(job)], labels[id(job)])
         c = out.setdefault(key, Cell(*key))
         c.costs.append(job_cost(res))
         if job_work(res) is not None:
             c.work.append(job_work(res))
-        c.curves.update(job_curves(res))
+        for seed, curve in job_curves(res).items():
+            c.curves.setdefault(seed, curve)
         c.engines.add(res.get("engine", "?"))
         c.lrs.add(cfg["optim"]["lr"])
         for rep in job.replicas:
             v = rep["final"]["heldout"]["nm"]["overall"] if rep["final"] else None
             if v is not None and math.isfinite(v):
-                c.rms[rep["seed"]] = v
-        c.nmse.update(heldout_nmse(job))
+                c.rms.setdefault(rep["seed"], v)
+        for seed, v in heldout_nmse(job).items():
+            c.nmse.setdefault(seed, v)
         job_stalls(c, res, job.replicas, design.stall_share)
     return out
 
 
 def job_stalls(c: Cell, res: dict, replicas: list[dict], share: float) -> None:
     """Each seed's stall (its final held-out RMS against ``share`` of the floor: :func:`selpres.run.stalls.is_stalled`)
-    and, where results.json has its ``stalls``, its dead and linear hidden units; into the cell."""
+    and, where results.json has its ``stalls``, its dead and linear hidden units; into the cell (a seed already there
+    keeps the first job's, as its errors do)."""
     floor = ((res.get("floor") or {}).get("heldout") or {}).get("nm", {}).get("overall")
     for rep in replicas:
         rms = rep["final"]["heldout"]["nm"]["overall"] if rep["final"] else None
         flag = is_stalled(rms, floor, share)
         if flag is not None:
-            c.stalled[rep["seed"]] = flag
+            c.stalled.setdefault(rep["seed"], flag)
     record = res.get("stalls") or {}
     for entry in record.get("replicas") or []:
-        if entry.get("dead") is not None:
+        if entry.get("dead") is not None and entry["seed"] not in c.dead:
             c.dead[entry["seed"]], c.linear[entry["seed"]] = entry["dead"], entry["linear"]
     c.hidden = record.get("hidden_units", c.hidden)
 

@@ -18,7 +18,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from selpres.report import Context, Options, Section, clopper_pearson, median, outcome, summarize, table, trimmed
+from selpres.report import (
+    Context,
+    Options,
+    Section,
+    clopper_pearson,
+    median,
+    outcome,
+    summarize,
+    table,
+    trimmed,
+)
+from selpres_studies._families import pruned_job
 from selpres_studies._modern_cells import (  # noqa: F401  (the study's API, read here by the tests)
     DESIGN,
     METRICS,
@@ -49,7 +60,7 @@ DODGE = 0.07  # methods of one cost are drawn side by side within ±7 % of their
 
 def applies(ctx: Context) -> bool:
     """A sweep with a pruning rival or a modern regime beside the paper's."""
-    return any(job.results and job.results.get("pruning") for job in ctx.jobs)
+    return any(job.results and pruned_job(job.results) for job in ctx.jobs)
 
 
 def summary_rows(cs: dict, design: Design = DESIGN) -> list[dict]:

@@ -18,7 +18,17 @@ from __future__ import annotations
 
 import math
 
-from selpres.report import Context, Section, clopper_pearson, is_stalled, mcnemar_exact, median, summarize, table
+from selpres.report import (
+    Context,
+    Section,
+    clopper_pearson,
+    is_stalled,
+    mcnemar_exact,
+    median,
+    presents_all,
+    summarize,
+    table,
+)
 from selpres_studies._modern_cells import DESIGN, arm_of, job_work, regime_of
 
 TOLERANCE = 0.10  # "converged": doubling the budget changes the median final held-out RMS by less than this share
@@ -50,7 +60,7 @@ def budgets(ctx: Context) -> dict[tuple[str, str, float], dict[int, dict]]:
     out: dict = {}
     for job in ctx.jobs:
         res = job.results
-        if job.status not in ("complete", "diverged") or not res or res.get("pruning"):
+        if job.status not in ("complete", "diverged") or not res or not presents_all(res):
             continue
         epochs = res["schedule"].get("epochs") or []
         if len(epochs) != 1 or res["schedule"].get("name") != DESIGN.reference:

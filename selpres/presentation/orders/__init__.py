@@ -10,7 +10,8 @@ at stage k's start, from the network's losses or afresh, saying how many candida
 
 Light on purpose: the registry lists the modules without importing them; the order's module is imported when a
 job or a sampler asks for it. Orders may import torch, numpy, ``selpres.errors``, ``selpres.seeding``, and of this
-room ``partition`` and ``selection`` (the network's scores); never the sampler (it imports this package).
+room ``schedule``, ``partition`` and ``selection`` (the network's scores); never the sampler (it imports this
+package) nor a selector (the ``staged`` selector runs them).
 """
 
 from __future__ import annotations

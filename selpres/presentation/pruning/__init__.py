@@ -1,13 +1,14 @@
-"""Dynamic data pruning: policies that choose each epoch's patterns from the network's losses, charged on the
+"""Dynamic data pruning: selectors that choose each epoch's patterns from the network's losses, charged on the
 paper's cost axis (issue 22). Selective presentation decides *before* each stage which patterns to present; the
 methods it competes with today decide every epoch.
 
 A policy is one module here exporting ``POLICY = <class>`` (``infobatch``, ``selective_backprop``, ...), named in
 a config as ``schedule.pruning: {_target_: <module name>, <its parameters>}``; a user's own is named by its import
-path (``_target_: my_pruning.RandomPruning``). The class subclasses :class:`Policy` (``_policy``) and checks its
-own parameters. What every policy shares lives in the ``_``-prefixed modules: ``_policy`` (the interface, the
-epoch's choice, the cost ledger, δ-annealing), ``_job`` (one job's pruning: the forward pass a policy may ask for,
-the costs, the plan, the checks of the schedule around it).
+path (``_target_: my_pruning.RandomPruning``). The class subclasses :class:`Policy` (``_policy``), a
+:class:`~selpres.presentation.selector.Selector` that refines each epoch's shuffle of U, and checks its own
+parameters; any other ``Selector`` subclass may be named the same way. What every policy shares lives in the
+``_``-prefixed modules: ``_policy`` (the interface, δ-annealing), ``_job`` (the class a node names, the checks of
+its parameters and of the schedule around it).
 
 Light on purpose: :mod:`selpres.presentation.arguments` reads the registry's names from here, and nothing here
 imports the heavy modules (which import the sampler, which imports the arguments).
@@ -21,7 +22,7 @@ REGISTRY = Registry("schedule.pruning._target_", "selpres.presentation.pruning",
 
 
 # what a policy of your own builds from (``_policy``)
-PUBLIC = ("Policy", "ScoredByLoss", "EpochChoice", "Param", "Annealing")
+PUBLIC = ("Policy", "ScoredByLoss", "EpochChoice", "Param", "Annealing", "Ledger")
 
 
 def __getattr__(name: str):

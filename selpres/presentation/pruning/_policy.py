@@ -1,11 +1,13 @@
-"""What every pruning policy shares: the interface (:class:`Policy`), the epoch's choice (:class:`EpochChoice`),
-the cost ledger of a job's replicas (:class:`Ledger`) and InfoBatch's annealing of the last epochs
-(:class:`Annealing`, which SeTa uses too).
+"""What every pruning policy shares: the interface (:class:`Policy`, a :class:`~selpres.presentation.selector.Selector`
+that chooses each epoch's patterns from the shuffle of U), InfoBatch's annealing of the last epochs
+(:class:`Annealing`, which SeTa uses too), and the epoch's choice (:class:`EpochChoice`, the selector's
+:class:`~selpres.presentation.selector.Presentation`) and the job's :class:`~selpres.presentation.selector.Ledger`
+under the names policies have used.
 
-Cost (the paper's T, in presentations): a back-propagated pattern costs one presentation; a forward pass only to
-choose costs ``schedule.selection_cost`` of one (1/3, as the loss orders of :mod:`selpres.presentation.selection`
-are charged). A policy whose scores come from its training passes (InfoBatch, SeTa) pays nothing for them; one
-that asks for a forward pass over U (``forward_pass = True``: Selective Backprop) charges it in ``choose``.
+Cost (the paper's T, in presentations): a back-propagated pattern costs one presentation (the loop charges what a
+policy presents); a forward pass only to choose costs ``schedule.selection_cost`` of one, charged by the policy
+(``ledger.charge``). A policy whose scores come from its training passes (InfoBatch, SeTa) pays nothing for them;
+one that asks for a forward pass over U (``forward_pass = True``: Selective Backprop) charges it in ``choose``.
 
 **Budget form.** With ``schedule.budget`` every replica trains until it has spent exactly that cost (the last
 epoch cut short, as a compute-matched run's is: :meth:`Ledger.affordable`), so a rival and conventional training
@@ -16,25 +18,22 @@ stopped at the same total cost are compared at one cost by construction. Without
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
 import torch
 
 from selpres.errors import ConfigError
+from selpres.presentation.proportions import fit_schedule
+from selpres.presentation.schedule import EpochPlan, Schedule, Stage
+from selpres.presentation.selector import Ledger, Network, Presentation, Selector
+
+__all__ = ["Annealing", "EpochChoice", "KEY", "Ledger", "Param", "Policy", "ScoredByLoss", "pad", "percentile"]
 
 KEY = "schedule.pruning"  # the config node a policy's parameters sit in (errors name schedule.pruning.<key>)
 INITIAL_SCORE = 3.0  # InfoBatch's (and SeTa's) initial score: above every loss here, so the first epoch keeps all
 
-
-@dataclass
-class EpochChoice:
-    """What each replica presents this epoch: the first ``counts[r]`` entries of ``order[r]``, each weighted."""
-
-    order: torch.Tensor  # [R, m] int64 (padded past counts[r])
-    weights: torch.Tensor | None  # [R, m] float64 or None (all 1)
-    counts: torch.Tensor  # [R] int64
+EpochChoice = Presentation  # what each replica presents this epoch (the first counts[r] of order[r], weighted)
 
 
 def pad(rows: list[torch.Tensor], fill) -> torch.Tensor:
@@ -50,43 +49,6 @@ def percentile(losses: torch.Tensor) -> torch.Tensor:
     """F(l_i) = #{j : l_j <= l_i} / n along the last dimension: [R, n] -> [R, n]."""
     s, _ = torch.sort(losses, dim=-1)
     return torch.searchsorted(s.contiguous(), losses.contiguous(), right=True).to(torch.float64) / losses.shape[-1]
-
-
-class Ledger:
-    """The costs of one job's replicas so far, and the budget they run against (None: ``epochs`` epochs)."""
-
-    def __init__(self, n: int, seeds: list[int], budget: int | None, epochs: int | None, selection_cost: float):
-        self.n, self.seeds, self.budget, self.epochs = n, list(seeds), budget, epochs
-        self.cost_fraction = float(selection_cost)
-        R = len(seeds)
-        self.spent = torch.zeros(R, dtype=torch.float64)  # training + charged forward passes, per replica
-        self.trained = torch.zeros(R, dtype=torch.float64)  # back-propagated presentations
-        self.charged = torch.zeros(R, dtype=torch.float64)  # forward passes charged for choosing
-        # patterns not back-propagated, summed over epochs: InfoBatch's pruned, Selective Backprop's scored not chosen
-        self.left_out = torch.zeros(R, dtype=torch.float64)
-        self.epochs_done = torch.zeros(R, dtype=torch.int64)
-
-    @property
-    def remaining(self) -> torch.Tensor:
-        if self.budget is None:
-            return torch.full_like(self.spent, math.inf)
-        return self.budget - self.spent
-
-    @property
-    def exhausted(self) -> bool:
-        """Every replica has spent its budget (a fraction of a presentation left cannot buy one)."""
-        return self.budget is not None and bool((self.remaining < min(1.0, 1.0 + self.cost_fraction)).all())
-
-    def affordable(self, r: int, k: int) -> int:
-        """How many of ``k`` presentations replica r's remaining budget pays for (the epoch is cut there)."""
-        left = float(self.remaining[r])
-        return k if math.isinf(left) else min(k, int(math.floor(left + 1e-9)))
-
-    def record(self, choice: EpochChoice) -> None:
-        """After the epoch's updates: the presentations it trained on."""
-        self.trained += choice.counts.to(torch.float64)
-        self.spent += choice.counts.to(torch.float64)
-        self.epochs_done += (choice.counts > 0).to(torch.int64)
 
 
 class Annealing:
@@ -106,6 +68,15 @@ class Annealing:
             self.on[r] = full_left * self.delta <= (1 - self.delta) * int(ledger.epochs_done[r])
         return bool(self.on[r])
 
+    def state_dict(self) -> dict:
+        return {"on": self.on}
+
+    def load_state_dict(self, state: dict) -> None:
+        on = state["on"]
+        if not isinstance(on, torch.Tensor) or on.shape != self.on.shape:
+            raise ValueError(f"annealing flags are not a tensor of shape {tuple(self.on.shape)}")
+        self.on = on.to(torch.bool).clone()
+
 
 class Param(NamedTuple):
     """One parameter of a policy: its type (float takes ints too), the range test, what is allowed (for errors)."""
@@ -115,19 +86,18 @@ class Param(NamedTuple):
     allowed: str
 
 
-class Policy:
+class Policy(Selector):
     """A pruning policy: each epoch, from the samplers' shuffles of U, the patterns each replica presents.
 
     A subclass lists its parameters in ``PARAMS`` (checked by :meth:`check`, which it may extend with checks
-    between them), and implements :meth:`choose` (and :meth:`finish` if it keeps scores). Its randomness comes
-    from ``selpres.seeding.generator(seed_r, "pruning", epoch)``, so a job is the same bit for bit.
+    between them), says how cheap an epoch can be (:meth:`epoch_share`: the budget form's plan) and implements
+    :meth:`choose` (and :meth:`finish` if it keeps scores). Its randomness comes from
+    ``selpres.seeding.generator(seed_r, "pruning", epoch)`` and its state (its tensors, its :class:`Annealing`) is
+    checkpointed, so a job is the same bit for bit, resumed or not. ``self.ledger`` is the job's ledger.
     """
 
     PARAMS: dict[str, Param] = {}
     forward_pass = False  # True: choose() gets every pattern's loss [R, n] from a forward pass over U (charge it)
-
-    def __init__(self, params: dict, ledger: Ledger):
-        self.params, self.ledger = dict(params), ledger
 
     @classmethod
     def check(cls, params: dict, *, budget: int | None, selection_cost: float) -> dict:
@@ -149,9 +119,42 @@ class Policy:
         return out
 
     @classmethod
+    def check_schedule(cls, *, sizes: list, order: str, budget: int | None, epochs: list | None, name: str) -> None:
+        """One stage of all of U, shuffled, with either a budget or one epoch count."""
+        if list(sizes) != [1.0]:
+            raise ConfigError("schedule.sizes", list(sizes), f"[1.0]: {name} prunes all of U every epoch")
+        if order != "random":
+            raise ConfigError("schedule.order", order, f"random: {name} shuffles all of U every epoch")
+        if (budget is None) == (epochs is None):
+            raise ConfigError(
+                "schedule.budget", budget, f"either a budget or schedule.epochs=[N] for {name}, not both or neither"
+            )
+        if epochs is not None and len(epochs) != 1:
+            raise ConfigError("schedule.epochs", list(epochs), f"one entry [N]: {name} has one stage")
+
+    @classmethod
+    def schedule(cls, node: Mapping, n: int, params: dict, cost: float) -> tuple[Schedule, str | None, int | None]:
+        """The epochs the loop may run: ``epochs`` as given, or (budget form) as many as the budget (fitted to n
+        as a one-stage budget is) could buy at the policy's cheapest epoch (:meth:`epoch_share`), the loop stopping
+        once each replica's is spent."""
+        _, budget, note = fit_schedule(node["sizes"], node.get("budget"), n)
+        if budget is None:
+            return Schedule((Stage(n, int(node["epochs"][0])),)), note, None
+        share = cls.epoch_share(cls.check(params, budget=budget, selection_cost=cost), cost)
+        return Schedule((Stage(n, math.ceil(budget / max(n * share, 1e-9)) + 1),)), note, budget
+
+    @classmethod
     def epoch_share(cls, params: dict, selection_cost: float) -> float:
         """A lower bound on one epoch's cost as a share of n: the budget form plans budget / (share n) epochs."""
         raise NotImplementedError
+
+    def select(self, ep: EpochPlan, ledger: Ledger, net: Network) -> Presentation:
+        order = self.source.select(ep, ledger, net).order  # the samplers' shuffles of U [R, n]
+        losses = net.errors() / net.Y.shape[1] if self.forward_pass else None  # mse per pattern, scaled units
+        return self.choose(ep.index, order, losses)
+
+    def observe(self, shown: Presentation, losses: torch.Tensor) -> None:
+        self.finish(shown, losses)
 
     def choose(self, epoch: int, order: torch.Tensor, losses: torch.Tensor | None) -> EpochChoice:
         """This epoch's presentations from the samplers' shuffles of U ``order`` [R, n] (``losses``: [R, n] by
@@ -163,7 +166,7 @@ class Policy:
         """After the epoch's updates, the presented patterns' losses [R, m] (first counts[r] of each row)."""
 
     def describe(self) -> dict:
-        """results.json's ``pruning`` parameters."""
+        """results.json's parameters of the policy."""
         return dict(self.params)
 
 

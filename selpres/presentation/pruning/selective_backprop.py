@@ -57,8 +57,7 @@ class SelectiveBackprop(Policy):
             cum = torch.cumsum(c + chosen.to(torch.float64), 0)
             scored = int((cum <= float(led.remaining[r]) + 1e-9).sum())  # candidates the budget pays for
             picked = order[r][:scored][chosen[:scored]]
-            led.charged[r] += c * scored
-            led.spent[r] += c * scored
+            led.charge(c * scored, r)  # every scored candidate's forward pass
             led.left_out[r] += scored - len(picked)  # forwarded, not back-propagated
             rows.append(picked)
             counts.append(len(picked))

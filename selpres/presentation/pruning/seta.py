@@ -17,7 +17,7 @@ Random" control (``configs/schedule/seta_random.yaml``).
 **The k-means.** The published code calls scikit-learn's ``KMeans`` (Lloyd's iterations from k-means++ seeds: a
 local optimum). Here it is exact (:mod:`selpres.presentation.kmeans`: a dynamic programme over split points of the
 sorted distinct scores, in C where it builds, else numpy, the same partition either way; results.json's
-``pruning.kmeans`` says which ran): deterministic, no seeds, no iterations to converge, and it can only differ from
+``selector.kmeans`` says which ran): deterministic, no seeds, no iterations to converge, and it can only differ from
 scikit-learn's where that stops at a worse local optimum. Published edge cases kept: G = 1 is one group; all scores
 equal (as every score is on the first epoch) split the draw into ``torch.chunk`` pieces in drawn order; fewer
 distinct scores than G give one group each.

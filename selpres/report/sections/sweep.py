@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from selpres.report.compare import Options, adjust_family, mean_curve, outcome, paired, paired_columns, reading
 from selpres.report.context import Context, Section
-from selpres.report.groups import Group, base, settings, varying
+from selpres.report.groups import Group, base, presents_all, replica_costs, settings, varying
 from selpres.report.markdown import fmt, signed_interval, table
 from selpres.report.sections import sweep_plots
 from selpres.report.sections.sweep_plots import Point, number
@@ -32,13 +32,9 @@ SAME_COST = 0.01  # a conventional run within 1 % of a setting's presentations i
 SCHEDULE = "schedule."
 
 
-def _pruned(g: Group) -> bool:
-    return bool(g.used[0].results.get("pruning"))
-
-
 def one_stage(g: Group) -> bool:
-    """Conventional training: one stage, every pattern presented (not a pruning policy)."""
-    return len(g.sched["sizes"]) == 1 and not _pruned(g)
+    """Conventional training: one stage, every pattern presented (selpres.report.groups.presents_all)."""
+    return presents_all(g.used[0].results)
 
 
 def _rest(g: Group) -> dict[str, str]:
@@ -188,7 +184,7 @@ def _partial(sched: dict) -> str:
 
 def _cost_ci(g: Group) -> list:
     """The 95 % interval of the cost over seeds where it varies (a pruning policy's), else [None, None]."""
-    costs = (g.used[0].results.get("pruning") or {}).get("cost") or []
+    costs = replica_costs(g.used[0].results)
     st = summarize(costs) if len(set(costs)) > 1 else {"ci95": [None, None]}
     return [st["ci95"][0], st["ci95"][1]]
 
