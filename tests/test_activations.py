@@ -25,7 +25,7 @@ class Softplus:
 
 
 def test_built_ins_are_the_modules_and_each_derivative_is_autograds():
-    assert ACTIVATIONS.names == ("relu", "sigmoid", "silu", "tanh")
+    assert ACTIVATIONS.names == ("leaky_relu", "relu", "sigmoid", "silu", "tanh")
     z = torch.linspace(-4, 4, 81, dtype=torch.float64).add(0.013).requires_grad_(True)
     for name in (*ACTIVATIONS.names, f"{__name__}.Softplus"):
         act = activation(name)
@@ -35,7 +35,9 @@ def test_built_ins_are_the_modules_and_each_derivative_is_autograds():
 
 
 def test_unknown_and_unfit_units_are_refused_naming_the_key():
-    with pytest.raises(ConfigError, match=r"model.activation='gelu' is not allowed: expected one of relu, sigmoid"):
+    with pytest.raises(
+        ConfigError, match=r"model.activation='gelu' is not allowed: expected one of leaky_relu, relu, sigmoid"
+    ):
         activation("gelu")
     with pytest.raises(ConfigError, match=r"model.activation='collections.OrderedDict'.*forward\(z\) and prime"):
         activation("collections.OrderedDict")

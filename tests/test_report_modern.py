@@ -3,6 +3,7 @@ partner, Holm's family, nMSE by an independent formula, and the figure."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -19,6 +20,9 @@ from selpres_studies import modern
 
 from conftest import cfg_of
 
+# the tiny runs below stall by the study's rule (a few epochs): with no stall and no trimming, the converged error
+# is the plain paired t-test, checked by hand here; the stall rule and the trimmed mean: the tests at the end
+PLAIN = dataclasses.replace(modern.DESIGN, stall_share=10.0, trim=0.0)
 COMMON = ["optim=adam_minibatch", "model.activation=relu", "replicas=3", "schedule.budget=3006", "schedule.epochs=null"]
 
 
@@ -49,8 +53,8 @@ def _seeds(sweep, name, key="overall"):
 
 def test_rivals_against_the_matched_partner_paired_by_seed_with_holm(sweep):
     ctx = Context.load(sweep, Options())
-    cs = modern.cells(ctx)
-    rows, claims = modern.verdict_rows(cs, ctx.options), modern.claim_rows(cs, ctx.options)
+    cs = modern.cells(ctx, PLAIN)
+    rows, claims = modern.verdict_rows(cs, ctx.options, PLAIN), modern.claim_rows(cs, ctx.options, PLAIN)
     modern.judge(rows, claims, ctx.options)
     # the methods at full cost are not of the partner's cost: they are judged on their claims instead
     assert [r["comparison"] for r in rows] == ["infobatch − matched", "selective_backprop − matched"]
@@ -79,8 +83,8 @@ def test_rivals_against_the_matched_partner_paired_by_seed_with_holm(sweep):
 
 def test_lossless_claim_is_tost_within_a_share_of_the_references_mean(sweep):
     ctx = Context.load(sweep, Options())
-    cs = modern.cells(ctx)
-    rows, claims = modern.verdict_rows(cs, ctx.options), modern.claim_rows(cs, ctx.options)
+    cs = modern.cells(ctx, PLAIN)
+    rows, claims = modern.verdict_rows(cs, ctx.options, PLAIN), modern.claim_rows(cs, ctx.options, PLAIN)
     modern.judge(rows, claims, ctx.options)
     (row,) = [r for r in claims if r["claim"] == "lossless"]
     c, conv = _seeds(sweep, "conventional")
@@ -113,8 +117,8 @@ def test_the_curve_records_the_methods_own_seconds(sweep):
     assert modern.job_work(res) == pytest.approx(work[-1], rel=1e-9)
     # Selective Backprop at full cost on its curves: its cost to reach conventional's final error, seed by seed
     ctx = Context.load(sweep, Options())
-    cs = modern.cells(ctx)
-    (row,) = [r for r in modern.claim_rows(cs, ctx.options) if r["claim"] == "speedup"]
+    cs = modern.cells(ctx, PLAIN)
+    (row,) = [r for r in modern.claim_rows(cs, ctx.options, PLAIN) if r["claim"] == "speedup"]
     assert row["seeds"] == 3 and 0 <= row["reached"] <= 3
 
 
@@ -140,3 +144,84 @@ def test_report_shows_the_section_and_draws_the_figure(sweep, tmp_path):
     assert (tmp_path / "modern_error_wall.png").stat().st_size > 10_000
     assert "Each method on its own claim" in rep.markdown and "modern_claims.csv" in files
     assert "Modern training and data pruning" in rep.markdown
+
+
+def _cell(method, regime="Adam", rms=None, stalled=None, dead=None):
+    c = modern.Cell("two-link", regime, method, rms=dict(rms or {}), stalled=dict(stalled or {}))
+    c.dead = dict(dead or {})
+    c.linear = {s: 1 for s in c.dead}
+    return c
+
+
+def test_converged_error_leaves_out_the_stalled_pairs_and_trims():
+    from scipy.stats import mstats
+
+    seeds = range(12)
+    ref = _cell("conventional", rms={s: 1.0 + 0.01 * s for s in seeds}, stalled={s: s == 3 for s in seeds})
+    # the method: a stall at seed 5, an outlier at seed 7 (converged, but far off)
+    rms = {s: 1.0 + 0.012 * s + (2.0 if s == 7 else 0.0) + (3.0 if s == 5 else 0.0) for s in seeds}
+    c = _cell("m", rms=rms, stalled={s: s == 5 for s in seeds})
+    v = modern.converged_paired(c, ref, "rms", Options(), modern.DESIGN)
+    ok = [s for s in seeds if s not in (3, 5)]
+    d = [rms[s] - ref.rms[s] for s in ok]
+    assert v["n"] == 10 and v["stalled_pairs"] == 2 and v["plain_n"] == 12
+    assert v["mean"] == pytest.approx(float(mstats.trimmed_mean(d, limits=(0.2, 0.2))))
+    assert v["se"] == pytest.approx(float(mstats.trimmed_stde(d, limits=(0.2, 0.2))))
+    assert v["plain_mean"] == pytest.approx(sum(rms[s] - ref.rms[s] for s in seeds) / 12)
+    loc = float(mstats.trimmed_mean([rms[s] for s in ok], limits=(0.2, 0.2)))
+    assert v["margin"] == pytest.approx(0.05 * loc)  # 5 % of the method's own converged error
+    claim = modern.converged_paired(c, ref, "rms", Options(), modern.DESIGN, of="other")
+    ref_loc = float(mstats.trimmed_mean([ref.rms[s] for s in ok], limits=(0.2, 0.2)))
+    assert claim["margin"] == pytest.approx(0.05 * ref_loc)  # a claim: 5 % of the reference's
+
+
+def test_stall_rows_exact_interval_mcnemar_and_holm():
+    from scipy import stats as sps
+
+    seeds = range(20)
+    ref = _cell("conventional", stalled={s: s < 2 for s in seeds}, dead={s: 3 if s < 2 else 1 for s in seeds})
+    a = _cell("selective", stalled={s: s < 8 for s in seeds}, dead={s: 9 if s < 8 else 2 for s in seeds})
+    b = _cell("matched", stalled={s: s in (0, 1, 19) for s in seeds}, dead={s: 0 for s in seeds})
+    for c in (ref, a, b):
+        c.rms = {s: 1.0 for s in seeds}
+    cs = {("two-link", "Adam", c.method): c for c in (ref, a, b)}
+    rows = {r["method"]: r for r in modern.stall_rows(cs)}
+    r = rows["selective"]
+    ci = sps.binomtest(8, 20).proportion_ci(method="exact")
+    assert (r["stalls"], r["seeds"]) == (8, 20) and (r["rate_lo"], r["rate_hi"]) == pytest.approx((ci.low, ci.high))
+    assert (r["vs_ref_only_this"], r["vs_ref_only_other"]) == (6, 0)  # seeds 2..7 stalled only with selective
+    assert r["vs_ref_p"] == pytest.approx(2 / 2**6)
+    assert (r["stalled_dead"], r["other_dead"]) == (9, 2)
+    assert rows["matched"]["vs_ref_p"] == 1.0 and "vs_ref_p" not in rows["conventional"]
+    assert r["vs_ref_p_holm"] == pytest.approx(min(1.0, 2 * 2 / 2**6))  # two tests: Holm doubles the smaller
+    assert "6 / 0" in modern.stall_markdown(list(rows.values()))
+
+
+def test_the_remedy_is_paired_with_the_regime_it_remedies():
+    seeds = range(10)
+    base = _cell("conventional", regime="Adam (batch 32, cosine lr), ReLU", stalled={s: s < 4 for s in seeds})
+    fixed = _cell("conventional", regime="Adam (batch 32, cosine lr), leaky ReLU", stalled={s: s == 9 for s in seeds})
+    other = _cell("conventional", regime="paper: sigmoid", stalled={s: False for s in seeds})
+    cs = {("two-link", c.regime, c.method): c for c in (base, fixed, other)}
+    (row,) = modern.remedy_rows(cs)
+    assert row["remedies"] == base.regime and row["regime"] == fixed.regime
+    assert (row["base_stalls"], row["remedy_stalls"]) == (4, 1)
+    assert (row["vs_base_only_this"], row["vs_base_only_other"]) == (1, 4)
+    assert row["vs_base_p"] == pytest.approx(2 * (1 + 5) / 2**5)
+
+
+def test_cells_read_each_seeds_stall_and_units_from_results(sweep):
+    ctx = Context.load(sweep, Options())
+    cs = modern.cells(ctx)
+    c = next(c for c in cs.values() if c.method == "conventional")
+    rms, res = _seeds(sweep, "conventional")
+    floor = res["floor"]["heldout"]["nm"]["overall"]
+    assert c.stalled == {s: v >= modern.DESIGN.stall_share * floor for s, v in rms.items()}
+    assert c.dead == {e["seed"]: e["dead"] for e in res["stalls"]["replicas"]} and c.hidden == 13
+
+
+def test_a_method_on_the_epochs_clock_stays_in_its_regime():
+    cfg = {"robot": {"name": "two_link"}, "model": {"activation": "relu"}}
+    on = [modern.regime_of({**cfg, "optim": {"_target_": "adam", "batch_size": 32, "lr": 0.003, "lr_schedule": s}})
+          for s in ("cosine", "cosine_epochs")]  # fmt: skip
+    assert on[0] == on[1] == "Adam (batch 32, cosine lr), ReLU"

@@ -13,7 +13,10 @@ they cannot, replica-batched in eager torch with a hand-written backward (checke
 * ``optim.lr_schedule``: ``constant`` or ``cosine``: lr · ½(1 + cos(π c / C)) where c is the replica's cost
   so far (presentations, forward passes charged for choosing included) and C the run's own budget, so a
   run scheduled for a smaller budget decays to zero at its own end (a compute-matched run is one scheduled
-  for that budget, not a prefix of a longer run);
+  for that budget, not a prefix of a longer run); ``cosine_epochs``: the same curve on the epochs' clock,
+  c = e n at the start of epoch e whatever the epochs before presented (then advanced by the presentations),
+  C = N n: a pruned run's rate reaches its end as SeTa's authors re-position their schedule every epoch
+  (one stage of all of U for N epochs only: :func:`check_epoch_clock`);
 * per-pattern weights and per-replica pattern counts (``train_epoch(..., weights, counts)``), which the
   data-pruning schedules of :mod:`selpres.presentation.pruning` need: replica r presents the first
   ``counts[r]`` entries of ``order[r]`` and a mini-batch's loss is the mean of ``weights · loss`` over its
@@ -39,16 +42,41 @@ from selpres.engines.model import forward_replicas
 from selpres.engines.online import ScoredByPredict
 from selpres.engines.optim import make_optimizer, with_defaults
 from selpres.engines.optim._replicas import ReplicaSteps
+from selpres.errors import ConfigError
 
-LR_SCHEDULES = ("constant", "cosine")
+LR_SCHEDULES = ("constant", "cosine", "cosine_epochs")
+EPOCH_CLOCK = "cosine_epochs"  # the cosine on the epochs' clock (SeTa's authors'), not the cost's
 
 
 def lr_factor(kind: str, spent: torch.Tensor, horizon: float) -> torch.Tensor:
-    """The learning rate's factor [R] at costs ``spent`` [R] of a run whose budget is ``horizon``."""
+    """The learning rate's factor [R] at clock ``spent`` [R] of a run whose clock ends at ``horizon``."""
     if kind == "constant":
         return torch.ones_like(spent)
     frac = (spent / max(horizon, 1e-300)).clamp(0.0, 1.0)
     return 0.5 * (1.0 + torch.cos(math.pi * frac))
+
+
+def epoch_clock(kind: str, spent: torch.Tensor, epochs: int, n: int) -> None:
+    """At an epoch's start, the rate's clock ``spent`` [R] (in place): under :data:`EPOCH_CLOCK` ``epochs`` full
+    epochs of the ``n`` patterns of U, whatever they presented; under the other schedules as the caller set it."""
+    if kind == EPOCH_CLOCK:
+        spent.fill_(float(epochs * n))
+
+
+def check_epoch_clock(kind: str, sizes: list | None, epochs: list | None, budget: int | None) -> None:
+    """A ConfigError naming ``optim.lr_schedule`` when a schedule (its ``sizes``, ``epochs`` and ``budget`` as
+    written) cannot run on the epochs' clock: its horizon N n needs one stage of all of U for a known N epochs (a
+    budget's epochs are not known beforehand, a stage of a subset presents fewer than n an epoch)."""
+    all_of_u = list(sizes or []) == [1.0] and isinstance(sizes[0], float)  # (an int 1 is one pattern)
+    if kind != EPOCH_CLOCK or (all_of_u and epochs is not None and len(epochs) == 1 and budget is None):
+        return
+    raise ConfigError(
+        "optim.lr_schedule",
+        kind,
+        "constant or cosine: cosine_epochs positions the rate at e / N at the start of epoch e of N, which needs "
+        "one stage of all of U for N epochs (schedule.sizes=[1.0], schedule.epochs=[N], no schedule.budget); this "
+        f"schedule has sizes {sizes}, epochs {epochs}, budget {budget}",
+    )
 
 
 class MiniBatchEngine(ScoredByPredict):
@@ -97,6 +125,7 @@ class MiniBatchEngine(ScoredByPredict):
         self.opt = ReplicaSteps(lambda params: make_optimizer(optimizer, params, h), self.flat)
         self.lr = float(self.opt.opt.param_groups[0]["lr"])  # the schedule's peak: optim.lr, or the class's default
         self.spent = torch.zeros(self.R, dtype=torch.float64)  # each replica's cost so far (the lr schedule's clock)
+        self.epochs = 0  # epochs trained (the clock of cosine_epochs)
         self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
 
     def _views(self, flat: torch.Tensor) -> list[torch.Tensor]:
@@ -114,6 +143,8 @@ class MiniBatchEngine(ScoredByPredict):
         check_inputs(self.sizes, X, Y, order, self.R)
         if spent is not None:
             self.spent.copy_(torch.as_tensor(spent, dtype=torch.float64).expand_as(self.spent))
+        epoch_clock(self.lr_schedule, self.spent, self.epochs, X.shape[0])
+        self.epochs += 1
         R, m = order.shape
         X, Y = X.to(torch.float64), Y.to(torch.float64)
         weights, counts = pruned_epoch_args(order, weights, counts)
@@ -176,7 +207,8 @@ class MiniBatchEngine(ScoredByPredict):
         return [t.clone().contiguous() for t in self.p]
 
     def state_dict(self):
-        return {"params": self.params(), "optimizer": copy.deepcopy(self.opt.state_dict()), "spent": self.spent.clone()}
+        opt = copy.deepcopy(self.opt.state_dict())
+        return {"params": self.params(), "optimizer": opt, "spent": self.spent.clone(), "epochs": self.epochs}
 
     def load_state_dict(self, state):
         with torch.no_grad():
@@ -184,3 +216,4 @@ class MiniBatchEngine(ScoredByPredict):
                 p.copy_(src)  # views: into self.flat
         self.opt.load_state_dict(copy.deepcopy(state["optimizer"]))
         self.spent = state["spent"].clone()
+        self.epochs = int(state.get("epochs", 0))  # (older checkpoints: their clock was the cost's)

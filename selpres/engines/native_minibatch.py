@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from selpres.engines.inputs import check_inputs, check_patterns, pruned_epoch_args, pruned_mean
-from selpres.engines.minibatch import LR_SCHEDULES
+from selpres.engines.minibatch import LR_SCHEDULES, epoch_clock
 from selpres.engines.model import forward_replicas
 from selpres.engines.online import NativeEngine, ScoredByPredict, _default_threads
 from selpres.engines.optim import with_defaults
@@ -102,7 +102,8 @@ class NativeMiniBatchEngine(ScoredByPredict):
         h = {**HPARAM_DEFAULTS, **{k: v for k, v in hparams.items() if v is not None}}
         keys = ("lr", "momentum", "beta1", "beta2", "eps", "weight_decay")
         self._hp = torch.tensor([float(h[k]) for k in keys] + [self.horizon], dtype=torch.float64)
-        flags = [RULES.index(rule), int(lr_schedule == "cosine"), int(reduction == "mean")]
+        # the kernel's rate: its cosine over spent / horizon (both clocks: cosine_epochs only sets spent differently)
+        flags = [RULES.index(rule), int(lr_schedule != "constant"), int(reduction == "mean")]
         self._flags = torch.tensor(flags, dtype=torch.int64)
         self.lr = float(h["lr"])
         self.R = params[0].shape[0]
@@ -113,6 +114,7 @@ class NativeMiniBatchEngine(ScoredByPredict):
         self.m1, self.m2 = torch.zeros_like(self.w), torch.zeros_like(self.w)
         self.steps = torch.zeros(self.G * self.LANES, dtype=torch.float64)  # each lane's optimizer steps
         self.spent = torch.zeros(self.R, dtype=torch.float64)  # each replica's cost so far (the rate's clock)
+        self.epochs = 0  # epochs trained (the clock of cosine_epochs)
         self.last_losses = torch.empty(self.R, 0, dtype=torch.float64)
         self._staged = None  # a large set's rows for the kernel (selpres.native.staging), kept between epochs
 
@@ -122,6 +124,8 @@ class NativeMiniBatchEngine(ScoredByPredict):
         check_inputs(self.sizes, X, Y, order, self.R)
         if spent is not None:
             self.spent.copy_(torch.as_tensor(spent, dtype=torch.float64).expand_as(self.spent))
+        epoch_clock(self.lr_schedule, self.spent, self.epochs, X.shape[0])
+        self.epochs += 1
         R, m = order.shape
         weights, counts = pruned_epoch_args(order, weights, counts)
         self._staged = stage(self._staged, X, Y)
@@ -164,6 +168,7 @@ class NativeMiniBatchEngine(ScoredByPredict):
             "moments": [self._unpack(self.m1), self._unpack(self.m2)],
             "steps": self.steps[: self.R].clone(),
             "spent": self.spent.clone(),
+            "epochs": self.epochs,
         }
 
     def load_state_dict(self, state):
@@ -176,3 +181,4 @@ class NativeMiniBatchEngine(ScoredByPredict):
         self.m1, self.m2 = moments
         self.steps = torch.from_numpy(self._lanes(steps.to(torch.float64).numpy()))
         self.spent = state["spent"].clone()
+        self.epochs = int(state.get("epochs", 0))  # (older checkpoints: their clock was the cost's)

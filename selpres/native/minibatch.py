@@ -20,7 +20,7 @@ from selpres.native.library import Library
 from selpres.native.sgd import LANES, TRAIN_WORK_PER_PARAMETER, macros
 
 SOURCE = KERNELS / "minibatch.c"
-ACTIVATIONS = ("sigmoid", "tanh", "relu", "silu")  # -DACT=0..3, in this order (the C file's hidden4)
+ACTIVATIONS = ("sigmoid", "tanh", "relu", "silu", "leaky_relu")  # -DACT=0..4, in this order (the C file's hidden4)
 RULES = ("sgd", "adam", "adamw")  # its RULE_* constants
 NP = 8  # patterns of a mini-batch advanced together (the C file's present; 8 measured ~10 % ahead of 4 at 18-40-6)
 

@@ -23,7 +23,8 @@ The block API (imported on first use, so ``import selpres.report`` loads nothing
   ``varying``, ``base``, ``SETS``, ``UNITS``;
 - comparisons: ``Options`` and ``Margin`` (the equivalence margin, Holm), ``paired``, ``paired_columns``,
   ``outcome``, ``reading``, ``adjust_family``, ``comparisons``, ``mean_curve``, ``reach``, ``time_to_target_rows``,
-  ``ALPHA``, and the statistics ``summarize``, ``median``, ``tost``;
+  ``ALPHA``, and the statistics ``summarize``, ``median``, ``tost``, ``trimmed``, ``holm``, ``clopper_pearson``,
+  ``mcnemar_exact``; ``is_stalled`` (a replica's stall: its final RMS against a share of the floor's);
 - blocks of sections: ``verdict`` and ``time_to_target`` (modules: a reference against every other method; the
   time-to-target tables), the figures' ``pyplot``, ``save_png``, ``draw_cost``, ``draw_curves``, ``Side``,
   ``family_styles``, ``nm_log_axis``, ``thousands``;
@@ -90,6 +91,11 @@ _EXPORTS = {
     "summarize": "selpres.run.stats",
     "median": "selpres.run.stats",
     "tost": "selpres.run.stats",
+    "trimmed": "selpres.run.stats",
+    "holm": "selpres.run.stats",
+    "clopper_pearson": "selpres.run.stats",
+    "mcnemar_exact": "selpres.run.stats",
+    "is_stalled": "selpres.run.stalls",
     "verdict": "selpres.report.sections.verdict",
     "time_to_target": "selpres.report.sections.time_to_target",
     "pyplot": "selpres.report.sections.plots",

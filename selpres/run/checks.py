@@ -18,6 +18,7 @@ from selpres.data.routes import ROUTES, required_of
 from selpres.data.spec import DataSpec
 from selpres.data.task import Shape, task_shape
 from selpres.engines.activations import activation
+from selpres.engines.minibatch import check_epoch_clock
 from selpres.engines.model import TopologyError, parse_topology
 from selpres.errors import ConfigError
 from selpres.presentation.orders import make_order
@@ -72,6 +73,7 @@ def check_schedule(s: ScheduleSpec, optim: OptimSpec) -> None:
     sel = s.selector
     make_order(sel.order)  # a built-in or an importable Order: ConfigError naming schedule.order
     check_form(s.node)  # listed sizes or the parametric keys, not both (selpres.presentation.proportions)
+    check_epoch_clock(optim.lr_schedule, s.sizes, s.epochs, s.budget)  # cosine_epochs: one stage of U for N epochs
     if sel.target is not None:
         kw = dict(sizes=s.sizes, order=sel.order, budget=s.budget, epochs=s.epochs, selection_cost=sel.selection_cost)
         check_pruning(sel.target, dict(sel.params), **kw)

@@ -65,7 +65,7 @@ class TopologyConfig:
 
 @dataclass
 class ModelConfig:
-    # hidden units: a built-in of selpres.engines.activations (sigmoid, tanh, relu, silu) or a class by its import path
+    # hidden units: a built-in of selpres.engines.activations (sigmoid, tanh, relu, silu, leaky_relu) or an import path
     activation: str = MISSING
 
 

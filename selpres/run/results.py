@@ -22,7 +22,7 @@ from omegaconf import DictConfig
 from selpres.engines.activations import ACTIVATIONS
 from selpres.engines.factory import Engine
 from selpres.presentation.sampler import shuffle_implementation
-from selpres.run import floor, provenance
+from selpres.run import floor, provenance, stalls
 from selpres.run.specs import JobSpec, identity, recorded, task_specs
 from selpres.run.stats import summarize
 
@@ -154,6 +154,7 @@ def build(job: JobSpec, prob, engine: Engine, final: dict, progress, seconds: di
             stats, task_floor, prob.task.info if prob.task else None, str(job.layers)
         ),
         "replica_results": reps,
+        "stalls": stalls.evidence(reps, engine, prob, job.activation, task_floor),  # stalled? dead units
         "curves": progress.history,
         "config": job.config,
     }

@@ -1,7 +1,7 @@
-"""The modern study's cells (:mod:`selpres_studies.modern`): its design file (roles, claims, display names), how a
-job's arm, regime and method are read from its results.json (the method as every report section names it,
-``selpres.report.method_labels``, within its arm and regime), and each (arm, regime, method) cell's seeds, costs,
-wall seconds and held-out curves."""
+"""The modern study's cells (:mod:`selpres_studies.modern`): its design file (roles, claims, the stall rule and the
+statistic, display names), how a job's arm, regime and method are read from its results.json (the method as every
+report section names it, ``selpres.report.method_labels``, within its arm and regime), and each (arm, regime, method)
+cell's seeds, costs, wall seconds, held-out curves, stalls and hidden units."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from selpres.report import Context, method_labels, optim_target
+from selpres.report import Context, is_stalled, method_labels, optim_target
 from selpres.report import job_cost as _job_cost
 
 METRICS = (("rms", "held-out RMS", "Nm"), ("nmse", "held-out nMSE", ""))
@@ -29,6 +29,9 @@ class Design:
     order: tuple[str, ...] = ()
     claims: dict = field(default_factory=dict)  # method -> its own published claim: comparable | lossless | speedup
     matched_within: float = 0.1  # a method within this share of the partner's cost is compared with it
+    stall_share: float = 0.2  # stalled: final held-out RMS >= this share of the mean predictor's (selpres.run.stalls)
+    trim: float = 0.2  # the converged error: this trimmed mean of the paired differences of the runs that did not stall
+    remedies: dict = field(default_factory=dict)  # hidden units of a remedy -> the units of the regime it remedies
     arms: dict = field(default_factory=dict)
     optimizers: dict = field(default_factory=dict)
     activations: dict = field(default_factory=dict)
@@ -64,8 +67,10 @@ def regime_of(cfg: dict, design: Design = DESIGN) -> str:
     name, b = optim_target(o), o["batch_size"]
     if name == "sgd" and b == 1 and act == "sigmoid" and o.get("lr_schedule", "constant") == "constant":
         return f"paper: sigmoid, online SGD (lr {o['lr']:g}, momentum {o.get('momentum') or 0:g})"
-    # the rate is left out: it is chosen per arm (on a validation draw), and shown in the table's lr column
-    sched = f", {o['lr_schedule']} lr" if o.get("lr_schedule") else ""
+    # the rate is left out: it is chosen per arm (on a validation draw), and shown in the table's lr column; so is its
+    # clock (a method's, as its authors run it: SeTa's cosine on the epochs is the regime's cosine)
+    shape = "cosine" if o.get("lr_schedule") == "cosine_epochs" else o.get("lr_schedule")
+    sched = f", {shape} lr" if shape else ""
     return f"{design.optimizers.get(name, name)} (batch {b}{sched}), {design.activations.get(act, act)}"
 
 
@@ -115,6 +120,10 @@ class Cell:
     lrs: set[float] = field(default_factory=set)
     work: list[float] = field(default_factory=list)  # per job: the method's own wall seconds (job_work)
     curves: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)  # seed -> (cost, s, RMS)
+    stalled: dict[int, bool] = field(default_factory=dict)  # seed -> stalled (design.stall_share of the floor)
+    dead: dict[int, int] = field(default_factory=dict)  # seed -> dead hidden units at the end (results.json stalls)
+    linear: dict[int, int] = field(default_factory=dict)  # seed -> linear ("always on") hidden units at the end
+    hidden: int | None = None  # hidden units per net
 
     @property
     def cost(self) -> float | None:
@@ -126,6 +135,10 @@ class Cell:
 
     def values(self, metric: str) -> dict[int, float]:
         return self.rms if metric == "rms" else self.nmse
+
+    def converged(self, metric: str) -> dict[int, float]:
+        """The seeds that did not stall (and whose stall is known), with their final value of ``metric``."""
+        return {s: v for s, v in self.values(metric).items() if self.stalled.get(s) is False}
 
 
 def job_cost(res: dict) -> float:
@@ -183,7 +196,25 @@ def cells(ctx: Context, design: Design = DESIGN) -> dict[tuple[str, str, str], C
                 c.rms.setdefault(rep["seed"], v)
         for seed, v in heldout_nmse(job).items():
             c.nmse.setdefault(seed, v)
+        job_stalls(c, res, job.replicas, design.stall_share)
     return out
+
+
+def job_stalls(c: Cell, res: dict, replicas: list[dict], share: float) -> None:
+    """Each seed's stall (its final held-out RMS against ``share`` of the floor: :func:`selpres.run.stalls.is_stalled`)
+    and, where results.json has its ``stalls``, its dead and linear hidden units; into the cell (a seed already there
+    keeps the first job's, as its errors do)."""
+    floor = ((res.get("floor") or {}).get("heldout") or {}).get("nm", {}).get("overall")
+    for rep in replicas:
+        rms = rep["final"]["heldout"]["nm"]["overall"] if rep["final"] else None
+        flag = is_stalled(rms, floor, share)
+        if flag is not None:
+            c.stalled.setdefault(rep["seed"], flag)
+    record = res.get("stalls") or {}
+    for entry in record.get("replicas") or []:
+        if entry.get("dead") is not None and entry["seed"] not in c.dead:
+            c.dead[entry["seed"]], c.linear[entry["seed"]] = entry["dead"], entry["linear"]
+    c.hidden = record.get("hidden_units", c.hidden)
 
 
 def _order(methods: list[str]):

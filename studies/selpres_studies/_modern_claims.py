@@ -1,5 +1,10 @@
 """The modern study's judgements (:mod:`selpres_studies.modern`): each method on its own published claim against
-the reference at full cost, and Holm's correction over the whole family (the compute-matched comparisons too)."""
+the reference at full cost, and Holm's correction over the whole family (the compute-matched comparisons too).
+
+Every comparison is of the **converged error** (issue 40), chosen before the run (``modern.yaml``): paired by seed
+over the seeds where neither run stalled, the ``design.trim`` trimmed mean of the differences with its
+Tukey–McLaughlin test (:func:`selpres.run.stats.trimmed`); the plain mean over every pair, stalls included, beside
+it. Stalls are their own outcome (:mod:`selpres_studies._modern_stalls`)."""
 
 from __future__ import annotations
 
@@ -7,32 +12,71 @@ import math
 
 from selpres.report import (
     ALPHA,
-    Margin,
     Options,
     adjust_family,
     median,
     outcome,
-    paired,
     paired_columns,
     reading,
     signed_interval,
+    summarize,
     table,
-    tost,
+    trimmed,
 )
 from selpres_studies._modern_cells import DESIGN, METRICS, Cell, Design, _arm_regimes
 
 
-def _against_reference(c: Cell, ref: Cell, metric: str, options: Options, one_sided: bool) -> dict:
-    """c − ref paired by seed, the margin a share of the *reference's* mean (a claim is about matching it);
-    ``one_sided``: the equivalence test is the non-inferiority half (H0: Δ ≥ +m), for "comparable or better"."""
-    a, b = c.values(metric), ref.values(metric)
+def converged_paired(c: Cell, other: Cell, metric: str, options: Options, design: Design, of: str = "self") -> dict:
+    """c − other over the seeds where neither stalled: the ``design.trim`` trimmed mean of the differences, its
+    95 % interval and two-sided p, and TOST against the margin, a share (``options.margin``) of the converged
+    trimmed mean of ``c`` (``of="self"``: a compute-matched comparison) or of ``other`` (``of="other"``: a claim is
+    about matching the reference). The keys of :func:`selpres.report.compare.paired`, plus the plain mean over every
+    pair (``plain_*``, stalls included) and how many pairs a stall left out (``stalled_pairs``)."""
+    a, b = c.values(metric), other.values(metric)
     seeds = sorted(set(a) & set(b))
-    ref_mean = sum(b[s] for s in seeds) / len(seeds) if seeds else None
-    m = options.margin.of(ref_mean)
-    v = paired(a, b, Margin(m, relative=False) if m else options.margin)
-    if one_sided and m and len(seeds) > 1:
-        t = tost([a[s] - b[s] for s in seeds], m, ALPHA)
-        v.update(p_tost=t["p_upper"], ci90=t["ci"])
+    ok = [s for s in seeds if c.stalled.get(s) is False and other.stalled.get(s) is False]
+    loc = trimmed([(a if of == "self" else b)[s] for s in ok], design.trim)["mean"]
+    m = options.margin.of(loc)
+    t = trimmed([a[s] - b[s] for s in ok], design.trim, margin=m)
+    plain = summarize(a[s] - b[s] for s in seeds)
+    return {
+        "n": t["n"],
+        "mean": t["mean"],
+        "std": None,
+        "se": t["se"],
+        "ci95": t["ci95"],
+        "other_mean": trimmed([b[s] for s in ok], design.trim)["mean"],
+        "margin": m,
+        "p": t["p"],
+        "p_tost": t["p_tost"],
+        "p_upper": t.get("p_upper"),
+        "ci90": t["ci90"],
+        "plain_n": plain["n"],
+        "plain_mean": plain["mean"],
+        "plain_ci95": plain["ci95"],
+        "stalled_pairs": len(seeds) - len(ok),
+    }
+
+
+def converged_columns(prefix: str, v: dict) -> dict:
+    """:func:`converged_paired` as CSV columns: :func:`selpres.report.compare.paired_columns` and the plain mean's."""
+    return {
+        **paired_columns(prefix, v),
+        f"{prefix}_stalled_pairs": v["stalled_pairs"],
+        f"{prefix}_plain_pairs": v["plain_n"],
+        f"{prefix}_plain_diff_mean": v["plain_mean"],
+        f"{prefix}_plain_ci_lo": v["plain_ci95"][0],
+        f"{prefix}_plain_ci_hi": v["plain_ci95"][1],
+    }
+
+
+def _against_reference(c: Cell, ref: Cell, metric: str, options: Options, one_sided: bool, design: Design) -> dict:
+    """c − ref, converged (:func:`converged_paired`), the margin a share of the *reference's* converged error (a claim
+    is about matching it); ``one_sided``: the equivalence test is the non-inferiority half (H0: Δ ≥ +m), for
+    "comparable or better"."""
+    v = converged_paired(c, ref, metric, options, design, of="other")
+    if one_sided and v["p_tost"] is not None:
+        v["p_tost"] = v["p_upper"]
     return v
 
 
@@ -54,21 +98,22 @@ def claim_rows(cs: dict, options: Options, design: Design = DESIGN) -> list[dict
                 row.update(speedup(c, ref))
             else:
                 row["_tests"] = {
-                    m: _against_reference(c, ref, m, options, one_sided=kind == "comparable") for m, _, _ in METRICS
+                    m: _against_reference(c, ref, m, options, kind == "comparable", design) for m, _, _ in METRICS
                 }
                 for metric, v in row["_tests"].items():
-                    row.update(paired_columns(metric, v))
+                    row.update(converged_columns(metric, v))
             rows.append(row)
     return rows
 
 
 def speedup(c: Cell, ref: Cell) -> dict:
     """Seed by seed, where the method's held-out curve first reaches the reference's final held-out curve value
-    (the same seed's), as shares of the reference's final cost and seconds: medians over the seeds that reach it."""
+    (the same seed's), as shares of the reference's final cost and seconds: medians over the seeds that reach it.
+    Seeds where either stalled are left out (a stalled reference's final error is no target)."""
     cost, secs, seeds = [], [], 0
     for seed, ref_curve in ref.curves.items():
         curve = c.curves.get(seed)
-        if not curve or not ref_curve:
+        if not curve or not ref_curve or c.stalled.get(seed) or ref.stalled.get(seed):
             continue
         seeds += 1
         target, ref_cost, ref_secs = ref_curve[-1][2], ref_curve[-1][0], ref_curve[-1][1]

@@ -18,7 +18,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from selpres.report import Context, Options, Section, outcome, paired, paired_columns, summarize, table
+from selpres.report import (
+    Context,
+    Options,
+    Section,
+    clopper_pearson,
+    median,
+    outcome,
+    summarize,
+    table,
+    trimmed,
+)
 from selpres_studies._families import pruned_job
 from selpres_studies._modern_cells import (  # noqa: F401  (the study's API, read here by the tests)
     DESIGN,
@@ -35,7 +45,15 @@ from selpres_studies._modern_cells import (  # noqa: F401  (the study's API, rea
     job_work,
     regime_of,
 )
-from selpres_studies._modern_claims import claim_rows, claims_markdown, judge, speedup  # noqa: F401
+from selpres_studies._modern_claims import (  # noqa: F401
+    claim_rows,
+    claims_markdown,
+    converged_columns,
+    converged_paired,
+    judge,
+    speedup,
+)
+from selpres_studies._modern_stalls import remedy_markdown, remedy_rows, stall_markdown, stall_rows  # noqa: F401
 
 DODGE = 0.07  # methods of one cost are drawn side by side within ±7 % of their cost
 
@@ -61,17 +79,26 @@ def summary_rows(cs: dict, design: Design = DESIGN) -> list[dict]:
             "lr": ",".join(f"{v:g}" for v in sorted(c.lrs)),
             "engine": ",".join(sorted(c.engines)),
         }
+        k, n = sum(c.stalled.values()), len(c.stalled)
+        row.update(stalls=k, stall_seeds=n, stall_rate=k / n if n else None)
+        row["stall_lo"], row["stall_hi"] = clopper_pearson(k, n)
         for metric, _, _ in METRICS:
             s = summarize(c.values(metric).values())
             row.update({f"{metric}_n": s["n"], f"{metric}_mean": s["mean"], f"{metric}_lo": s["ci95"][0]})
             row[f"{metric}_hi"] = s["ci95"][1]
+            ok = list(c.converged(metric).values())
+            t = trimmed(ok, design.trim)
+            row.update({f"{metric}_converged_n": t["n"], f"{metric}_trimmed": t["mean"]})
+            row.update({f"{metric}_trimmed_lo": t["ci95"][0], f"{metric}_trimmed_hi": t["ci95"][1]})
+            row[f"{metric}_converged_median"] = median(ok)
         rows.append(row)
     return rows
 
 
 def verdict_rows(cs: dict, options: Options, design: Design = DESIGN) -> list[dict]:
-    """Every rival of the partner's cost (within ``design.matched_within``) against the partner, both metrics,
-    paired by seed; the p-values are Holm-adjusted by :func:`judge` over the whole family."""
+    """Every rival of the partner's cost (within ``design.matched_within``) against the partner, both metrics, on the
+    converged error (:func:`converged_paired`: paired by seed where neither stalled, the trimmed mean); the p-values
+    are Holm-adjusted by :func:`judge` over the whole family."""
     rows = []
     methods = design.methods(m for _, _, m in cs)
     for arm, regime in _arm_regimes(cs, design):
@@ -84,9 +111,9 @@ def verdict_rows(cs: dict, options: Options, design: Design = DESIGN) -> list[di
                 continue  # not of the partner's cost: judged on its own claim, if it makes one
             row = {"arm": arm, "regime": regime, "comparison": f"{method} − {design.partner}"}
             row["cost_ratio"] = c.cost / partner.cost
-            row["_tests"] = {m: paired(c.values(m), partner.values(m), options.margin) for m, _, _ in METRICS}
+            row["_tests"] = {m: converged_paired(c, partner, m, options, design) for m, _, _ in METRICS}
             for metric, v in row["_tests"].items():
-                row.update(paired_columns(metric, v))
+                row.update(converged_columns(metric, v))
             rows.append(row)
     return rows
 
@@ -108,8 +135,11 @@ def summary_markdown(rows: list[dict]) -> str:
             r["lr"],
             f"{r['cost']:,.0f}" if r["cost"] is not None else "–",
             _wall(r),
+            _stalls(r),
+            _iv(r["rms_trimmed"], r["rms_trimmed_lo"], r["rms_trimmed_hi"]),
+            "–" if r["rms_converged_median"] is None else f"{r['rms_converged_median']:.3f}",
             _iv(r["rms_mean"], r["rms_lo"], r["rms_hi"]),
-            _iv(r["nmse_mean"], r["nmse_lo"], r["nmse_hi"], 4),
+            _iv(r["nmse_trimmed"], r["nmse_trimmed_lo"], r["nmse_trimmed_hi"], 4),
             str(r["rms_n"]),
         ]
         for r in rows
@@ -121,11 +151,20 @@ def summary_markdown(rows: list[dict]) -> str:
         "lr",
         "total cost (presentations)",
         "wall s per job [min, max]",
-        "held-out RMS, Nm [95 %]",
-        "held-out nMSE [95 %]",
+        "stalled [95 %]",
+        "converged RMS, Nm: trimmed mean [95 %]",
+        "its median",
+        "plain mean RMS (all seeds) [95 %]",
+        "converged nMSE: trimmed mean [95 %]",
         "seeds",
     ]
     return table(head, body)
+
+
+def _stalls(r: dict) -> str:
+    if not r.get("stall_seeds"):
+        return "–"
+    return f"{r['stalls']}/{r['stall_seeds']} [{r['stall_lo'] * 100:.0f}, {r['stall_hi'] * 100:.0f} %]"
 
 
 def _wall(r: dict) -> str:
@@ -137,8 +176,30 @@ def _wall(r: dict) -> str:
 
 
 def verdict_markdown(rows: list[dict]) -> str:
-    body = [[r["arm"], r["regime"], r["comparison"], r["reading_rms"], r["reading_nmse"]] for r in rows]
-    return table(["arm", "regime", "Δ (paired by seed)", "held-out RMS (Nm)", "held-out nMSE"], body)
+    body = [
+        [
+            r["arm"],
+            r["regime"],
+            r["comparison"],
+            f"{r['rms_pairs']} ({r['rms_stalled_pairs']})",
+            r["reading_rms"],
+            plain_text(r, "rms"),
+            r["reading_nmse"],
+        ]
+        for r in rows
+    ]
+    head = ["arm", "regime", "Δ (paired by seed)", "pairs (stalled, left out)", "converged held-out RMS (Nm)",
+            "plain mean Δ RMS, all pairs [95 %]", "converged held-out nMSE"]  # fmt: skip
+    return table(head, body)
+
+
+def plain_text(r: dict, metric: str) -> str:
+    """The plain mean difference over every pair (stalls included) with its t-interval, as the study read it before."""
+    d = r.get(f"{metric}_plain_diff_mean")
+    if d is None:
+        return "–"
+    lo, hi = r[f"{metric}_plain_ci_lo"], r[f"{metric}_plain_ci_hi"]
+    return f"{d:+.4f}" + ("" if lo is None else f" [{lo:+.4f}, {hi:+.4f}]")
 
 
 def headline(rows: list[dict], claims: list[dict] = ()) -> str:
@@ -182,26 +243,32 @@ def note(options: Options, design: Design = DESIGN) -> str:
         "the mean over its jobs and [min, max] over them (the seed blocks: repeats of the same method). "
         "Methods named `…_full` train for conventional training's epochs at their own saving; the others of "
         "selective presentation's cost are stopped at it (`schedule.budget`). "
+        f"**Stalls** (final held-out RMS ≥ {design.stall_share * 100:g} % of the mean predictor's) are their own "
+        "outcome (the stall table); every error comparison is of the **converged error**: paired by seed over the "
+        f"seeds where neither run stalled, the {design.trim * 100:g} % trimmed mean of the differences "
+        "(Tukey–McLaughlin test), the plain mean over every pair beside it. "
         f"**Compute-matched:** the partner `{design.partner}` is conventional training scheduled for that cost "
         "(its cosine learning rate reaches zero at its own end), not a prefix of the longer run; every method "
         f"within {design.matched_within * 100:g} % of its cost is compared with it. "
         f"Δ = method − {design.partner}, paired by seed; Δ < 0: the method has the lower error. Margin m = "
-        f"{options.margin.describe('the method')}. Readings: *better/worse* when the Holm-adjusted paired "
-        "t-test rejects Δ = 0, *equivalent within ±m* when the Holm-adjusted TOST rejects |Δ| ≥ m, else *no "
-        f"detectable difference*. **Own claims**, against `{design.reference}` at its full cost, m a share of "
-        f"its mean: *comparable* holds when the paired t-test finds the method better or a one-sided test "
-        "rejects Δ ≥ +m (non-inferior); *lossless* holds when TOST rejects |Δ| ≥ m (or the method is better); "
-        "*speedup* (no test: read off the held-out curves) holds when every seed's curve reaches that seed's "
+        f"{options.margin.describe('the method')} (of its converged trimmed mean). Readings: *better/worse* when "
+        "the Holm-adjusted test rejects Δ = 0, *equivalent within ±m* when the Holm-adjusted TOST rejects "
+        f"|Δ| ≥ m, else *no detectable difference*. **Own claims**, against `{design.reference}` at its full "
+        "cost, m a share of its converged trimmed mean: *comparable* holds when the test finds the method better "
+        "or a one-sided test rejects Δ ≥ +m (non-inferior); *lossless* holds when TOST rejects |Δ| ≥ m (or the "
+        "method is better); *speedup* (no test: read off the held-out curves of the seeds where neither stalled) "
+        "holds when every such seed's curve reaches that seed's "
         f"final `{design.reference}` curve value and the median cost to get there is below {design.reference}'s. "
         "Holm's family, per metric: every compute-matched comparison and every tested claim in the sweep."
     )
 
 
 def plot_error_cost(rows: list[dict], path: Path, design: Design = DESIGN, axis: str = "cost") -> None:
-    """Final held-out RMS (Nm) with 95 % intervals against total cost (``axis="cost"``) or against the method's
-    wall seconds per job (``axis="wall"``, with its [min, max] over the jobs): one panel per (regime, arm), the legend
-    outside the panels. A method keeps its colour whichever others ran (the design's listed methods hold theirs);
-    the methods other than the reference are drawn side by side within ±DODGE of their cost."""
+    """The converged final held-out RMS (Nm: the trimmed mean over the seeds that did not stall) with 95 % intervals
+    against total cost (``axis="cost"``) or against the method's wall seconds per job (``axis="wall"``, with its
+    [min, max] over the jobs): one panel per (regime, arm), the legend outside the panels. A method keeps its colour
+    whichever others ran (the design's listed methods hold theirs); the methods other than the reference are drawn
+    side by side within ±DODGE of their cost."""
     from matplotlib.ticker import FuncFormatter
 
     from selpres.report import family_styles, pyplot, save_png
@@ -225,11 +292,12 @@ def plot_error_cost(rows: list[dict], path: Path, design: Design = DESIGN, axis:
         for j, arm in enumerate(arms):
             ax = axes[i][j]
             for r in rows:
-                if (r["regime"], r["arm"]) != (regime, arm) or r["rms_mean"] is None:
+                y = r["rms_trimmed"]  # the converged error: stalls are their own outcome
+                if (r["regime"], r["arm"]) != (regime, arm) or y is None:
                     continue
                 colour, marker = styles[r["method"]]
-                lo, hi = r["rms_lo"], r["rms_hi"]
-                yerr = None if lo is None else [[r["rms_mean"] - lo], [hi - r["rms_mean"]]]
+                lo, hi = r["rms_trimmed_lo"], r["rms_trimmed_hi"]
+                yerr = None if lo is None else [[y - lo], [hi - y]]
                 x, xerr = r["cost"], None
                 if axis == "wall":
                     if r.get("wall_s") is None:
@@ -239,7 +307,7 @@ def plot_error_cost(rows: list[dict], path: Path, design: Design = DESIGN, axis:
                 dodge = 1.0 if k is None else 1 + step * (k - (len(side) - 1) / 2)
                 ax.errorbar(
                     x * (dodge if axis == "cost" else 1.0),
-                    r["rms_mean"],
+                    y,
                     yerr=yerr,
                     xerr=xerr,
                     fmt=marker,
@@ -252,7 +320,7 @@ def plot_error_cost(rows: list[dict], path: Path, design: Design = DESIGN, axis:
             ax.set_xlabel("total cost (presentations)" if axis == "cost" else "the method's wall seconds per job")
             if axis == "wall":
                 ax.set_xscale("log")
-            ax.set_ylabel("final held-out RMS (Nm), mean [95 %]")
+            ax.set_ylabel("converged held-out RMS (Nm), trimmed mean [95 %]")
             ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:,.0f}" if axis == "cost" else f"{v:g}"))
             ax.tick_params(axis="x", labelrotation=20)
             ax.grid(alpha=0.3)
@@ -271,7 +339,19 @@ def section(ctx: Context, design: Design = DESIGN) -> Section | None:
     summary = summary_rows(cs, design)
     verdicts, claims = verdict_rows(cs, ctx.options, design), claim_rows(cs, ctx.options, design)
     judge(verdicts, claims, ctx.options)
+    stalls, remedies = stall_rows(cs, design), remedy_rows(cs, design)
     blocks = [headline(verdicts, claims), summary_markdown(summary)]
+    if stalls:
+        blocks += [
+            f"**Stalls** (final held-out RMS ≥ {design.stall_share * 100:g} % of predicting the training mean's), "
+            f"per method, against `{design.reference}` paired by seed (McNemar's exact test on the seeds that "
+            "stalled in one of the two; Holm over these tests), and the hidden units that ended dead (no gradient "
+            "on any held-out input) or linear (the same derivative on every one: ReLU always on):",
+            stall_markdown(stalls, design),
+        ]
+    if remedies:
+        blocks += ["**The remedy** against the regime it remedies, method by method, paired by seed:"]
+        blocks += [remedy_markdown(remedies)]
     if claims:
         blocks += [
             "**Each method on its own claim**, against conventional training at full cost:",
@@ -282,7 +362,8 @@ def section(ctx: Context, design: Design = DESIGN) -> Section | None:
         verdict_markdown(verdicts),
         note(ctx.options, design),
         "![final held-out RMS against total cost, per regime and arm](modern_error_cost.png)\n\n"
-        "Each point: the mean over the paired seeds with its 95 % t-interval; methods of one cost are drawn "
+        "Each point: the converged error (the trimmed mean over the seeds that did not stall) with its 95 % "
+        "interval; methods of one cost are drawn "
         "side by side (within ±7 % of their cost; conventional training at its own) so their intervals "
         "can be told apart.",
         "![final held-out RMS against the method's wall seconds per job](modern_error_wall.png)\n\n"
@@ -292,7 +373,13 @@ def section(ctx: Context, design: Design = DESIGN) -> Section | None:
     return Section(
         "Modern training and data pruning: error against total cost",
         blocks,
-        csv={"modern.csv": summary, "modern_verdict.csv": verdicts, "modern_claims.csv": claims},
+        csv={
+            "modern.csv": summary,
+            "modern_verdict.csv": verdicts,
+            "modern_claims.csv": claims,
+            "modern_stalls.csv": stalls,
+            "modern_remedy.csv": remedies,
+        },
         figures={
             "modern_error_cost.png": ("error against cost", lambda p: plot_error_cost(summary, p, design)),
             "modern_error_wall.png": ("error against wall", lambda p: plot_error_cost(summary, p, design, "wall")),

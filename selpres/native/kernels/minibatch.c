@@ -2,7 +2,7 @@
  * (selpres_mb_train: one epoch). It does what selpres/engines/minibatch.py (the torch mini-batch engine)
  * does, operation for operation where it can (the same formulas, in the same order; sums over a
  * mini-batch's patterns in presentation order), so the two agree to rounding (tests/test_native_minibatch.py):
- *   hidden units  ACT: 0 sigmoid, 1 tanh, 2 relu, 3 silu;  output  OUT_SIGMOID: 1 sigmoid, 0 linear
+ *   hidden units  ACT: 0 sigmoid, 1 tanh, 2 relu, 3 silu, 4 leaky relu (slope 0.01);  output  OUT_SIGMOID: 1 sigmoid, 0 linear
  *   loss          per pattern mse over the outputs; a mini-batch's loss the mean (mean reduction: times
  *                 2 / (nb * nout) in the gradient) or the sum (sum reduction: 1/2 sum e^2) of weight * mse
  *   optimizers    rule 0 sgd (momentum, L2 weight decay), 1 adam (L2), 2 adamw (decoupled), per replica with
@@ -94,8 +94,13 @@ static inline void hidden4(__m256d z, __m256d *a, __m256d *d)
     const __m256d s = sigmoid4(z);
     *a = _mm256_mul_pd(z, s);
     *d = _mm256_mul_pd(s, _mm256_add_pd(one, _mm256_mul_pd(z, _mm256_sub_pd(one, s))));
+#elif ACT == 4
+    /* z > 0 ? z : 0.01 z, as torch.where(z > 0, z, 0.01 * z) (a NaN takes the slope branch and stays NaN) */
+    const __m256d pos = _mm256_cmp_pd(z, _mm256_setzero_pd(), _CMP_GT_OQ);
+    *a = _mm256_blendv_pd(_mm256_mul_pd(SET1(0.01), z), z, pos);
+    *d = _mm256_blendv_pd(SET1(0.01), one, pos);
 #else
-#error "ACT: 0 sigmoid, 1 tanh, 2 relu, 3 silu"
+#error "ACT: 0 sigmoid, 1 tanh, 2 relu, 3 silu, 4 leaky_relu"
 #endif
 }
 

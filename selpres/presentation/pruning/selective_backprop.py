@@ -1,5 +1,6 @@
 """Selective Backprop (Jiang et al. 2019, "Accelerating deep learning by focusing on the biggest losers",
-arXiv:1910.00762; also MosaicML Composer's selective_backprop).
+arXiv:1910.00762): their probabilistic rule. Not MosaicML Composer's ``selective_backprop``, which keeps a fixed
+share of each mini-batch (its highest losses): that form is not implemented here.
 
 Every candidate gets a forward pass; it is back-propagated with probability ``P = F(loss)^β``, F its loss's
 percentile in a history of recent losses (β: ``beta``); the chosen ones fill mini-batches of ``optim.batch_size``.
