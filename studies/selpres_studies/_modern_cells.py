@@ -10,10 +10,9 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from omegaconf import OmegaConf
-
 from selpres.report import Context, is_stalled, method_labels, optim_target
 from selpres.report import job_cost as _job_cost
+from selpres_studies._design import read_design
 
 METRICS = (("rms", "held-out RMS", "Nm"), ("nmse", "held-out nMSE", ""))
 DESIGN_FILE = Path(__file__).with_name("modern.yaml")  # modern.yaml: the study's roles and display names
@@ -38,8 +37,7 @@ class Design:
 
     @classmethod
     def load(cls, path: Path = DESIGN_FILE) -> Design:
-        d = OmegaConf.to_container(OmegaConf.load(path))
-        return cls(**{**d, "order": tuple(d.get("order") or ())})
+        return read_design(cls, path)
 
     def methods(self, found) -> list[str]:
         """The methods of a sweep in the rows' order: the listed ones first, then the others by name."""

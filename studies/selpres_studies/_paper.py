@@ -8,9 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from omegaconf import OmegaConf
-
 from selpres.report import base
+from selpres_studies._design import read_design
 
 DESIGN_FILE = Path(__file__).with_name("table1.yaml")
 
@@ -33,8 +32,7 @@ class Design:
 
     @classmethod
     def load(cls, path: Path = DESIGN_FILE) -> Design:
-        d = OmegaConf.to_container(OmegaConf.load(path))
-        return cls(**{**d, "order": tuple(d.get("order") or ())})
+        return read_design(cls, path)
 
     @property
     def published(self) -> dict[str, dict]:
