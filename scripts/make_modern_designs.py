@@ -36,19 +36,18 @@ ACTIVATION = {"adam": "relu", "adam_leaky": "leaky_relu"}
 #     keeps 0.003 (1.031 Nm; 0.001: 1.072, 0.01: 2.717, 0.03: 3.146): one round;
 #   the paper's regime (its lr 0.15, not searched): the two-link curve moves its median by more than 10 % at every
 #     doubling up to 640 (-12.9 % at 160 -> 320): no N <= 640 passes the rule; it stays at 160, the earlier study's,
-#     a budget the rule rejects. The PUMA 560's passes at 80 (-3.3 % at 80 -> 160, 12 seeds); it runs at 50, a
-#     budget the rule rejects (40 -> 80 moves the median -15 %), with 2 x 12 seeds (below), so that
-#     experiment=modern fits its 30 minutes (at 60 epochs and 2 x 24 seeds this cell alone took 35 of the study's
-#     74 job-minutes, ~40 minutes on 2 cores; docs/studies/modern.md, "Time").
-EPOCHS = {("two_link", "paper"): 160, ("two_link", "adam"): 320, ("puma560", "paper"): 50, ("puma560", "adam"): 20}
+#     a budget the rule rejects. The PUMA 560's passes at 80 (-3.3 % at 80 -> 160, 12 seeds) and runs there. (A
+#     first cut to 50 epochs and 2 x 12 seeds was sized on timings taken at load 4-8; on 2 free cores the curves
+#     run ~6x faster and the study at the rule's budget fits its 30 minutes: docs/studies/modern.md, "Time".)
+EPOCHS = {("two_link", "paper"): 160, ("two_link", "adam"): 320, ("puma560", "paper"): 80, ("puma560", "adam"): 20}
 # arm -> the Adam rate (its remedy's too), chosen with the budget above
 ADAM_LR = {"two_link": 0.003, "puma560": 0.003}
 # (arm, regime) -> replicas per job; every design point runs in two jobs (SEED_BLOCKS), so twice this many paired
 # seeds (issue 40: at least 48 where a ~10 % stall rate would widen the intervals, the Adam cells; more where the
 # margins need it and the runs are cheap: the two-link arm in the paper's regime, whose paired differences spread
 # most against its margin). The PUMA 560 in the paper's regime, which stalled 0 of 48 seeds in every method at 60
-# epochs, runs 2 x 12 = 24: its cell is the study's costliest (the 30 minutes, above)
-REPLICAS = {("two_link", "paper"): 48, ("two_link", "adam"): 24, ("puma560", "paper"): 12, ("puma560", "adam"): 24}
+# epochs, runs 2 x 24 = 48 as the Adam cells do
+REPLICAS = {("two_link", "paper"): 48, ("two_link", "adam"): 24, ("puma560", "paper"): 24, ("puma560", "adam"): 24}
 SEED_BLOCKS = (0, 1000)  # experiment=modern's seed values: seeds 0.. and 1000.. (apart from the curves' 100..)
 # the held-out curve: about this many points per run (Selective Backprop's cost to reach an error is read off it)
 CURVE_POINTS = 40
