@@ -113,7 +113,10 @@ def replica_costs(res: dict) -> list[float]:
 
 
 def _sched_key(s: dict) -> tuple:
-    return (tuple(s["sizes"]), tuple(s["epochs"]), tuple(s.get("extra_presentations") or []), s.get("order"))
+    """The schedule a job was asked to run: its plan's epochs, not the epochs a budget let it reach (those differ
+    between a method's seed blocks, which are one method)."""
+    epochs = s.get("planned_epochs") or s["epochs"]
+    return (tuple(s["sizes"]), tuple(epochs), tuple(s.get("extra_presentations") or []), s.get("order"))
 
 
 def _final_heldout(rep: dict) -> float | None:
