@@ -34,6 +34,26 @@ os.environ["SELPRES_DATA_CACHE"] = tempfile.mkdtemp(prefix="selpres-test-cache-"
 atexit.register(shutil.rmtree, os.environ["SELPRES_DATA_CACHE"], ignore_errors=True)
 
 
+# The longest files first: `make test` hands whole files to its two workers (--dist loadfile) in collection order,
+# and with these last one worker ran alone for ~3 minutes at the end of a CI run (load 1.1-1.5 there). Per-file
+# seconds of a CI run (pytest --durations); the order within a file is kept, the other files follow in theirs.
+LONGEST_FILES = (
+    "test_engine.py",
+    "test_resume.py",
+    "test_ctrl_c.py",
+    "test_sigterm_sweeps.py",
+    "test_sigterm.py",
+    "test_lightning.py",
+    "test_selective_presentation.py",
+    "test_reliability.py",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {name: i for i, name in enumerate(LONGEST_FILES)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: every other order is kept
+
+
 def load_group(group: str, option: str):
     """A group file's own values (its Hydra ``defaults`` list, which picks other groups, left out)."""
     cfg = OmegaConf.load(CONFIGS / group / f"{option}.yaml")
