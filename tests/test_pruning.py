@@ -59,6 +59,19 @@ def test_infobatch_expected_gradient_is_the_full_data_gradient():
     assert (unscaled - full).abs().max() > 10 * se.max()
 
 
+def test_percentile_counts_every_loss_at_or_below_each_one_ties_and_nans_included():
+    """F(l_i) = #{j : l_j <= l_i} / n, against the all-pairs count; ties (rounded losses) share a count; a diverged
+    replica's NaN losses rank at the top (F = 1), its finite ones as if the NaNs were not there."""
+    g = torch.Generator().manual_seed(3)
+    losses = (torch.rand(4, 700, generator=g, dtype=torch.float64) * 50).round() / 7  # ~50 distinct values: ties
+    losses[2, ::9] = float("nan")
+    losses[3, 5] = float("inf")
+    pairs = (losses.unsqueeze(-2) <= losses.unsqueeze(-1)).sum(-1).to(torch.float64) / 700
+    want = torch.where(losses.isnan(), torch.ones_like(pairs), pairs)
+    assert torch.equal(percentile(losses), want)
+    assert torch.equal(percentile(losses[1]), want[1])  # one row
+
+
 def test_selective_backprop_selection_follows_the_percentile_rule():
     """Chosen with frequency F(l)^β, F counted by hand; the engine-facing draw matches it statistically."""
     losses = torch.tensor([[0.5, 0.1, 0.9, 0.3, 0.7, 0.3]], dtype=torch.float64)
