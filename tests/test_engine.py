@@ -112,7 +112,9 @@ def test_reference_matches_torch_func_and_returns_pre_update_loss():
 # padded lanes), online and mini-batch (B = 7 divides none of the epoch lengths), through selective
 # presentation's stage changes (permutations of growing prefixes 50 -> 120 -> n of U) and a partial
 # (budget) epoch. Default tier: 4 cases on a 200-pattern slice of the exemplar set that still cover
-# every topology, every R and B = 7 with interleaving; the whole grid on all n = 1002 is marked slow.
+# every topology, every R and B = 7 with interleaving; the grid on all n = 1002 is marked slow. In it R = 30
+# runs on Table 1's 6-13-2 only: on the other topologies it repeats R = 13's layout (pairs, a padded group)
+# at 2.3 times the reference engine's time (~100 s of the suite's CPU).
 TOPOLOGIES = [(6, 4, 2), (6, 8, 2), (6, 13, 2), (6, 8, 8, 2)]
 DEFAULT_CASES = [((6, 4, 2), 1, 1), ((6, 8, 2), 8, 7), ((6, 13, 2), 30, 1), ((6, 8, 8, 2), 13, 7)]
 EQUIVALENCE_CASES = [
@@ -122,6 +124,7 @@ EQUIVALENCE_CASES = [
     for sizes in TOPOLOGIES
     for R in (1, 8, 13, 30)
     for B in (1, 7)
+    if R != 30 or sizes == (6, 13, 2)
 ]
 TOL = 1e-12
 
