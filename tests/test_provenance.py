@@ -165,3 +165,23 @@ def test_the_runs_section_says_what_ran_and_which_jobs_ran_on_other_versions(tmp
     said = {r["job"]: r["provenance"] for r in Report.build(sweep).rows("runs.csv")}
     assert said["seed1"] == "not recorded" and "torch 2.99.0" in said["seed2"]
     assert f"torch {torch.__version__}" in said["seed0"] and "CPUs 512" in said["seed2"]
+
+    # native kernels: a sweep worker's record lists every library its process loaded, so two jobs may list different
+    # kernels built the same way (no warning); one kernel under two build hashes is a difference
+    def kernels(job, libraries):
+        path = sweep / job / "results.json"
+        res = json.loads(path.read_text())
+        res["provenance"]["torch"], res["provenance"]["cpus"] = torch.__version__, 2
+        flags = ["-O3 -march=native", "-O3 -march=native -ffp-contract=off"][: len(libraries)]
+        res["provenance"]["native"] = {"libraries": libraries, "compiler": "cc (12)", "flags": flags,
+                                       "instruction_set": "AVX2 FMA", "cpu": "x"}  # fmt: skip
+        path.write_text(json.dumps(res))
+
+    kernels("seed0", ["selpres_6-13-2_aaaa.so", "selpres_mb_6-13-2_relu_bbbb.so"])
+    kernels("seed2", ["selpres_6-13-2_aaaa.so"])
+    runs = Report.build(sweep).sections[-1].markdown()
+    assert "warning" not in runs and "native kernels cc (12) (AVX2 FMA)" in runs, runs
+    kernels("seed2", ["selpres_6-13-2_cccc.so"])
+    runs = Report.build(sweep).sections[-1].markdown()
+    assert "- warning: the jobs ran on different versions: native kernel selpres_6-13-2: build " in runs
+    assert "build aaaa (1 job" in runs and "build cccc (1 job" in runs and "`seed" in runs

@@ -368,6 +368,8 @@ def test_runs_lists_failed_missing_diverged_and_files_written(sweep, tmp_path, c
         ({"schedule": "selective,conventional,matched,random_growth", "topology": "6-4-2,6-8-2"}, True),
         ({"design/arm": "puma560,two_link", "data.n": "1000,10000", "schedule": "conventional,selective"}, True),
         ({"design": "a,b,c"}, False),  # design points: each its own topology and schedule, no grid
+        ({"design/modern": "glob(*)", "seed": "0,1000"}, False),  # design points in seed blocks (experiment=modern)
+        ({"schedule": "selective,matched", "topology": "6-4-2,6-8-2", "seed": "0,1000"}, True),
     ],
 )
 def test_cells_with_no_folder_are_listed_only_for_a_sweep_that_crossed_them(sweep, swept, listed):

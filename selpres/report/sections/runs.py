@@ -7,8 +7,9 @@ cells no job was meant to fill. Without a ``multirun.yaml`` (folders gathered by
 
 Below the table, what the jobs ran on (results.json ``provenance``, :mod:`selpres.run.provenance`): one line when
 every job ran on the same versions and machine; a warning naming each version that differs (selpres's version,
-commit and uncommitted changes, Python, torch, numpy, the native kernels' build) with its jobs, and a note for
-machines that differ (platform, CPUs); jobs whose results.json records none are counted."""
+commit and uncommitted changes, Python, torch, numpy, the native kernels' compiler and instruction set, a kernel
+built two ways) with its jobs, and a note for machines that differ (platform, CPUs); jobs whose results.json records
+none are counted."""
 
 from __future__ import annotations
 
@@ -37,8 +38,9 @@ def crossed(sweep: Path) -> bool:
         if "," in value or value.startswith(("range(", "choice(", "glob(")):
             swept.add(key.lstrip("+~"))
     # a grid has at least two swept dimensions (Table 1: schedule x topology; experiment=large: design/arm, which
-    # sets the topology, x data.n x schedule); one list of design points (experiment=modern, sensitivity) is none
-    return len(swept) >= 2
+    # sets the topology, x data.n x schedule); one list of design points (experiment=modern, sensitivity) is none,
+    # and seed blocks repeat the cells, they add none (experiment=modern sweeps seed=0,1000: 76 phantom cells)
+    return len(swept - {"seed"}) >= 2
 
 
 def runs_rows(jobs: list[Job], groups, topologies, methods, sweep: Path, order: tuple[str, ...] = ()) -> list[dict]:
@@ -99,11 +101,9 @@ def _fields(p: dict) -> tuple[dict[str, str], dict[str, str]]:
     src, native = p.get("selpres") or {}, p.get("native")
     commit = src.get("commit")
     where = f"commit {str(commit)[:12]}{', uncommitted changes' if src.get('dirty') else ''}" if commit else "no commit"
-    build = (
-        f"{native.get('compiler')} {' | '.join(native.get('flags') or [])} ({native.get('instruction_set')})"
-        if isinstance(native, dict)
-        else "none loaded"
-    )
+    # the compiler and the instruction set; which kernels and flags: _kernel_builds (a process that ran several jobs,
+    # a sweep worker, records every library it loaded, so jobs differ in which kernels they list, not in how built)
+    build = f"{native.get('compiler')} ({native.get('instruction_set')})" if isinstance(native, dict) else "none loaded"
     versions = {
         "selpres": f"{src.get('version')} ({where})",
         "Python": str(p.get("python")),
@@ -125,6 +125,30 @@ def _summary(p) -> str:
 
 def _jobs(n: int) -> str:
     return f"{n} job{'s' * (n != 1)}"
+
+
+def _kernel_builds(recorded: list[tuple[Job, dict]], sweep: Path) -> list[str]:
+    """A native kernel built two ways across the jobs: its library's name ends in a hash of what built it
+    (``selpres_6-13-2_<hash>.so``), so the same kernel under two hashes is a difference, whichever jobs loaded it."""
+    by_kernel: dict[str, dict[str, list[str]]] = {}
+    for j, p in recorded:
+        native = p.get("native")
+        for lib in native.get("libraries") or [] if isinstance(native, dict) else []:
+            kernel, _, built = str(lib).removesuffix(".so").rpartition("_")
+            by_kernel.setdefault(kernel, {}).setdefault(built, []).append(_name(j, sweep))
+    said = []
+    for kernel, builds in sorted(by_kernel.items()):
+        if len(builds) > 1:
+            ranked = sorted(builds.items(), key=lambda kv: -len(kv[1]))
+            said.append(
+                f"native kernel {kernel}: "
+                + "; ".join(
+                    f"build {b} ({_jobs(len(names))}" + (": " + ", ".join(f"`{n}`" for n in names[:3]) if i else "")
+                    + (", …" if i and len(names) > 3 else "") + ")"
+                    for i, (b, names) in enumerate(ranked)
+                )
+            )  # fmt: skip
+    return said
 
 
 def provenance_lines(jobs: list[Job], sweep: Path) -> list[str]:
@@ -158,6 +182,7 @@ def provenance_lines(jobs: list[Job], sweep: Path) -> list[str]:
         lines.append(
             f"**What ran.** {len(recorded)} job{'s' * (len(recorded) > 1)}" + (f": {common}." if common else ".")
         )
+        differ["versions"] += _kernel_builds(recorded, sweep)
         lines += [f"- warning: the jobs ran on different versions: {d}" for d in differ["versions"]]
         lines += [f"- note: the jobs ran on different machines: {d}" for d in differ["machines"]]
     unrecorded = sum(1 for j in jobs if j.results and not isinstance(j.results.get("provenance"), dict))
