@@ -35,11 +35,12 @@ ACTIVATION = {"adam": "relu", "adam_leaky": "leaky_relu"}
 #   PUMA 560, Adam: the curve at 0.003 gives N = 20 (20 -> 40: -0.5 %, stalls 2 / 0, p = 0.5), the rate check at 20
 #     keeps 0.003 (1.031 Nm; 0.001: 1.072, 0.01: 2.717, 0.03: 3.146): one round;
 #   the paper's regime (its lr 0.15, not searched): the two-link curve moves its median by more than 10 % at every
-#     doubling up to 640 (-12.9 % at 160 -> 320): no N <= 640 passes the rule; it stays at 160, the earlier study's,
-#     a budget the rule rejects. The PUMA 560's passes at 80 (-3.3 % at 80 -> 160, 12 seeds) and runs there. (A
-#     first cut to 50 epochs and 2 x 12 seeds was sized on timings taken at load 4-8; on 2 free cores the curves
-#     run ~6x faster and the study at the rule's budget fits its 30 minutes: docs/studies/modern.md, "Time".)
-EPOCHS = {("two_link", "paper"): 160, ("two_link", "adam"): 320, ("puma560", "paper"): 80, ("puma560", "adam"): 20}
+#     doubling up to 640 (-12.9 % at 160 -> 320, -11.1 % at 320 -> 640): no N <= 640 passes the rule, so it runs at
+#     the largest N that fits the study's 30 minutes with the 2 x 48 seeds its margins need: 320 (640 would add ~5
+#     minutes), a budget the rule rejects, said in docs/studies/modern.md. The PUMA 560's passes at 80 (-3.3 % at
+#     80 -> 160, 12 seeds) and runs there. (A first cut to 50 epochs and 2 x 12 seeds was sized on timings taken at
+#     load 4-8; on 2 free cores the study at these budgets fits its 30 minutes: docs/studies/modern.md, "Time".)
+EPOCHS = {("two_link", "paper"): 320, ("two_link", "adam"): 320, ("puma560", "paper"): 80, ("puma560", "adam"): 20}
 # arm -> the Adam rate (its remedy's too), chosen with the budget above
 ADAM_LR = {"two_link": 0.003, "puma560": 0.003}
 # (arm, regime) -> replicas per job; every design point runs in two jobs (SEED_BLOCKS), so twice this many paired
