@@ -177,11 +177,11 @@ def test_the_runs_section_says_what_ran_and_which_jobs_ran_on_other_versions(tmp
                                        "instruction_set": "AVX2 FMA", "cpu": "x"}  # fmt: skip
         path.write_text(json.dumps(res))
 
-    kernels("seed0", ["selpres_6-13-2_aaaa.so", "selpres_mb_6-13-2_relu_bbbb.so"])
-    kernels("seed2", ["selpres_6-13-2_aaaa.so"])
+    kernels("seed0", ["selpres_6-13-2_aaaa.so", "selpres_6-13-2_dddd.so", "selpres_mb_6-13-2_relu_bbbb.so"])
+    kernels("seed2", ["selpres_6-13-2_aaaa.so"])  # a variant beside the usual build in seed0's process: no conflict
     runs = Report.build(sweep).sections[-1].markdown()
     assert "warning" not in runs and "native kernels cc (12) (AVX2 FMA)" in runs, runs
     kernels("seed2", ["selpres_6-13-2_cccc.so"])
     runs = Report.build(sweep).sections[-1].markdown()
     assert "- warning: the jobs ran on different versions: native kernel selpres_6-13-2: build " in runs
-    assert "build aaaa (1 job" in runs and "build cccc (1 job" in runs and "`seed" in runs
+    assert "build aaaa, dddd (1 job" in runs and "build cccc (1 job" in runs and "`seed" in runs

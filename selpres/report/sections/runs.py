@@ -129,23 +129,29 @@ def _jobs(n: int) -> str:
 
 def _kernel_builds(recorded: list[tuple[Job, dict]], sweep: Path) -> list[str]:
     """A native kernel built two ways across the jobs: its library's name ends in a hash of what built it
-    (``selpres_6-13-2_<hash>.so``), so the same kernel under two hashes is a difference, whichever jobs loaded it."""
-    by_kernel: dict[str, dict[str, list[str]]] = {}
+    (``selpres_6-13-2_<hash>.so``). A process lists every library it loaded (a sweep worker: earlier jobs' kernels
+    too; one process may load a variant beside the usual build), so a job's builds of a kernel are a set, and two
+    jobs differ only where their sets share no build: then they cannot have run the same one."""
+    by_kernel: dict[str, dict[frozenset, list[str]]] = {}
     for j, p in recorded:
         native = p.get("native")
+        builds: dict[str, set[str]] = {}
         for lib in native.get("libraries") or [] if isinstance(native, dict) else []:
             kernel, _, built = str(lib).removesuffix(".so").rpartition("_")
-            by_kernel.setdefault(kernel, {}).setdefault(built, []).append(_name(j, sweep))
+            builds.setdefault(kernel, set()).add(built)
+        for kernel, hashes in builds.items():
+            by_kernel.setdefault(kernel, {}).setdefault(frozenset(hashes), []).append(_name(j, sweep))
     said = []
-    for kernel, builds in sorted(by_kernel.items()):
-        if len(builds) > 1:
-            ranked = sorted(builds.items(), key=lambda kv: -len(kv[1]))
+    for kernel, sets in sorted(by_kernel.items()):
+        if any(not (a & b) for a in sets for b in sets):
+            ranked = sorted(sets.items(), key=lambda kv: -len(kv[1]))
             said.append(
                 f"native kernel {kernel}: "
                 + "; ".join(
-                    f"build {b} ({_jobs(len(names))}" + (": " + ", ".join(f"`{n}`" for n in names[:3]) if i else "")
+                    f"build {', '.join(sorted(h))} ({_jobs(len(names))}"
+                    + (": " + ", ".join(f"`{n}`" for n in names[:3]) if i else "")
                     + (", …" if i and len(names) > 3 else "") + ")"
-                    for i, (b, names) in enumerate(ranked)
+                    for i, (h, names) in enumerate(ranked)
                 )
             )  # fmt: skip
     return said
