@@ -141,20 +141,21 @@ def _kernel_builds(recorded: list[tuple[Job, dict]], sweep: Path) -> list[str]:
             builds.setdefault(kernel, set()).add(built)
         for kernel, hashes in builds.items():
             by_kernel.setdefault(kernel, {}).setdefault(frozenset(hashes), []).append(_name(j, sweep))
-    said = []
-    for kernel, sets in sorted(by_kernel.items()):
-        if any(not (a & b) for a in sets for b in sets):
-            ranked = sorted(sets.items(), key=lambda kv: -len(kv[1]))
-            said.append(
-                f"native kernel {kernel}: "
-                + "; ".join(
-                    f"build {', '.join(sorted(h))} ({_jobs(len(names))}"
-                    + (": " + ", ".join(f"`{n}`" for n in names[:3]) if i else "")
-                    + (", …" if i and len(names) > 3 else "") + ")"
-                    for i, (h, names) in enumerate(ranked)
-                )
-            )  # fmt: skip
-    return said
+    return [
+        f"native kernel {kernel}: {_values_and_jobs({'build ' + ', '.join(sorted(h)): n for h, n in sets.items()})}"
+        for kernel, sets in sorted(by_kernel.items())
+        if any(not (a & b) for a in sets for b in sets)
+    ]
+
+
+def _values_and_jobs(by_value: dict[str, list[str]]) -> str:
+    """Each value with its count of jobs, the most common first; the others name their jobs (three at most)."""
+    ranked = sorted(by_value.items(), key=lambda kv: -len(kv[1]))
+    said = [f"{ranked[0][0]} ({_jobs(len(ranked[0][1]))})"] + [
+        f"{v} ({_jobs(len(names))}: " + ", ".join(f"`{n}`" for n in names[:3]) + (", …" if len(names) > 3 else "") + ")"
+        for v, names in ranked[1:]
+    ]
+    return "; ".join(said)
 
 
 def provenance_lines(jobs: list[Job], sweep: Path) -> list[str]:
@@ -175,15 +176,7 @@ def provenance_lines(jobs: list[Job], sweep: Path) -> list[str]:
                 if len(by_value) == 1:
                     same[key] = next(iter(by_value))
                     continue
-                ranked = sorted(by_value.items(), key=lambda kv: -len(kv[1]))
-                said = [f"{ranked[0][0]} ({_jobs(len(ranked[0][1]))})"] + [
-                    f"{v} ({_jobs(len(names))}: "
-                    + ", ".join(f"`{n}`" for n in names[:3])
-                    + (", …" if len(names) > 3 else "")
-                    + ")"
-                    for v, names in ranked[1:]
-                ]
-                differ[kind].append(f"{key}: {'; '.join(said)}")
+                differ[kind].append(f"{key}: {_values_and_jobs(by_value)}")
         common = ", ".join(f"{k} {v}" for k, v in same.items())
         lines.append(
             f"**What ran.** {len(recorded)} job{'s' * (len(recorded) > 1)}" + (f": {common}." if common else ".")
