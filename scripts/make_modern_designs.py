@@ -36,8 +36,8 @@ ACTIVATION = {"adam": "relu", "adam_leaky": "leaky_relu"}
 #     keeps 0.003 (1.031 Nm; 0.001: 1.072, 0.01: 2.717, 0.03: 3.146): one round;
 #   the paper's regime (its lr 0.15, not searched): the two-link curve moves its median by more than 10 % at every
 #     doubling up to 640 (-12.9 % at 160 -> 320, -11.1 % at 320 -> 640): no N <= 640 passes the rule, so it runs at
-#     the largest N that fits the study's 30 minutes with the 2 x 48 seeds its margins need: 320 (640 would add ~5
-#     minutes), a budget the rule rejects, said in docs/studies/modern.md. The PUMA 560's passes at 80 (-3.3 % at
+#     the largest N that fits the study's 30 minutes with its 2 x 48 seeds: 320 (640 would add ~3 minutes), a budget
+#     the rule rejects; 640 with 2 x 24 seeds would cost the same (a choice, said in docs/studies/modern.md). The PUMA 560's passes at 80 (-3.3 % at
 #     80 -> 160, 12 seeds) and runs there. (A first cut to 50 epochs and 2 x 12 seeds was sized on timings taken at
 #     load 4-8; on 2 free cores the study at these budgets fits its 30 minutes: docs/studies/modern.md, "Time".)
 EPOCHS = {("two_link", "paper"): 320, ("two_link", "adam"): 320, ("puma560", "paper"): 80, ("puma560", "adam"): 20}
