@@ -41,4 +41,5 @@ for epoch in range(sampler.num_epochs):
             f"{sampler.presentations:,} presentations so far ({sampler.rank_presentations:,} on rank 0), "
             f"held-out RMS {heldout_rms_nm(model.module, heldout, unscale):.4f} Nm"
         )
+dist.barrier()  # rank 0 may still be scoring: a rank that tears gloo down first can abort the other (seen once)
 dist.destroy_process_group()
