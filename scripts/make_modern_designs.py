@@ -15,8 +15,8 @@ date and the rounds: decisions, taken on data the study does not report.
 
 from __future__ import annotations
 
+import argparse
 import math
-import sys
 from pathlib import Path
 
 OUT = Path(__file__).resolve().parents[1] / "configs" / "design" / "modern"
@@ -37,9 +37,10 @@ ACTIVATION = {"adam": "relu", "adam_leaky": "leaky_relu"}
 #   the paper's regime (its lr 0.15, not searched): the two-link curve moves its median by more than 10 % at every
 #     doubling up to 640 (-12.9 % at 160 -> 320, -11.1 % at 320 -> 640): no N <= 640 passes the rule, so it runs at
 #     the largest N that fits the study's 30 minutes with its 2 x 48 seeds: 320 (640 would add ~3 minutes), a budget
-#     the rule rejects; 640 with 2 x 24 seeds would cost the same (a choice, said in docs/studies/modern.md). The PUMA 560's passes at 80 (-3.3 % at
-#     80 -> 160, 12 seeds) and runs there. (A first cut to 50 epochs and 2 x 12 seeds was sized on timings taken at
-#     load 4-8; on 2 free cores the study at these budgets fits its 30 minutes: docs/studies/modern.md, "Time".)
+#     the rule rejects; 640 with 2 x 24 seeds would cost the same (a choice, said in docs/studies/modern.md). The
+#     PUMA 560's passes at 80 (-3.3 % at 80 -> 160, 12 seeds) and runs there. (A first cut to 50 epochs and
+#     2 x 12 seeds was sized on timings taken at load 4-8; on 2 free cores the study at these budgets fits its
+#     30 minutes: docs/studies/modern.md, "Time".)
 EPOCHS = {("two_link", "paper"): 320, ("two_link", "adam"): 320, ("puma560", "paper"): 80, ("puma560", "adam"): 20}
 # arm -> the Adam rate (its remedy's too), chosen with the budget above
 ADAM_LR = {"two_link": 0.003, "puma560": 0.003}
@@ -197,4 +198,6 @@ def main(out: Path = OUT) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else OUT)
+    parser = argparse.ArgumentParser(description="Write experiment=modern's design files (configs/design/modern).")
+    parser.add_argument("out", nargs="?", type=Path, default=OUT, help=f"the folder to write into (default: {OUT})")
+    main(parser.parse_args().out)
