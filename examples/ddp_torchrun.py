@@ -9,6 +9,7 @@ import argparse
 
 import torch
 import torch.distributed as dist
+import torch.distributed.nn  # noqa: F401  imported before the group exists: see the note at the end
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader
 from twolink import heldout_rms_nm, load, mlp
@@ -20,26 +21,36 @@ ap.add_argument("--data", default="twolink.npz")
 ap.add_argument("--epochs", type=int, default=30, help="epochs per stage")
 a = ap.parse_args()
 
-dist.init_process_group("gloo")
-X, train, heldout, unscale = load(a.data)
-torch.manual_seed(0)
-model = DistributedDataParallel(mlp())
-opt = torch.optim.Adam(model.parameters(), lr=1e-3)
 
-# num_replicas and rank come from the process group
-sampler = SelectivePresentation(X, sizes=[0.05, 0.1, 0.4, 0.8, 1.0], epochs=[a.epochs] * 5, seed=0)
-loader = DataLoader(train, batch_size=32, sampler=sampler)  # 32 per rank
-for epoch in range(sampler.num_epochs):
-    sampler.set_epoch(epoch)
-    for x, y in loader:
-        opt.zero_grad()
-        torch.nn.functional.mse_loss(model(x), y).backward()
-        opt.step()
-    if epoch in sampler.schedule.stage_ends() and dist.get_rank() == 0:
-        print(
-            f"stage {sampler.stage + 1}: {sampler.training_set.numel()} patterns, {len(sampler)} per rank, "
-            f"{sampler.presentations:,} presentations so far ({sampler.rank_presentations:,} on rank 0), "
-            f"held-out RMS {heldout_rms_nm(model.module, heldout, unscale):.4f} Nm"
-        )
-dist.barrier()  # rank 0 may still be scoring: a rank that tears gloo down first can abort the other (seen once)
+def main():
+    X, train, heldout, unscale = load(a.data)
+    torch.manual_seed(0)
+    model = DistributedDataParallel(mlp())
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+
+    # num_replicas and rank come from the process group
+    sampler = SelectivePresentation(X, sizes=[0.05, 0.1, 0.4, 0.8, 1.0], epochs=[a.epochs] * 5, seed=0)
+    loader = DataLoader(train, batch_size=32, sampler=sampler)  # 32 per rank
+    for epoch in range(sampler.num_epochs):
+        sampler.set_epoch(epoch)
+        for x, y in loader:
+            opt.zero_grad()
+            torch.nn.functional.mse_loss(model(x), y).backward()
+            opt.step()
+        if epoch in sampler.schedule.stage_ends() and dist.get_rank() == 0:
+            print(
+                f"stage {sampler.stage + 1}: {sampler.training_set.numel()} patterns, {len(sampler)} per rank, "
+                f"{sampler.presentations:,} presentations so far ({sampler.rank_presentations:,} on rank 0), "
+                f"held-out RMS {heldout_rms_nm(model.module, heldout, unscale):.4f} Nm"
+            )
+
+
+dist.init_process_group("gloo")
+main()
+# The model (its DDP reducer holds the group) went with main's frame, so this is the group's last reference:
+# destroying it joins gloo's worker threads now, while Python is alive. A worker still freeing the last
+# backward's all-reduce needs the GIL for it (the work keeps backward's Python context), and one left running
+# into interpreter shutdown aborts the process ("terminate called without an active exception"; pytorch#190489).
+# torch.distributed.nn, when first imported, keeps the default group in its functions' defaults, hence its
+# import above, before the group exists (DistributedDataParallel imports it otherwise, and the group lives on).
 dist.destroy_process_group()
