@@ -9,10 +9,9 @@ import argparse
 
 import torch
 import torch.distributed as dist
-import torch.distributed.nn  # noqa: F401  imported before the group exists: see the note at the end
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader
-from twolink import heldout_rms_nm, load, mlp
+from twolink import end_process_group, heldout_rms_nm, load, mlp
 
 from selpres import SelectivePresentation
 
@@ -47,10 +46,4 @@ def main():
 
 dist.init_process_group("gloo")
 main()
-# The model (its DDP reducer holds the group) went with main's frame, so this is the group's last reference:
-# destroying it joins gloo's worker threads now, while Python is alive. A worker still freeing the last
-# backward's all-reduce needs the GIL for it (the work keeps backward's Python context), and one left running
-# into interpreter shutdown aborts the process ("terminate called without an active exception"; pytorch#190489).
-# torch.distributed.nn, when first imported, keeps the default group in its functions' defaults, hence its
-# import above, before the group exists (DistributedDataParallel imports it otherwise, and the group lives on).
-dist.destroy_process_group()
+end_process_group()  # the model went with main(): the group's threads end while Python is alive (see twolink.py)

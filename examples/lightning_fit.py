@@ -10,7 +10,7 @@ import argparse
 import lightning.pytorch as pl
 import torch
 from torch.utils.data import DataLoader
-from twolink import heldout_rms_nm, load, mlp
+from twolink import end_process_group, heldout_rms_nm, load, mlp
 
 from selpres import SelectivePresentation, SelectivePresentationCallback
 
@@ -28,14 +28,7 @@ class Net(pl.LightningModule):
         return torch.optim.Adam(self.parameters(), lr=1e-3)
 
 
-if __name__ == "__main__":  # Lightning's DDP launcher runs this file again in each process
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default="twolink.npz")
-    ap.add_argument("--epochs", type=int, default=30, help="epochs per stage")
-    ap.add_argument("--devices", type=int, default=1)
-    ap.add_argument("--strategy", default="auto")
-    a = ap.parse_args()
-
+def main(a: argparse.Namespace) -> None:
     X, train, heldout, unscale = load(a.data)
     torch.manual_seed(0)
     sampler = SelectivePresentation(X, sizes=[0.05, 0.1, 0.4, 0.8, 1.0], epochs=[a.epochs] * 5, seed=0)
@@ -57,3 +50,13 @@ if __name__ == "__main__":  # Lightning's DDP launcher runs this file again in e
             f"(the schedule's {sampler.schedule.presentations:,}), held-out RMS "
             f"{heldout_rms_nm(model.net, heldout, unscale):.4f} Nm"
         )
+
+
+if __name__ == "__main__":  # Lightning's DDP launcher runs this file again in each process
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default="twolink.npz")
+    ap.add_argument("--epochs", type=int, default=30, help="epochs per stage")
+    ap.add_argument("--devices", type=int, default=1)
+    ap.add_argument("--strategy", default="auto")
+    main(ap.parse_args())
+    end_process_group()  # under DDP (Lightning leaves a gloo group to the interpreter's exit): see twolink.py

@@ -124,6 +124,15 @@ def run_python(*args: str, timeout: int = 600, cwd=REPO):
     return subprocess.run([sys.executable, *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
 
 
+def torchrun(script, *args: str, log_dir, timeout: int = 600):
+    """``torchrun --standalone --nproc_per_node=2 script args`` (2 CPU processes), its agent's logs under
+    ``log_dir`` (by default torchrun makes a /tmp/torchelastic_* folder per run that nothing removes)."""
+    return run_python(
+        "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2", "--log-dir", str(log_dir), str(script),
+        *args, timeout=timeout,
+    )  # fmt: skip
+
+
 def report_of(sweep, out) -> None:
     """``python -m selpres.report sweep --out out``, which must succeed."""
     done = run_python("-m", "selpres.report", str(sweep), "--out", str(out))

@@ -16,6 +16,9 @@ import torch
 from torch.utils.data import DataLoader, TensorDataset
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))  # twolink, as the examples have it
+
+from twolink import end_process_group  # noqa: E402
 
 from selpres.presentation.lightning import SelectivePresentationCallback  # noqa: E402
 from selpres.presentation.sampler import SelectivePresentation  # noqa: E402
@@ -104,4 +107,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main()  # the fit's Trainer and model go with main's frame
+    end_process_group()

@@ -61,9 +61,12 @@ EPOCHS = {"reference": 10, "native": 214, "loss_high": 10, "minibatch": 74, "inf
 EPOCHS.update(selective_backprop=math.ceil(7000 / (1002 / 3)) + 1, user_policy=19, infobatch_adam=150, user_selector=10)
 
 
-def run(out: Path, args: list[str], wait: bool = True) -> subprocess.Popen:
-    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"}
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT / "examples" / "extending"), env.get("PYTHONPATH")]))
+def run(out: Path, args: list[str], wait: bool = True, **env: str) -> subprocess.Popen:
+    """``python train.py COMMON args`` into ``out`` (the user plug-ins of examples/extending and the tests' own on its
+    path; ``env``: variables to set for it)."""
+    env = {k: v for k, v in os.environ.items() if k != "HYDRA_FULL_ERROR"} | env
+    path = [str(ROOT / "examples" / "extending"), str(ROOT / "tests"), env.get("PYTHONPATH")]
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, path))
     p = subprocess.Popen(
         [sys.executable, "train.py", *COMMON, *args, f"hydra.run.dir={out}"],
         cwd=ROOT,

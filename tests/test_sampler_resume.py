@@ -15,7 +15,7 @@ from torch.utils.data import DataLoader, TensorDataset
 
 from selpres.presentation.sampler import SelectivePresentation, SelectivePresentationWarning
 
-from conftest import REPO, run_python
+from conftest import REPO, torchrun
 
 StatefulDataLoader = pytest.importorskip("torchdata.stateful_dataloader").StatefulDataLoader
 
@@ -131,10 +131,7 @@ def test_two_gloo_processes_resume_each_rank_from_its_own_state(tmp_path):
     """torchrun, 2 CPU processes, gloo, StatefulDataLoader with 0 and 2 workers: each rank saves its own loader
     state mid-epoch, a second torchrun resumes from it, and every rank's epochs are the uninterrupted run's."""
     for mode in ("stop", "resume"):
-        done = run_python(
-            "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2",
-            str(REPO / "tests" / "resume_app.py"), str(tmp_path), mode,
-        )  # fmt: skip
+        done = torchrun(REPO / "tests" / "resume_app.py", str(tmp_path), mode, log_dir=tmp_path / "logs")
         assert done.returncode == 0, done.stderr[-3000:]
     shares = []
     for rank in (0, 1):

@@ -21,7 +21,7 @@ from selpres.errors import ConfigError
 from selpres.presentation.proportions import NAMED
 from selpres.presentation.sampler import SelectivePresentation, SelectivePresentationWarning
 
-from conftest import CONFIGS, REPO, cfg_of, run_python
+from conftest import CONFIGS, REPO, cfg_of, run_python, torchrun
 
 FRACTIONS, EPOCHS = [0.05, 0.1, 0.4, 0.8, 1.0], [2, 1, 2, 1, 1]
 
@@ -357,12 +357,6 @@ def test_set_epoch_past_the_schedule_says_what_to_do(X):
 # ------------------------------------------------------------------------------------------ a real process group
 
 
-def _torchrun(script, *args, timeout=600):
-    return run_python(
-        "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2", str(script), *args, timeout=timeout
-    )
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("drop_last", [False, True])
 def test_two_gloo_processes_share_every_epoch(tmp_path, drop_last):
@@ -370,7 +364,9 @@ def test_two_gloo_processes_share_every_epoch(tmp_path, drop_last):
     order without communicating, their shares are torch's DistributedSampler's of it (disjoint, union = A_i when
     the size divides, padded by the head or cut otherwise), and the counters agree."""
     out = tmp_path / "ranks.json"
-    done = _torchrun(REPO / "tests" / "ddp_app.py", str(out), *(["--drop-last"] if drop_last else []))
+    done = torchrun(
+        REPO / "tests" / "ddp_app.py", str(out), *(["--drop-last"] if drop_last else []), log_dir=tmp_path / "logs"
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     got = json.loads(out.read_text())
     assert got["world"] == 2
@@ -407,7 +403,7 @@ def test_examples_run(tmp_path):
     assert plain.returncode == 0, plain.stderr[-3000:]
     lines = plain.stdout.splitlines()
     assert len(lines) == 5 and lines[-1].startswith("stage 5: 1002 patterns, 4,710 presentations so far")
-    ddp = _torchrun(tmp_path / "ddp_torchrun.py", "--data", data, "--epochs", "2")
+    ddp = torchrun(tmp_path / "ddp_torchrun.py", "--data", data, "--epochs", "2", log_dir=tmp_path / "logs")
     assert ddp.returncode == 0, ddp.stderr[-3000:]
     assert "stage 5: 1002 patterns, 501 per rank, 4,712 presentations so far" in ddp.stdout  # 401 padded to 402
     light = run_python(str(tmp_path / "lightning_fit.py"), "--data", data, "--epochs", "2", cwd=tmp_path)
