@@ -15,13 +15,8 @@ from twolink import end_process_group, heldout_rms_nm, load, mlp
 
 from selpres import SelectivePresentation
 
-ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-ap.add_argument("--data", default="twolink.npz")
-ap.add_argument("--epochs", type=int, default=30, help="epochs per stage")
-a = ap.parse_args()
 
-
-def main():
+def main(a: argparse.Namespace) -> None:
     X, train, heldout, unscale = load(a.data)
     torch.manual_seed(0)
     model = DistributedDataParallel(mlp())
@@ -44,6 +39,10 @@ def main():
             )
 
 
+ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+ap.add_argument("--data", default="twolink.npz")
+ap.add_argument("--epochs", type=int, default=30, help="epochs per stage")
+a = ap.parse_args()
 dist.init_process_group("gloo")
-main()
+main(a)
 end_process_group()  # the model went with main(): the group's threads end while Python is alive (see twolink.py)

@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import gated_route
 import pytest
 
 from selpres.run.checkpoint import dumps
@@ -232,10 +233,10 @@ def test_ctrl_c_during_set_up_keeps_the_users_folder(tmp_path):
     folder = tmp_path / "mine"
     before = _user_folder(folder)
     gate = tmp_path / "gate"
-    env = _env() | {"SELPRES_TEST_GATE": str(gate), "SELPRES_DATA_CACHE": "off"}
+    env = _env() | gated_route.env(gate)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO / "tests"), env.get("PYTHONPATH")]))
     p = subprocess.Popen(
-        _cmd(folder, *TINY, "data.kind=gated_route.GatedGrid"),
+        _cmd(folder, *TINY, gated_route.OVERRIDE),
         cwd=REPO,
         env=env,
         stdout=subprocess.PIPE,
@@ -245,11 +246,7 @@ def test_ctrl_c_during_set_up_keeps_the_users_folder(tmp_path):
         # it: the job must see Ctrl-C as a terminal would deliver it, whoever runs the tests
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
-    deadline = time.monotonic() + TIMEOUT
-    while not gate.with_suffix(".reached").exists() and p.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.01)
-    p.send_signal(signal.SIGINT)
-    gate.with_suffix(".go").touch()  # the build goes on if the stop waits for the set-up's next check
+    gated_route.signal_when(p, gated_route.reached(gate), signal.SIGINT, gate, timeout=TIMEOUT)
     stdout, stderr = p.communicate(timeout=TIMEOUT)
     assert p.returncode == 130, stdout + stderr
     assert stderr.strip().splitlines() == [

@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 
+import gated_route
 import pytest
 import torch
 from test_outcomes import says
@@ -80,19 +81,15 @@ def test_a_signal_during_set_up_removes_what_the_run_created(tmp_path, where):
     out.mkdir()
     (out / "mine.txt").write_text("the user's")
     gate = tmp_path / "gate"
-    args = [*ARGS, "data.kind=gated_route.GatedGrid"] if where == "making the data" else ARGS
-    p = run(out, args, wait=False, SELPRES_TEST_GATE=str(gate), SELPRES_DATA_CACHE="off")
-    mark = gate.with_suffix(".reached") if where == "making the data" else out / ".hydra" / "config.yaml"
-    deadline = time.time() + 120
-    while not mark.exists() and p.poll() is None and time.time() < deadline:
-        time.sleep(0.01)
-    p.send_signal(signal.SIGTERM)
-    gate.with_suffix(".go").touch()  # the build goes on if the stop waits for the set-up's next check
+    gated = where == "making the data"
+    p = run(out, [*ARGS, gated_route.OVERRIDE] if gated else ARGS, wait=False, **gated_route.env(gate))
+    mark = gated_route.reached(gate) if gated else out / ".hydra" / "config.yaml"
+    gated_route.signal_when(p, mark, signal.SIGTERM, gate if gated else None)
     output, _ = p.communicate(timeout=120)
     assert p.returncode == 143, output
     (line,) = [x for x in output.splitlines() if x.startswith("stopped by SIGTERM")]  # before or inside the set-up
     inside = f"stopped by SIGTERM during set-up: nothing of this run was kept ({out} as it was)"
-    if where == "making the data":
+    if gated:
         assert line == inside, output
     else:
         assert line in ("stopped by SIGTERM before the job started: nothing was written", inside), output
